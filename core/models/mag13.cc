@@ -1,0 +1,53 @@
+// mag13: the seed's magnetometer model (eq. 16-17), B_m = G C_p^q C_NED^p B_NED + b'.
+// Parameters g11 ... g33, beta, bx by bz.
+
+#include <Eigen/LU>
+
+#include "core/model_adapter.h"
+#include "core/models/mag_common.h"
+
+namespace turncal {
+namespace {
+
+struct Mag13 {
+  static constexpr std::string_view kName = "mag13";
+  static constexpr int kNumParams = 13;
+  static constexpr SensorKind kSensor = SensorKind::kMagnetometer;
+  static constexpr int kBeta = 9;
+  static constexpr int kBias = 10;
+
+  static std::vector<ParameterInfo> Parameters(const ModelContext& context) {
+    std::vector<ParameterInfo> p;
+    mag::AppendG(context, &p);
+    p.push_back({"beta", ParameterKind::kInstallation, ParameterUnit::kAngle, 0.0});
+    mag::AppendVector(&p, "b", ParameterKind::kSensor);
+    return p;
+  }
+  template <typename T>
+  static Vec3<T> Predict(const T* theta, const Mat3<T>& C_p_q, const Vec3<T>& B_ned,
+                         const ModelContext&) {
+    return mag::MatrixRowMajor(theta) * (C_p_q * (C_ned_p(theta[kBeta]) * B_ned)) +
+           mag::Vector(theta + kBias);
+  }
+  static Eigen::Vector3d Correct(const double* theta, const Eigen::Vector3d& raw,
+                                 const ModelContext&) {
+    return mag::CorrectWithG(theta, theta + kBias, raw);
+  }
+  static OutputFrame CorrectedFrame(const ModelContext&) { return OutputFrame::kTable; }
+  static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
+                         const ModelContext&, double* theta, std::string* error) {
+    if (!G.allFinite() || std::abs(G.determinant()) < 1e-12 * std::pow(G.norm(), 3)) {
+      if (error) *error = "G is singular or not finite";
+      return false;
+    }
+    mag::SetG(G, theta);
+    theta[kBeta] = beta;
+    for (int i = 0; i < 3; ++i) theta[kBias + i] = b[i];
+    return true;
+  }
+};
+
+}  // namespace
+}  // namespace turncal
+
+TURNCAL_REGISTER_MODEL(mag13, turncal::Mag13)

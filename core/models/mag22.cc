@@ -1,0 +1,66 @@
+// mag22: the seed's magnetometer model with a platform field (eq. 21),
+// B_m = G C_p^q C_NED^p B_NED + G K_ C_p^q dB + b, K_ = K^-1 symmetric.
+// Parameters g11 ... g33, k11 k12 k13 k22 k23 k33, beta, dBx dBy dBz, bx by bz.
+//
+// Only 20 of the 22 are identifiable from turntable data (MODELS.md "The mag22 gauge"); the
+// calibrator fixes the gauge, this file only states the model.
+
+#include <Eigen/LU>
+
+#include "core/model_adapter.h"
+#include "core/models/mag_common.h"
+
+namespace turncal {
+namespace {
+
+struct Mag22 {
+  static constexpr std::string_view kName = "mag22";
+  static constexpr int kNumParams = 22;
+  static constexpr SensorKind kSensor = SensorKind::kMagnetometer;
+  static constexpr int kK = 9, kBeta = 15, kDeltaB = 16, kBias = 19;
+
+  static std::vector<ParameterInfo> Parameters(const ModelContext& context) {
+    std::vector<ParameterInfo> p;
+    mag::AppendG(context, &p);
+    mag::AppendK(&p, ParameterKind::kInstallation);
+    p.push_back({"beta", ParameterKind::kInstallation, ParameterUnit::kAngle, 0.0});
+    mag::AppendVector(&p, "dB", ParameterKind::kInstallation);
+    mag::AppendVector(&p, "b", ParameterKind::kSensor);
+    return p;
+  }
+  template <typename T>
+  static Vec3<T> Predict(const T* theta, const Mat3<T>& C_p_q, const Vec3<T>& B_ned,
+                         const ModelContext&) {
+    const Mat3<T> G = mag::MatrixRowMajor(theta);
+    return G * (C_p_q * (C_ned_p(theta[kBeta]) * B_ned)) +
+           G * (mag::Symmetric(theta + kK) * (C_p_q * mag::Vector(theta + kDeltaB))) +
+           mag::Vector(theta + kBias);
+  }
+  // dB belongs to the table, not to the sensor: the correction is G^-1 (B_m - b).
+  static Eigen::Vector3d Correct(const double* theta, const Eigen::Vector3d& raw,
+                                 const ModelContext&) {
+    return mag::CorrectWithG(theta, theta + kBias, raw);
+  }
+  static OutputFrame CorrectedFrame(const ModelContext&) { return OutputFrame::kTable; }
+  static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
+                         const ModelContext&, double* theta, std::string* error) {
+    if (!G.allFinite() || std::abs(G.determinant()) < 1e-12 * std::pow(G.norm(), 3)) {
+      if (error) *error = "G is singular or not finite";
+      return false;
+    }
+    mag::SetG(G, theta);
+    const double K_nominal[6] = {1, 0, 0, 1, 0, 1};
+    for (int i = 0; i < 6; ++i) theta[kK + i] = K_nominal[i];
+    theta[kBeta] = beta;
+    for (int i = 0; i < 3; ++i) {
+      theta[kDeltaB + i] = 0.0;
+      theta[kBias + i] = b[i];
+    }
+    return true;
+  }
+};
+
+}  // namespace
+}  // namespace turncal
+
+TURNCAL_REGISTER_MODEL(mag22, turncal::Mag22)

@@ -1,0 +1,63 @@
+#pragma once
+// What the magnetometer models share: the G matrix entries g11 ... g33 (row-major) and K.
+
+#include <string>
+#include <vector>
+
+#include "core/measurement_model.h"
+
+namespace turncal::mag {
+
+// Parameters g11 ... g33 with nominal G = M (the nominal mounting): a well-mounted sensor has G
+// equal to the rotation from the table's frame to its axes.
+inline void AppendG(const ModelContext& context, std::vector<ParameterInfo>* p) {
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      p->push_back({"g" + std::to_string(r + 1) + std::to_string(c + 1), ParameterKind::kSensor,
+                    ParameterUnit::kGain, context.mounting(r, c)});
+}
+
+// Symmetric K (or K underbar) from its six upper entries k11 k12 k13 k22 k23 k33, nominal I.
+inline void AppendK(std::vector<ParameterInfo>* p, ParameterKind kind) {
+  for (const char* k : {"k11", "k12", "k13", "k22", "k23", "k33"}) {
+    const bool diagonal = k[1] == k[2];
+    p->push_back({k, kind, ParameterUnit::kGain, diagonal ? 1.0 : 0.0});
+  }
+}
+
+inline void AppendVector(std::vector<ParameterInfo>* p, const char* prefix, ParameterKind kind) {
+  for (const char* axis : {"x", "y", "z"}) {
+    p->push_back({std::string(prefix) + axis, kind, ParameterUnit::kField, 0.0});
+  }
+}
+
+template <typename T>
+Mat3<T> MatrixRowMajor(const T* g) {
+  Mat3<T> m;
+  m << g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8];
+  return m;
+}
+
+template <typename T>
+Mat3<T> Symmetric(const T* k) {
+  Mat3<T> m;
+  m << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
+  return m;
+}
+
+template <typename T>
+Vec3<T> Vector(const T* v) {
+  return Vec3<T>(v[0], v[1], v[2]);
+}
+
+// B_q = G^-1 (B_m - b): the field in the table's inner frame q.
+inline Eigen::Vector3d CorrectWithG(const double* g, const double* b, const Eigen::Vector3d& raw) {
+  return MatrixRowMajor(g).partialPivLu().solve(raw - Vector(b));
+}
+
+inline void SetG(const Mat3<double>& G, double* theta) {
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) theta[3 * r + c] = G(r, c);
+}
+
+}  // namespace turncal::mag

@@ -1,0 +1,34 @@
+#pragma once
+// Description of one model parameter: its name (exactly as MODELS.md writes it), nominal value,
+// physical unit, and whether it describes the sensor or its installation on the table.
+
+#include <string>
+#include <vector>
+
+namespace turncal {
+
+// Sensor parameters enter the correction of live samples; installation parameters describe the
+// table (MODELS.md "What the publish gate protects"). Mounting angles (eps) are installation
+// parameters when output is wanted in the case frame and sensor parameters when it is wanted in
+// the table frame.
+enum class ParameterKind { kSensor, kMounting, kInstallation };
+
+enum class ParameterUnit {
+  kScaleFactor,   // dimensionless relative error; reports use ppm
+  kAngle,         // rad; reports add degrees
+  kAcceleration,  // m/s^2; reports use mg
+  kField,         // the magnetometer's unit (Gauss for MicroStrain, arbitrary for Xsens)
+  kGain,          // dimensionless matrix entry (G, K)
+};
+
+struct ParameterInfo {
+  std::string name;
+  ParameterKind kind = ParameterKind::kSensor;
+  ParameterUnit unit = ParameterUnit::kGain;
+  double nominal = 0.0;
+};
+
+const char* ToString(ParameterKind kind);
+const char* ToString(ParameterUnit unit);
+
+}  // namespace turncal

@@ -1,0 +1,31 @@
+#pragma once
+// turncald's command line (DESIGN.md "Command line"). Flags override the configuration file.
+
+#include <CLI/CLI.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "drivers/device_spec.h"
+
+namespace turncal::daemon {
+
+struct Options {
+  std::string config_path;                   // --config FILE (TOML)
+  std::vector<drivers::DeviceSpec> devices;  // --device NAME=PROTOCOL:PORT[@BAUD]
+  std::string socket_path = "/run/turncal/turncal.sock";
+  std::string state_dir = "/var/lib/turncal";
+  std::string replay_path;                           // --replay FILE
+  std::optional<drivers::Protocol> replay_protocol;  // --protocol, for raw .bin replays
+  bool once = false;                                 // --once: run the capture, then exit
+  std::string result_out;                            // --result-out FILE
+
+  // False with a message when the combination of flags cannot run.
+  bool IsValid(std::string* error) const;
+};
+
+// Adds turncald's flags to `app`, storing into `options`. Device and protocol strings are parsed
+// and checked by CLI11 validators, so a bad flag is an error before anything starts.
+void AddCommandLine(CLI::App* app, Options* options);
+
+}  // namespace turncal::daemon

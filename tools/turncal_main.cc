@@ -1,0 +1,16 @@
+// turncal: the command-line tool (client and offline subcommands). Thin main over the layers.
+
+#include <CLI/CLI.hpp>
+
+#include "tools/models_command.h"
+#include "turncal/version.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"turncal — calibrate inertial sensors on a turntable (client and offline tools)",
+               "turncal"};
+  app.set_version_flag("--version", std::string("turncal ") + turncal::kVersion);
+  app.require_subcommand(1);
+  turncal::tools::AddModelsCommand(&app);
+  CLI11_PARSE(app, argc, argv);
+  return 0;
+}
