@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include "tools/models_command.h"
+#include "tools/sim_fit_command.h"
 #include "turncal/version.h"
 
 int main(int argc, char** argv) {
@@ -11,6 +12,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("turncal ") + turncal::kVersion);
   app.require_subcommand(1);
   turncal::tools::AddModelsCommand(&app);
+  turncal::tools::AddSimFitCommands(&app);
   CLI11_PARSE(app, argc, argv);
   return 0;
 }

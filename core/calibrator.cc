@@ -1,0 +1,429 @@
+#include "core/calibrator.h"
+
+#include <ceres/ceres.h>
+#include <fmt/format.h>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+#include <boost/math/special_functions/gamma.hpp>
+#include <cmath>
+
+#include "core/linear_start.h"
+
+namespace turncal {
+
+struct Calibrator::Pose {
+  TablePose pose;
+  Eigen::Vector3d measured;
+  Eigen::Matrix3d sqrt_information;  // Sigma^{-1/2}, Sigma the covariance of the mean
+  std::unique_ptr<ceres::CostFunction> cost;
+};
+
+const char* ToString(RobustLoss loss) {
+  switch (loss) {
+    case RobustLoss::kNone:
+      return "none";
+    case RobustLoss::kHuber:
+      return "huber";
+    case RobustLoss::kCauchy:
+      return "cauchy";
+  }
+  return "?";
+}
+
+const char* ToString(Mag22Gauge gauge) {
+  switch (gauge) {
+    case Mag22Gauge::kUnitDetKOrthogonalDeltaB:
+      return "det(K_) = 1, dB orthogonal to R3(beta) B_NED";
+  }
+  return "?";
+}
+
+bool CalibratorOptions::IsValid(std::string* error) const {
+  auto fail = [&](const std::string& message) {
+    if (error) *error = message;
+    return false;
+  };
+  const auto names = ModelNames();
+  if (std::find(names.begin(), names.end(), model) == names.end()) {
+    return fail("unknown model '" + model + "'");
+  }
+  if (!context.IsValid(error)) return false;
+  if (loss != RobustLoss::kNone && !(loss_scale > 0)) return fail("loss_scale must be > 0");
+  if (!(noise_density >= 0) || !(pose_offset_sigma >= 0)) {
+    return fail("noise_density and pose_offset_sigma must be >= 0");
+  }
+  if (max_iterations < 1) return fail("max_iterations must be >= 1");
+  if (!(rank_tolerance > 0 && rank_tolerance < 1)) return fail("rank_tolerance must be in (0, 1)");
+  if (!(outlier_threshold > 0)) return fail("outlier_threshold must be > 0");
+  if (!(chi2_inflation_p_value > 0 && chi2_inflation_p_value < 1)) {
+    return fail("chi2_inflation_p_value must be in (0, 1)");
+  }
+  return true;
+}
+
+double Estimate::value(std::string_view name) const {
+  for (std::size_t i = 0; i < parameters.size(); ++i)
+    if (parameters[i].name == name) return theta[static_cast<Eigen::Index>(i)];
+  return std::nan("");
+}
+
+double Estimate::sigma_of(std::string_view name) const {
+  for (std::size_t i = 0; i < parameters.size(); ++i)
+    if (parameters[i].name == name) return sigma[static_cast<Eigen::Index>(i)];
+  return std::nan("");
+}
+
+std::string Estimate::BriefReport() const {
+  if (!ok) return fmt::format("{}: no estimate: {}", model, error);
+  return fmt::format("{}: {} poses, rank {}/{}, chi2 {:.1f} on {} dof (p = {:.3g}){}{}, {} iterations, {}",
+                     model, poses, rank, parameters.size(), chi2, dof, p_value,
+                     covariance_scale > 1 ? fmt::format(", covariance x{:.2f}", covariance_scale) : "",
+                     gauge.empty() ? "" : ", gauge: " + gauge, iterations, termination);
+}
+
+std::string Estimate::FullReport() const {
+  std::string out = BriefReport() + "\n";
+  if (!ok) return out;
+  for (std::size_t i = 0; i < parameters.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    out += fmt::format("  {:<8} {:>+16.9g} +- {:<12.4g} [{}]\n", parameters[i].name, theta[k],
+                       sigma[k], ToString(parameters[i].unit));
+  }
+  for (std::size_t i = 0; i < residuals.size(); ++i) {
+    if (residuals[i].outlier) {
+      out += fmt::format("  pose {} is an outlier: normalised residual {:.1f}\n", i,
+                         residuals[i].normalized);
+    }
+  }
+  for (const auto& w : warnings) out += "  warning: " + w + "\n";
+  return out;
+}
+
+namespace {
+
+std::unique_ptr<ceres::LossFunction> MakeLoss(RobustLoss loss, double scale) {
+  switch (loss) {
+    case RobustLoss::kNone:
+      return nullptr;
+    case RobustLoss::kHuber:
+      return std::make_unique<ceres::HuberLoss>(scale);
+    case RobustLoss::kCauchy:
+      return std::make_unique<ceres::CauchyLoss>(scale);
+  }
+  return nullptr;
+}
+
+const TriadStats* TriadFor(SensorKind sensor, const PoseRecord& record) {
+  const auto& triad = sensor == SensorKind::kAccelerometer ? record.acc : record.mag;
+  return triad ? &*triad : nullptr;
+}
+
+// Dense Jacobian of all residuals (with the robust loss's reweighting, as the solver sees it).
+Eigen::MatrixXd DenseJacobian(ceres::Problem* problem) {
+  ceres::CRSMatrix crs;
+  problem->Evaluate(ceres::Problem::EvaluateOptions(), nullptr, nullptr, nullptr, &crs);
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
+  for (int r = 0; r < crs.num_rows; ++r)
+    for (int k = crs.rows[r]; k < crs.rows[r + 1]; ++k) J(r, crs.cols[k]) = crs.values[k];
+  return J;
+}
+
+}  // namespace
+
+Calibrator::Calibrator(CalibratorOptions options) : options_(std::move(options)) {
+  if (options_.IsValid(&model_error_)) {
+    model_ = MakeModel(options_.model, options_.context, &model_error_);
+  }
+  loss_ = MakeLoss(options_.loss, options_.loss_scale);
+}
+
+Calibrator::~Calibrator() = default;
+
+int Calibrator::num_poses() const { return static_cast<int>(poses_.size()); }
+
+bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
+  auto fail = [&](const std::string& message) {
+    if (error) *error = message;
+    return false;
+  };
+  if (!model_) return fail(model_error_);
+  const TriadStats* triad = TriadFor(model_->sensor(), record);
+  if (triad == nullptr) {
+    return fail(fmt::format("the record has no {} statistics", ToString(model_->sensor())));
+  }
+  const TablePose& p = record.pose;
+  if (!std::isfinite(p.phi_rad) || !std::isfinite(p.gamma_rad) || !std::isfinite(p.psi_rad)) {
+    return fail("the record's table angles are not finite");
+  }
+  if (!triad->mean.allFinite() || !triad->covariance.allFinite() ||
+      (triad->mean_covariance && !triad->mean_covariance->allFinite())) {
+    return fail("the record holds a non-finite mean or covariance");
+  }
+  if (triad->count < 1) return fail("the record has no samples");
+
+  Eigen::Matrix3d sigma = triad->mean_covariance
+                              ? *triad->mean_covariance
+                              : Eigen::Matrix3d(triad->covariance / static_cast<double>(triad->count));
+  sigma = 0.5 * (sigma + sigma.transpose());
+  double floor_var = 0.0;
+  if (options_.noise_density > 0 && record.duration_s() > 0) {
+    floor_var = options_.noise_density * options_.noise_density / (2.0 * record.duration_s());
+  }
+  // Floor the eigenvalues (the mean is never known better than the white noise allows), then add
+  // the pose-to-pose offset variance.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
+  Eigen::Vector3d lambda = eig.eigenvalues().cwiseMax(floor_var).array() +
+                           options_.pose_offset_sigma * options_.pose_offset_sigma;
+  if (!(lambda.minCoeff() > 0) || lambda.minCoeff() < 1e-12 * lambda.maxCoeff()) {
+    return fail("the record's covariance is singular and no noise floor is configured "
+                "(set noise_density or pose_offset_sigma)");
+  }
+  Pose pose;
+  pose.pose = p;
+  pose.measured = triad->mean;
+  pose.sqrt_information =
+      eig.eigenvectors() * lambda.cwiseInverse().cwiseSqrt().asDiagonal() * eig.eigenvectors().transpose();
+  pose.cost = model_->MakeResidual(p, pose.measured, pose.sqrt_information);
+  poses_.push_back(std::move(pose));
+  return true;
+}
+
+bool Calibrator::StartFromLinearForm(Eigen::VectorXd* theta, std::string* error) const {
+  std::vector<TablePose> poses;
+  std::vector<Eigen::Vector3d> measured;
+  for (const auto& p : poses_) {
+    poses.push_back(p.pose);
+    measured.push_back(p.measured);
+  }
+  LinearStart start;
+  if (!SolveLinearStart(poses, measured, model_->excitation_ned(), &start, error)) return false;
+  return model_->FromLinear(start.G, start.beta, start.b, theta, error);
+}
+
+Eigen::MatrixXd Calibrator::GaugeTangentBasis(const Eigen::VectorXd& theta) const {
+  // Constraints h1 = det(K_) - 1 and h2 = dB . R3(beta) B_NED; the tangent space is the null
+  // space of their 2 x 22 Jacobian.
+  const int kK = model_->index_of("k11"), kBeta = model_->index_of("beta"),
+            kDB = model_->index_of("dBx");
+  const double* k = theta.data() + kK;
+  Mat3<double> K;
+  K << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
+  const Mat3<double> cof = K.determinant() * K.inverse().transpose();
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(2, theta.size());
+  H(0, kK + 0) = cof(0, 0);
+  H(0, kK + 1) = cof(0, 1) + cof(1, 0);
+  H(0, kK + 2) = cof(0, 2) + cof(2, 0);
+  H(0, kK + 3) = cof(1, 1);
+  H(0, kK + 4) = cof(1, 2) + cof(2, 1);
+  H(0, kK + 5) = cof(2, 2);
+  const double beta = theta[kBeta];
+  const Eigen::Vector3d B = model_->excitation_ned();
+  const Eigen::Vector3d u = R3(beta) * B;
+  Mat3<double> dR3;
+  dR3 << -std::sin(beta), std::cos(beta), 0, -std::cos(beta), -std::sin(beta), 0, 0, 0, 0;
+  H.block<1, 3>(1, kDB) = u.transpose();
+  H(1, kBeta) = theta.segment<3>(kDB).dot(dR3 * B);
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(H, Eigen::ComputeFullV);
+  return svd.matrixV().rightCols(theta.size() - 2);
+}
+
+void Calibrator::ApplyMag22Gauge(Eigen::VectorXd* theta) const {
+  // Move along the two exact symmetries of seed eq. 21 (MODELS.md), which leave every prediction
+  // unchanged, to the representative with dB . u = 0 (u = R3(beta) B_NED) and det(K_) = 1.
+  const int kG = model_->index_of("g11"), kK = model_->index_of("k11"),
+            kBeta = model_->index_of("beta"), kDB = model_->index_of("dBx");
+  double* g = theta->data() + kG;
+  double* k = theta->data() + kK;
+  Mat3<double> G;
+  G << g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8];
+  Mat3<double> K;
+  K << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
+  Eigen::Vector3d dB = theta->segment<3>(kDB);
+  const Eigen::Vector3d u = R3((*theta)[kBeta]) * model_->excitation_ned();
+  // Symmetry 2: G' = G (I + t K_), K_' = (I + t K_)^-1 K_, dB' = dB - t u.
+  const double t = dB.dot(u) / u.squaredNorm();
+  const Mat3<double> A = Mat3<double>::Identity() + t * K;
+  G = G * A;
+  K = A.inverse() * K;
+  K = 0.5 * (K + K.transpose());
+  dB -= t * u;
+  // Symmetry 1: K_' = lambda K_, dB' = dB / lambda with lambda = det(K_)^(-1/3).
+  const double lambda = 1.0 / std::cbrt(K.determinant());
+  K *= lambda;
+  dB /= lambda;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) g[3 * r + c] = G(r, c);
+  k[0] = K(0, 0), k[1] = K(0, 1), k[2] = K(0, 2), k[3] = K(1, 1), k[4] = K(1, 2), k[5] = K(2, 2);
+  theta->segment<3>(kDB) = dB;
+}
+
+Estimate Calibrator::solve() {
+  Estimate est;
+  est.model = options_.model;
+  est.poses = num_poses();
+  if (!model_) {
+    est.error = model_error_;
+    return est;
+  }
+  est.parameters = model_->parameters();
+  const int N = model_->num_parameters();
+  const int n = num_poses();
+  const bool gauge = model_->name() == "mag22";
+  const int identifiable = gauge ? N - 2 : N;
+  if (3 * n < identifiable) {
+    est.error = fmt::format("{} poses give {} equations for {} parameters: add at least {} poses",
+                            n, 3 * n, identifiable, (identifiable + 2) / 3 - n);
+    return est;
+  }
+
+  ceres::Problem::Options problem_options;
+  problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Solver::Options solver_options;
+  solver_options.minimizer_type = ceres::TRUST_REGION;
+  solver_options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  solver_options.linear_solver_type = ceres::DENSE_QR;
+  solver_options.max_num_iterations = options_.max_iterations;
+  solver_options.function_tolerance = options_.function_tolerance;
+  solver_options.gradient_tolerance = options_.gradient_tolerance;
+  solver_options.parameter_tolerance = options_.parameter_tolerance;
+  solver_options.logging_type = ceres::SILENT;
+  solver_options.num_threads = 1;
+
+  auto run = [&](Eigen::VectorXd* theta, ceres::Solver::Summary* summary) {
+    ceres::Problem problem(problem_options);
+    for (auto& p : poses_) problem.AddResidualBlock(p.cost.get(), loss_.get(), theta->data());
+    ceres::Solve(solver_options, &problem, summary);
+  };
+
+  Eigen::VectorXd theta;
+  ceres::Solver::Summary summary;
+  bool warm = theta_.size() == N;
+  if (warm) {
+    theta = theta_;
+    run(&theta, &summary);
+    const double cost_per_dof = 2 * summary.final_cost / std::max(1, 3 * n - identifiable);
+    if (!summary.IsSolutionUsable() || !theta.allFinite() ||
+        cost_per_dof > options_.restart_cost_ratio * std::max(last_cost_per_dof_, 1.0)) {
+      est.warnings.push_back(fmt::format(
+          "the warm-started solve ended at cost/dof {:.3g} (was {:.3g}); restarted from the "
+          "linear form",
+          cost_per_dof, last_cost_per_dof_));
+      warm = false;
+    }
+  }
+  if (!warm) {
+    std::string error;
+    if (StartFromLinearForm(&theta, &error)) {
+      est.linear_start = true;
+    } else {
+      est.warnings.push_back("no linear start (" + error + "); started from nominal values");
+      theta = model_->nominal();
+    }
+    run(&theta, &summary);
+  }
+  est.iterations = static_cast<int>(summary.iterations.size());
+  est.termination = ceres::TerminationTypeToString(summary.termination_type);
+  est.solve_time_s = summary.total_time_in_seconds;
+  if (!summary.IsSolutionUsable() || !theta.allFinite()) {
+    est.error = "the solver failed: " + summary.message;
+    theta_.resize(0);
+    return est;
+  }
+  if (summary.termination_type == ceres::NO_CONVERGENCE) {
+    est.warnings.push_back(fmt::format("the solver stopped after {} iterations without converging",
+                                       est.iterations));
+  }
+  if (gauge) {
+    ApplyMag22Gauge(&theta);
+    est.gauge = ToString(options_.mag22_gauge);
+  }
+
+  // Jacobian at the estimate, as the solver sees it (whitened, robust loss applied).
+  ceres::Problem problem(problem_options);
+  for (auto& p : poses_) problem.AddResidualBlock(p.cost.get(), loss_.get(), theta.data());
+  const Eigen::MatrixXd J = DenseJacobian(&problem);
+  Eigen::VectorXd scale = J.colwise().norm().transpose();
+  for (int j = 0; j < N; ++j) scale[j] = scale[j] > 0 ? 1.0 / scale[j] : 1.0;
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(J * scale.asDiagonal(), Eigen::ComputeThinV);
+  const Eigen::VectorXd s = svd.singularValues();
+  est.rank = 0;
+  for (int i = 0; i < s.size(); ++i) est.rank += s[i] > options_.rank_tolerance * s[0];
+  est.condition = s[s.size() - 1] > 0 ? s[0] / s[s.size() - 1] : INFINITY;
+  const int expected_rank = identifiable;
+  if (est.rank < expected_rank) {
+    est.warnings.push_back(fmt::format(
+        "rank {} of {}: the poses do not determine every parameter (pose diversity)", est.rank,
+        expected_rank));
+  }
+
+  // Covariance: Ceres' dense SVD for the models without a gauge; for mag22 the inverse Fisher
+  // information restricted to the gauge's tangent space, B (B^T J^T J B)^-1 B^T.
+  Eigen::MatrixXd cov(N, N);
+  if (gauge) {
+    const Eigen::MatrixXd B = GaugeTangentBasis(theta);
+    const Eigen::MatrixXd JB = J * B;
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd_b(JB, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    svd_b.setThreshold(options_.rank_tolerance);
+    const Eigen::VectorXd sb = svd_b.singularValues();
+    Eigen::VectorXd inv = Eigen::VectorXd::Zero(sb.size());
+    for (int i = 0; i < sb.size(); ++i)
+      if (sb[i] > options_.rank_tolerance * sb[0]) inv[i] = 1.0 / (sb[i] * sb[i]);
+    cov = B * svd_b.matrixV() * inv.asDiagonal() * svd_b.matrixV().transpose() * B.transpose();
+  } else {
+    ceres::Covariance::Options cov_options;
+    cov_options.algorithm_type = ceres::DENSE_SVD;
+    cov_options.null_space_rank = est.rank < N ? N - est.rank : 0;
+    cov_options.num_threads = 1;
+    ceres::Covariance covariance(cov_options);
+    std::vector<std::pair<const double*, const double*>> blocks = {{theta.data(), theta.data()}};
+    if (covariance.Compute(blocks, &problem)) {
+      covariance.GetCovarianceBlock(theta.data(), theta.data(), cov.data());
+    } else {
+      est.warnings.push_back("Ceres could not compute the covariance; using the pseudo-inverse");
+      const Eigen::MatrixXd V = svd.matrixV();
+      Eigen::VectorXd inv = Eigen::VectorXd::Zero(s.size());
+      for (int i = 0; i < est.rank; ++i) inv[i] = 1.0 / (s[i] * s[i]);
+      cov = scale.asDiagonal() * V * inv.asDiagonal() * V.transpose() * scale.asDiagonal();
+    }
+  }
+
+  // Residuals, chi^2 (without the robust loss: the likelihood of the data as they are).
+  est.chi2 = 0;
+  for (const auto& p : poses_) {
+    PoseResidual r;
+    r.raw = p.measured - model_->Predict(theta, p.pose);
+    r.whitened = p.sqrt_information * r.raw;
+    r.normalized = std::sqrt(r.whitened.squaredNorm() / 3.0);
+    r.outlier = r.normalized > options_.outlier_threshold;
+    est.chi2 += r.whitened.squaredNorm();
+    est.residuals.push_back(r);
+  }
+  est.dof = 3 * n - est.rank;
+  est.p_value = est.dof > 0 ? boost::math::gamma_q(est.dof / 2.0, est.chi2 / 2.0) : 1.0;
+  const int outliers = static_cast<int>(std::count_if(
+      est.residuals.begin(), est.residuals.end(), [](const PoseResidual& r) { return r.outlier; }));
+  if (outliers > 0) {
+    est.warnings.push_back(fmt::format("{} pose(s) with normalised residual above {}", outliers,
+                                       options_.outlier_threshold));
+  }
+  if (options_.inflate_covariance_by_chi2 && est.dof > 0 &&
+      est.p_value < options_.chi2_inflation_p_value) {
+    est.covariance_scale = est.chi2 / est.dof;
+    cov *= est.covariance_scale;
+    est.warnings.push_back(fmt::format(
+        "chi2/dof = {:.2f} (p = {:.2g}): the noise or the model does not explain the data; "
+        "covariance inflated by that factor",
+        est.covariance_scale, est.p_value));
+  }
+  est.theta = theta;
+  est.covariance = cov;
+  est.sigma = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  est.ok = true;
+  theta_ = theta;
+  last_cost_per_dof_ = est.dof > 0 ? est.chi2 / est.dof : 0.0;
+  return est;
+}
+
+}  // namespace turncal

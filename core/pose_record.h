@@ -1,0 +1,36 @@
+#pragma once
+// PoseRecord: the unit the calibrator consumes (DESIGN.md "Data flow"): the commanded table
+// angles and the statistics of each triad over one stationary window.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "core/table_pose.h"
+
+namespace turncal {
+
+struct TriadStats {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  // Sample covariance of the individual samples.
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  // Covariance of the mean when the producer estimated it in a way that survives correlated
+  // noise (batch means over sub-windows). Absent: covariance / count is used.
+  std::optional<Eigen::Matrix3d> mean_covariance;
+  std::int64_t count = 0;
+};
+
+struct PoseRecord {
+  TablePose pose;
+  std::optional<TriadStats> acc;  // specific force, m/s^2
+  std::optional<TriadStats> gyr;  // rad/s
+  std::optional<TriadStats> mag;  // device unit
+  double t_start_s = 0.0;         // window start and end, seconds on the host's clock
+  double t_end_s = 0.0;
+  std::optional<double> temp_c;
+
+  double duration_s() const { return t_end_s - t_start_s; }
+};
+
+}  // namespace turncal

@@ -1,0 +1,162 @@
+#include "core/synthetic.h"
+
+#include <cmath>
+
+namespace turncal {
+
+namespace {
+constexpr double kDeg = M_PI / 180.0;
+constexpr double kMicroG = 1e-6 * 9.80665;
+}  // namespace
+
+SensorClass IndustrialClass() {
+  SensorClass c;
+  c.name = "industrial";
+  c.acc_noise_density = 60 * kMicroG;      // MTi-300, 60 ug/sqrt(Hz)
+  c.acc_bias_instability = 4e-4;           // between poses over minutes (SENSORS.md)
+  c.acc_turn_on_bias = 2e-3 * 9.80665;     // 2 mg
+  c.acc_scale_sigma = 500e-6;              // 500 ppm
+  c.misalignment_sigma_rad = 0.05 * kDeg;  // 0.05 deg
+  c.mag_noise_rms = 0.5e-3;                // 0.5 mG
+  c.mag_bias_instability = 0.1e-3;
+  c.mag_hard_iron_sigma = 0.05;
+  c.mag_soft_iron_sigma = 0.02;
+  c.rate_hz = 500;
+  return c;
+}
+
+SensorClass ConsumerClass() {
+  SensorClass c;
+  c.name = "consumer";
+  c.acc_noise_density = 200 * kMicroG;   // 200 ug/sqrt(Hz)
+  c.acc_bias_instability = 0.02;          // SENSORS.md: 0.02 m/s^2
+  c.acc_turn_on_bias = 20e-3 * 9.80665;   // 20 mg
+  c.acc_scale_sigma = 3e-3;               // 0.3 %
+  c.misalignment_sigma_rad = 0.1 * kDeg;  // 0.1 deg
+  c.mag_noise_rms = 0.5e-3;
+  c.mag_bias_instability = 0.2e-3;
+  c.mag_hard_iron_sigma = 0.1;
+  c.mag_soft_iron_sigma = 0.03;
+  c.rate_hz = 100;
+  return c;
+}
+
+bool SensorClassByName(const std::string& name, SensorClass* out) {
+  if (name == "industrial") {
+    *out = IndustrialClass();
+    return true;
+  }
+  if (name == "consumer") {
+    *out = ConsumerClass();
+    return true;
+  }
+  return false;
+}
+
+Eigen::VectorXd DrawTruth(const MeasurementModel& model, const SensorClass& sensor,
+                          std::mt19937_64* rng) {
+  std::normal_distribution<double> normal(0.0, 1.0);
+  std::uniform_real_distribution<double> heading(-0.3, 0.3);
+  Eigen::VectorXd theta = model.nominal();
+  const bool accel = model.sensor() == SensorKind::kAccelerometer;
+  for (int i = 0; i < model.num_parameters(); ++i) {
+    const ParameterInfo& p = model.parameters()[i];
+    if (p.name == "beta") {
+      theta[i] = heading(*rng);
+    } else if (p.unit == ParameterUnit::kScaleFactor) {
+      theta[i] += (accel ? sensor.acc_scale_sigma : sensor.mag_soft_iron_sigma) * normal(*rng);
+    } else if (p.unit == ParameterUnit::kAngle) {
+      theta[i] += sensor.misalignment_sigma_rad * normal(*rng);
+    } else if (p.unit == ParameterUnit::kAcceleration) {
+      theta[i] += sensor.acc_turn_on_bias * normal(*rng);
+    } else if (p.unit == ParameterUnit::kGain) {
+      theta[i] += sensor.mag_soft_iron_sigma * normal(*rng);
+    } else if (p.unit == ParameterUnit::kField) {
+      theta[i] += sensor.mag_hard_iron_sigma * normal(*rng);
+    }
+  }
+  if (model.name() == "mag22") {
+    // Into the calibrator's gauge: det K_ = 1 and dB . R3(beta) B_NED = 0.
+    const int kK = model.index_of("k11"), kDB = model.index_of("dBx");
+    const double beta = theta[model.index_of("beta")];
+    const Eigen::Vector3d u = R3(beta) * model.excitation_ned();
+    Eigen::Vector3d dB = theta.segment<3>(kDB);
+    dB -= dB.dot(u) / u.squaredNorm() * u;
+    theta.segment<3>(kDB) = dB;
+    double* k = theta.data() + kK;
+    Mat3<double> K;
+    K << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
+    const double lambda = 1.0 / std::cbrt(K.determinant());
+    for (int j = 0; j < 6; ++j) k[j] *= lambda;
+    theta.segment<3>(kDB) /= lambda;
+  }
+  return theta;
+}
+
+std::vector<TablePose> RandomPoses(int n, std::mt19937_64* rng) {
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  std::vector<TablePose> poses;
+  for (int i = 0; i < n; ++i) {
+    Eigen::Vector3d d;
+    do {
+      d = Eigen::Vector3d(uniform(*rng), uniform(*rng), uniform(*rng));
+    } while (d.norm() > 1.0 || d.norm() < 0.1);
+    poses.push_back(PoseWithDownAlong(d, M_PI * uniform(*rng)));
+  }
+  return poses;
+}
+
+std::vector<TablePose> CubePoses26() {
+  std::vector<TablePose> poses;
+  int k = 0;
+  for (int x = -1; x <= 1; ++x)
+    for (int y = -1; y <= 1; ++y)
+      for (int z = -1; z <= 1; ++z) {
+        if (x == 0 && y == 0 && z == 0) continue;
+        poses.push_back(PoseWithDownAlong(Eigen::Vector3d(x, y, z), (k++ % 4) * M_PI / 2));
+      }
+  return poses;
+}
+
+std::vector<TablePose> AboutZPoses(int n) {
+  std::vector<TablePose> poses;
+  for (int i = 0; i < n; ++i) poses.push_back(TablePose{0.0, 0.0, 2 * M_PI * i / n});
+  return poses;
+}
+
+PoseRecord SimulateRecord(const MeasurementModel& model, const Eigen::VectorXd& truth,
+                          const TablePose& pose, const SensorClass& sensor, double dwell_s,
+                          std::mt19937_64* rng) {
+  std::normal_distribution<double> normal(0.0, 1.0);
+  const bool accel = model.sensor() == SensorKind::kAccelerometer;
+  const auto count = static_cast<std::int64_t>(std::llround(dwell_s * sensor.rate_hz));
+  // Per-sample white-noise sigma: density * sqrt(rate / 2) for a sensor band-limited at Nyquist;
+  // the mean of n samples has sigma_sample / sqrt(n) = density / sqrt(2 dwell).
+  const double sample_sigma =
+      accel ? sensor.acc_noise_density * std::sqrt(sensor.rate_hz / 2.0) : sensor.mag_noise_rms;
+  const double offset_sigma = accel ? sensor.acc_bias_instability : sensor.mag_bias_instability;
+  const double white_mean_var = sample_sigma * sample_sigma / static_cast<double>(count);
+
+  TriadStats stats;
+  stats.count = count;
+  stats.mean = model.Predict(truth, pose);
+  for (int i = 0; i < 3; ++i) {
+    stats.mean[i] += std::sqrt(white_mean_var) * normal(*rng) + offset_sigma * normal(*rng);
+  }
+  // The sample covariance of n white samples: a Wishart draw, approximated per axis by the
+  // chi-square spread of its diagonal (enough for n in the hundreds).
+  stats.covariance = Eigen::Matrix3d::Zero();
+  const double spread = std::sqrt(2.0 / static_cast<double>(std::max<std::int64_t>(count - 1, 1)));
+  for (int i = 0; i < 3; ++i) {
+    stats.covariance(i, i) = sample_sigma * sample_sigma * std::max(0.1, 1.0 + spread * normal(*rng));
+  }
+
+  PoseRecord record;
+  record.pose = pose;
+  record.t_start_s = 0.0;
+  record.t_end_s = dwell_s;
+  (accel ? record.acc : record.mag) = stats;
+  return record;
+}
+
+}  // namespace turncal

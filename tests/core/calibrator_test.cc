@@ -1,0 +1,259 @@
+#include "core/calibrator.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/synthetic.h"
+
+namespace turncal {
+namespace {
+
+struct SimRun {
+  std::unique_ptr<MeasurementModel> model;
+  Eigen::VectorXd truth;
+  Estimate estimate;
+};
+
+CalibratorOptions OptionsFor(const std::string& model, const SensorClass& sensor) {
+  CalibratorOptions o;
+  o.model = model;
+  const bool accel = model.rfind("accel", 0) == 0;
+  o.pose_offset_sigma = accel ? sensor.acc_bias_instability : sensor.mag_bias_instability;
+  return o;
+}
+
+SimRun Simulate(const std::string& name, const SensorClass& sensor, const std::vector<TablePose>& poses,
+             std::uint64_t seed, double dwell_s = 5.0) {
+  std::mt19937_64 rng(seed);
+  SimRun run;
+  std::string error;
+  run.model = MakeModel(name, ModelContext{}, &error);
+  EXPECT_NE(run.model, nullptr) << error;
+  run.truth = DrawTruth(*run.model, sensor, &rng);
+  Calibrator calibrator(OptionsFor(name, sensor));
+  for (const auto& pose : poses) {
+    EXPECT_TRUE(calibrator.add_pose(SimulateRecord(*run.model, run.truth, pose, sensor, dwell_s, &rng), &error))
+        << error;
+  }
+  run.estimate = calibrator.solve();
+  return run;
+}
+
+// Every parameter within 4 sigma (sigma from the Fisher information) of the truth.
+void ExpectWithinFourSigma(const SimRun& run) {
+  const Estimate& e = run.estimate;
+  ASSERT_TRUE(e.ok) << e.error;
+  ASSERT_EQ(e.theta.size(), run.truth.size());
+  for (int i = 0; i < e.theta.size(); ++i) {
+    const double z = (e.theta[i] - run.truth[i]) / e.sigma[i];
+    EXPECT_LT(std::abs(z), 4.0) << e.model << " " << e.parameters[i].name << " est " << e.theta[i]
+                                << " truth " << run.truth[i] << " sigma " << e.sigma[i];
+  }
+}
+
+class RecoversTruth : public ::testing::TestWithParam<std::tuple<std::string, std::string, int>> {};
+
+TEST_P(RecoversTruth, EveryParameterWithinFourSigma) {
+  const auto& [model, class_name, n] = GetParam();
+  SensorClass sensor;
+  ASSERT_TRUE(SensorClassByName(class_name, &sensor));
+  for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+    std::mt19937_64 pose_rng(seed * 7919);
+    const auto poses = n == 26 ? CubePoses26() : RandomPoses(n, &pose_rng);
+    const SimRun run = Simulate(model, sensor, poses, seed);
+    ExpectWithinFourSigma(run);
+    EXPECT_EQ(run.estimate.rank, run.model->num_parameters());
+    EXPECT_TRUE(run.estimate.linear_start);
+    EXPECT_GT(run.estimate.p_value, 1e-4) << run.estimate.BriefReport();
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Models, RecoversTruth,
+    ::testing::Combine(::testing::Values("accel12", "accel13", "mag13"),
+                       ::testing::Values("industrial", "consumer"), ::testing::Values(26, 60)),
+    [](const auto& param_info) {
+      std::string name = std::get<0>(param_info.param) + "_" + std::get<1>(param_info.param) + "_" +
+                         std::to_string(std::get<2>(param_info.param));
+      return name;
+    });
+
+TEST(Calibrator, Accel12FitsAccel13DataOnlyWhenHeadingIsZero) {
+  // accel12 takes beta = 0: on data with beta != 0 its chi^2 must show the misfit (the paper's
+  // point), and the covariance is inflated.
+  SensorClass sensor = IndustrialClass();
+  std::mt19937_64 rng(5);
+  std::string error;
+  auto truth_model = MakeModel("accel13", {}, &error);
+  Eigen::VectorXd truth = DrawTruth(*truth_model, sensor, &rng);
+  truth[truth_model->index_of("beta")] = 0.25;
+  Calibrator calibrator(OptionsFor("accel12", sensor));
+  for (const auto& pose : RandomPoses(60, &rng)) {
+    ASSERT_TRUE(calibrator.add_pose(SimulateRecord(*truth_model, truth, pose, sensor, 5.0, &rng), &error));
+  }
+  const Estimate e = calibrator.solve();
+  ASSERT_TRUE(e.ok) << e.error;
+  EXPECT_LT(e.p_value, 1e-6) << e.BriefReport();
+  EXPECT_GT(e.covariance_scale, 1.0);
+}
+
+TEST(Calibrator, Mag22ConvergesWithRankTwentyAndNamedGauge) {
+  SensorClass sensor = IndustrialClass();
+  std::mt19937_64 pose_rng(99);
+  const auto poses = RandomPoses(60, &pose_rng);
+  for (std::uint64_t seed = 11; seed <= 13; ++seed) {
+    const SimRun run = Simulate("mag22", sensor, poses, seed);
+    const Estimate& e = run.estimate;
+    ASSERT_TRUE(e.ok) << e.error;
+    EXPECT_EQ(e.rank, 20) << e.BriefReport();
+    EXPECT_NE(e.gauge.find("det(K_) = 1"), std::string::npos);
+    EXPECT_GT(e.p_value, 1e-4) << e.BriefReport();
+    // Gauge-independent quantities: beta and b within 4 sigma; predicted measurements at new poses
+    // match the truth's within 4 sigma of the propagated uncertainty.
+    for (const char* name : {"beta", "bx", "by", "bz"}) {
+      const int i = run.model->index_of(name);
+      EXPECT_LT(std::abs(e.theta[i] - run.truth[i]), 4 * e.sigma[i]) << name;
+    }
+    std::mt19937_64 rng(seed);
+    for (const auto& pose : RandomPoses(20, &rng)) {
+      Jacobian3 J;
+      const Eigen::Vector3d y = run.model->Predict(e.theta, pose, &J);
+      const Eigen::Matrix3d cov = J * e.covariance * J.transpose();
+      const Eigen::Vector3d truth_y = run.model->Predict(run.truth, pose);
+      for (int k = 0; k < 3; ++k) EXPECT_LT(std::abs(y[k] - truth_y[k]), 4 * std::sqrt(cov(k, k)) + 1e-12);
+    }
+    // Truth is drawn in the same gauge, so in this gauge every parameter is recovered too.
+    ExpectWithinFourSigma(run);
+  }
+}
+
+TEST(Calibrator, IncrementalWarmStartAgreesWithAFreshSolve) {
+  SensorClass sensor = IndustrialClass();
+  std::mt19937_64 rng(21);
+  std::string error;
+  auto model = MakeModel("accel13", {}, &error);
+  const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
+  Calibrator incremental(OptionsFor("accel13", sensor));
+  Calibrator fresh(OptionsFor("accel13", sensor));
+  const auto poses = RandomPoses(40, &rng);
+  Estimate last;
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    const PoseRecord record = SimulateRecord(*model, truth, poses[i], sensor, 5.0, &rng);
+    ASSERT_TRUE(incremental.add_pose(record, &error));
+    ASSERT_TRUE(fresh.add_pose(record, &error));
+    if (i >= 12) {
+      last = incremental.solve();
+      ASSERT_TRUE(last.ok) << last.error;
+      if (i > 12) {
+        EXPECT_FALSE(last.linear_start) << "pose " << i;
+      }
+    }
+  }
+  const Estimate cold = fresh.solve();
+  ASSERT_TRUE(cold.ok);
+  for (int i = 0; i < cold.theta.size(); ++i) {
+    EXPECT_NEAR(last.theta[i], cold.theta[i], 1e-3 * cold.sigma[i]) << cold.parameters[i].name;
+  }
+}
+
+TEST(Calibrator, ARingingPoseStandsOutAndBarelyMovesTheEstimate) {
+  SensorClass sensor = IndustrialClass();
+  std::mt19937_64 rng(31);
+  std::string error;
+  auto model = MakeModel("accel13", {}, &error);
+  const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
+  Calibrator calibrator(OptionsFor("accel13", sensor));
+  const auto poses = RandomPoses(40, &rng);
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    PoseRecord record = SimulateRecord(*model, truth, poses[i], sensor, 5.0, &rng);
+    if (i == 17) record.acc->mean += Eigen::Vector3d(0.05, -0.03, 0.02);  // ~100 sigma off
+    ASSERT_TRUE(calibrator.add_pose(record, &error));
+  }
+  const Estimate e = calibrator.solve();
+  ASSERT_TRUE(e.ok) << e.error;
+  EXPECT_TRUE(e.residuals[17].outlier);
+  EXPECT_GT(e.residuals[17].normalized, 20.0);
+  int flagged = 0;
+  for (const auto& r : e.residuals) flagged += r.outlier;
+  EXPECT_EQ(flagged, 1);
+  // With the Huber loss the bad pose's pull is bounded: the sensor parameters stay within 4 sigma.
+  for (const char* name : {"Sx", "Sy", "Sz", "alpha1", "alpha2", "alpha3"}) {
+    const int i = model->index_of(name);
+    EXPECT_LT(std::abs(e.theta[i] - truth[i]), 4 * e.sigma[i]) << name;
+  }
+}
+
+TEST(Calibrator, TooFewPosesIsAClearError) {
+  auto poses = CubePoses26();
+  poses.resize(3);
+  const SimRun run = Simulate("accel13", IndustrialClass(), poses, 1);
+  EXPECT_FALSE(run.estimate.ok);
+  EXPECT_NE(run.estimate.error.find("add at least"), std::string::npos) << run.estimate.error;
+}
+
+TEST(Calibrator, PosesAboutOneAxisAreFlaggedAsRankDeficient) {
+  const SimRun run = Simulate("accel13", IndustrialClass(), AboutZPoses(24), 2);
+  ASSERT_TRUE(run.estimate.ok) << run.estimate.error;
+  EXPECT_LT(run.estimate.rank, 13);
+  ASSERT_FALSE(run.estimate.warnings.empty());
+  bool said = false;
+  for (const auto& w : run.estimate.warnings) said |= w.find("rank") != std::string::npos;
+  EXPECT_TRUE(said) << run.estimate.FullReport();
+}
+
+TEST(Calibrator, NonFiniteOrSingularRecordsAreRefusedWithAReason) {
+  SensorClass sensor = IndustrialClass();
+  std::mt19937_64 rng(41);
+  std::string error;
+  auto model = MakeModel("accel13", {}, &error);
+  const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
+  PoseRecord good = SimulateRecord(*model, truth, TablePose{}, sensor, 5.0, &rng);
+
+  CalibratorOptions no_floor;
+  no_floor.model = "accel13";
+  Calibrator calibrator(no_floor);
+  PoseRecord nan = good;
+  nan.acc->mean[1] = std::nan("");
+  EXPECT_FALSE(calibrator.add_pose(nan, &error));
+  EXPECT_NE(error.find("non-finite"), std::string::npos) << error;
+  PoseRecord nan_angle = good;
+  nan_angle.pose.gamma_rad = std::nan("");
+  EXPECT_FALSE(calibrator.add_pose(nan_angle, &error));
+  PoseRecord zero = good;
+  zero.acc->covariance.setZero();
+  EXPECT_FALSE(calibrator.add_pose(zero, &error));
+  EXPECT_NE(error.find("singular"), std::string::npos) << error;
+  PoseRecord no_acc = good;
+  no_acc.acc.reset();
+  EXPECT_FALSE(calibrator.add_pose(no_acc, &error));
+  EXPECT_EQ(calibrator.num_poses(), 0);
+
+  // With a noise floor the zero-covariance record is usable.
+  CalibratorOptions floored = no_floor;
+  floored.noise_density = sensor.acc_noise_density;
+  Calibrator with_floor(floored);
+  EXPECT_TRUE(with_floor.add_pose(zero, &error)) << error;
+}
+
+TEST(Calibrator, InvalidOptionsAreReported) {
+  CalibratorOptions o;
+  std::string error;
+  o.model = "nope";
+  EXPECT_FALSE(o.IsValid(&error));
+  o.model = "accel13";
+  o.loss_scale = -1;
+  EXPECT_FALSE(o.IsValid(&error));
+  o.loss_scale = 4;
+  o.rank_tolerance = 2;
+  EXPECT_FALSE(o.IsValid(&error));
+  CalibratorOptions unknown;
+  unknown.model = "nope";
+  Calibrator c(unknown);
+  const Estimate e = c.solve();
+  EXPECT_FALSE(e.ok);
+  EXPECT_NE(e.error.find("unknown model"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace turncal

@@ -1,0 +1,248 @@
+#include "tools/sim_fit_command.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "core/accel_physical.h"
+#include "core/calibrator.h"
+#include "core/synthetic.h"
+
+namespace turncal::tools {
+
+namespace {
+
+struct SimArgs {
+  std::string model = "accel13";
+  std::string sensor_class = "industrial";
+  int poses = 26;
+  std::string design = "cube";
+  double dwell_s = 5.0;
+  std::uint64_t seed = 1;
+  int runs = 200;
+  bool json = false;
+};
+
+void AddSimOptions(CLI::App* cmd, SimArgs* args) {
+  cmd->add_option("--model", args->model, "accel12|accel13|mag13|mag22|mag-physical")
+      ->capture_default_str();
+  cmd->add_option("--class", args->sensor_class, "sensor class: industrial|consumer (SENSORS.md)")
+      ->check(CLI::IsMember({"industrial", "consumer"}))
+      ->capture_default_str();
+  cmd->add_option("--poses", args->poses, "number of poses")->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  cmd->add_option("--design", args->design,
+                  "pose design: cube (26 cube directions, repeated) | random | about-z")
+      ->check(CLI::IsMember({"cube", "random", "about-z"}))
+      ->capture_default_str();
+  cmd->add_option("--dwell", args->dwell_s, "seconds averaged per pose")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--seed", args->seed, "random seed")->capture_default_str();
+  cmd->add_flag("--json", args->json, "JSON output");
+}
+
+std::vector<TablePose> Design(const SimArgs& args, std::mt19937_64* rng) {
+  if (args.design == "random") return RandomPoses(args.poses, rng);
+  if (args.design == "about-z") return AboutZPoses(args.poses);
+  const auto cube = CubePoses26();
+  std::vector<TablePose> poses;
+  for (int i = 0; i < args.poses; ++i) {
+    TablePose p = cube[i % cube.size()];
+    p.psi_rad += (i / static_cast<int>(cube.size())) * M_PI / 4;  // repeats turn by 45 deg
+    poses.push_back(p);
+  }
+  return poses;
+}
+
+CalibratorOptions OptionsFor(const MeasurementModel& model, const SensorClass& sensor) {
+  CalibratorOptions o;
+  o.model = model.name();
+  const bool accel = model.sensor() == SensorKind::kAccelerometer;
+  o.pose_offset_sigma = accel ? sensor.acc_bias_instability : sensor.mag_bias_instability;
+  o.noise_density = accel ? sensor.acc_noise_density : 0.0;
+  return o;
+}
+
+// A value in the unit a test engineer reads: ppm, degrees, mg.
+std::pair<double, const char*> Display(const ParameterInfo& p, double v, bool is_sigma) {
+  switch (p.unit) {
+    case ParameterUnit::kScaleFactor:
+      return {v * 1e6, "ppm"};
+    case ParameterUnit::kAngle:
+      return {(is_sigma || p.name != "alpha3" ? v : v - M_PI / 2) * 180 / M_PI,
+              p.name == "alpha3" && !is_sigma ? "deg-90" : "deg"};
+    case ParameterUnit::kAcceleration:
+      return {v / 9.80665 * 1e3, "mg"};
+    case ParameterUnit::kField:
+      return {v * 1e3, "mG"};
+    case ParameterUnit::kGain:
+      return {v, ""};
+  }
+  return {v, ""};
+}
+
+int RunFit(const SimArgs& args) {
+  SensorClass sensor;
+  SensorClassByName(args.sensor_class, &sensor);
+  std::string error;
+  auto model = MakeModel(args.model, ModelContext{}, &error);
+  if (!model) {
+    fmt::print(stderr, "turncal fit-sim: {}\n", error);
+    return 2;
+  }
+  std::mt19937_64 rng(args.seed);
+  const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
+  Calibrator calibrator(OptionsFor(*model, sensor));
+  for (const auto& pose : Design(args, &rng)) {
+    if (!calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng), &error)) {
+      fmt::print(stderr, "turncal fit-sim: {}\n", error);
+      return 2;
+    }
+  }
+  const Estimate e = calibrator.solve();
+  if (args.json) {
+    nlohmann::json params;
+    for (std::size_t i = 0; i < e.parameters.size(); ++i) {
+      const auto k = static_cast<Eigen::Index>(i);
+      params[e.parameters[i].name] = {{"value", e.ok ? e.theta[k] : NAN},
+                                      {"sigma", e.ok ? e.sigma[k] : NAN},
+                                      {"truth", truth[k]}};
+    }
+    fmt::print("{}\n", nlohmann::json{{"model", e.model}, {"ok", e.ok}, {"error", e.error},
+                                      {"poses", e.poses}, {"rank", e.rank}, {"chi2", e.chi2},
+                                      {"dof", e.dof}, {"p_value", e.p_value}, {"gauge", e.gauge},
+                                      {"warnings", e.warnings}, {"params", params}}
+                           .dump());
+    return e.ok ? 0 : 1;
+  }
+  fmt::print("Simulated {} session: {} class, {} poses ({} design), {:.1f} s dwell, seed {}\n",
+             args.model, sensor.name, args.poses, args.design, args.dwell_s, args.seed);
+  fmt::print("{}\n", e.BriefReport());
+  if (!e.ok) return 1;
+  fmt::print("\n  {:<8} {:>14} {:>14} {:>11}  {:<7} {:>7}\n", "param", "truth", "estimate", "1 sigma",
+             "unit", "z");
+  int beyond = 0;
+  for (std::size_t i = 0; i < e.parameters.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    const auto& p = e.parameters[i];
+    const auto [t, unit] = Display(p, truth[k], false);
+    const auto [v, unused] = Display(p, e.theta[k], false);
+    const auto [s, unused2] = Display(p, e.sigma[k], true);
+    const double z = (e.theta[k] - truth[k]) / e.sigma[k];
+    beyond += std::abs(z) > 3;
+    fmt::print("  {:<8} {:>14.6g} {:>14.6g} {:>11.3g}  {:<7} {:>+7.2f}\n", p.name, t, v, s, unit, z);
+  }
+  if (model->sensor() == SensorKind::kAccelerometer) {
+    AccelPhysical phys;
+    phys.S = e.theta.segment<3>(0);
+    phys.alpha = e.theta.segment<3>(3);
+    phys.eps = e.theta.segment<3>(6);
+    const Mat3<double> G = AccelGFromPhysical(phys, model->context().mounting);
+    fmt::print("\n  G = (I+S) T_r^s C_q^r (the linear form's matrix):\n");
+    for (int r = 0; r < 3; ++r) fmt::print("    [{:+.9f} {:+.9f} {:+.9f}]\n", G(r, 0), G(r, 1), G(r, 2));
+  }
+  for (const auto& w : e.warnings) fmt::print("  warning: {}\n", w);
+  fmt::print("\n  z = (estimate - truth) / sigma; {} of {} parameters beyond 3 sigma.\n", beyond,
+             e.parameters.size());
+  return 0;
+}
+
+int RunMonteCarlo(const SimArgs& args) {
+  SensorClass sensor;
+  SensorClassByName(args.sensor_class, &sensor);
+  std::string error;
+  auto model = MakeModel(args.model, ModelContext{}, &error);
+  if (!model) {
+    fmt::print(stderr, "turncal montecarlo: {}\n", error);
+    return 2;
+  }
+  const int N = model->num_parameters();
+  // One pose design for every run (the Cramer-Rao bound depends on it); new truth and noise each run.
+  std::mt19937_64 design_rng(args.seed);
+  const auto poses = Design(args, &design_rng);
+  Eigen::VectorXd sum_sq_err = Eigen::VectorXd::Zero(N), sum_var = Eigen::VectorXd::Zero(N),
+                  sum_z = Eigen::VectorXd::Zero(N), sum_z2 = Eigen::VectorXd::Zero(N);
+  int ok = 0, failed = 0;
+  double solve_time = 0;
+  for (int run = 0; run < args.runs; ++run) {
+    std::mt19937_64 rng(args.seed * 1000003 + static_cast<std::uint64_t>(run));
+    const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
+    Calibrator calibrator(OptionsFor(*model, sensor));
+    for (const auto& pose : poses) {
+      calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng), &error);
+    }
+    const Estimate e = calibrator.solve();
+    if (!e.ok) {
+      ++failed;
+      continue;
+    }
+    ++ok;
+    solve_time += e.solve_time_s;
+    const Eigen::VectorXd err = e.theta - truth;
+    sum_sq_err += err.cwiseAbs2();
+    sum_var += e.sigma.cwiseAbs2();
+    const Eigen::VectorXd z = err.cwiseQuotient(e.sigma);
+    sum_z += z;
+    sum_z2 += z.cwiseAbs2();
+  }
+  nlohmann::json rows = nlohmann::json::array();
+  if (!args.json) {
+    fmt::print("Monte Carlo: {} runs of {} ({} class, {} poses, {} design, {:.1f} s dwell, seed {}); "
+               "{} solved, {} failed; mean solve {:.2f} ms\n\n",
+               args.runs, args.model, sensor.name, poses.size(), args.design, args.dwell_s,
+               args.seed, ok, failed, ok ? 1e3 * solve_time / ok : 0.0);
+    fmt::print("| param | RMSE | mean CR sigma | RMSE / sigma | mean z | std z | verdict |\n");
+    fmt::print("|---|---|---|---|---|---|---|\n");
+  }
+  int bad = 0;
+  for (int i = 0; i < N; ++i) {
+    const double rmse = std::sqrt(sum_sq_err[i] / ok);
+    const double sigma = std::sqrt(sum_var[i] / ok);
+    const double mean_z = sum_z[i] / ok;
+    const double std_z = std::sqrt(std::max(0.0, sum_z2[i] / ok - mean_z * mean_z));
+    const bool honest = rmse <= 1.1 * sigma && std_z >= 0.9 && std_z <= 1.1;
+    bad += !honest;
+    const auto& p = model->parameters()[i];
+    if (args.json) {
+      rows.push_back({{"name", p.name}, {"rmse", rmse}, {"sigma", sigma}, {"mean_z", mean_z},
+                      {"std_z", std_z}, {"honest", honest}});
+    } else {
+      fmt::print("| {} | {:.3g} | {:.3g} | {:.3f} | {:+.3f} | {:.3f} | {} |\n", p.name, rmse, sigma,
+                 rmse / sigma, mean_z, std_z, honest ? "ok" : "NOT HONEST");
+    }
+  }
+  if (args.json) {
+    fmt::print("{}\n", nlohmann::json{{"model", args.model}, {"class", sensor.name},
+                                      {"runs", args.runs}, {"solved", ok}, {"poses", poses.size()},
+                                      {"params", rows}}
+                           .dump());
+  } else {
+    fmt::print("\nCriteria: RMSE <= 1.1 x sigma and std z in [0.9, 1.1]; {} of {} parameters fail.\n",
+               bad, N);
+  }
+  return bad == 0 && failed == 0 ? 0 : 1;
+}
+
+}  // namespace
+
+void AddSimFitCommands(CLI::App* app) {
+  auto fit_args = std::make_shared<SimArgs>();
+  auto* fit = app->add_subcommand(
+      "fit-sim", "simulate one calibration session in memory, calibrate, print the parameter table");
+  AddSimOptions(fit, fit_args.get());
+  fit->callback([fit_args] { throw CLI::RuntimeError(RunFit(*fit_args)); });
+
+  auto mc_args = std::make_shared<SimArgs>();
+  mc_args->poses = 60;
+  mc_args->design = "random";
+  auto* mc = app->add_subcommand(
+      "montecarlo", "repeat simulated sessions and check the reported sigma against the errors");
+  AddSimOptions(mc, mc_args.get());
+  mc->add_option("--runs", mc_args->runs, "number of sessions")->check(CLI::Range(2, 1000000))
+      ->capture_default_str();
+  mc->callback([mc_args] { throw CLI::RuntimeError(RunMonteCarlo(*mc_args)); });
+}
+
+}  // namespace turncal::tools

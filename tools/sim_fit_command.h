@@ -1,0 +1,10 @@
+#pragma once
+// Offline, in-memory calibration experiments on synthetic data with known truth:
+//   turncal fit-sim     one simulated session: truth, estimate, 1 sigma, normalised error
+//   turncal montecarlo  many sessions: is the reported uncertainty honest?
+
+#include <CLI/CLI.hpp>
+
+namespace turncal::tools {
+void AddSimFitCommands(CLI::App* app);
+}
