@@ -9,6 +9,7 @@
 #include <cmath>
 
 #include "core/linear_start.h"
+#include "core/mag22_gauge.h"
 
 namespace turncal {
 
@@ -201,63 +202,6 @@ bool Calibrator::StartFromLinearForm(Eigen::VectorXd* theta, std::string* error)
   return model_->FromLinear(start.G, start.beta, start.b, theta, error);
 }
 
-Eigen::MatrixXd Calibrator::GaugeTangentBasis(const Eigen::VectorXd& theta) const {
-  // Constraints h1 = det(K_) - 1 and h2 = dB . R3(beta) B_NED; the tangent space is the null
-  // space of their 2 x 22 Jacobian.
-  const int kK = model_->index_of("k11"), kBeta = model_->index_of("beta"),
-            kDB = model_->index_of("dBx");
-  const double* k = theta.data() + kK;
-  Mat3<double> K;
-  K << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
-  const Mat3<double> cof = K.determinant() * K.inverse().transpose();
-  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(2, theta.size());
-  H(0, kK + 0) = cof(0, 0);
-  H(0, kK + 1) = cof(0, 1) + cof(1, 0);
-  H(0, kK + 2) = cof(0, 2) + cof(2, 0);
-  H(0, kK + 3) = cof(1, 1);
-  H(0, kK + 4) = cof(1, 2) + cof(2, 1);
-  H(0, kK + 5) = cof(2, 2);
-  const double beta = theta[kBeta];
-  const Eigen::Vector3d B = model_->excitation_ned();
-  const Eigen::Vector3d u = R3(beta) * B;
-  Mat3<double> dR3;
-  dR3 << -std::sin(beta), std::cos(beta), 0, -std::cos(beta), -std::sin(beta), 0, 0, 0, 0;
-  H.block<1, 3>(1, kDB) = u.transpose();
-  H(1, kBeta) = theta.segment<3>(kDB).dot(dR3 * B);
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(H, Eigen::ComputeFullV);
-  return svd.matrixV().rightCols(theta.size() - 2);
-}
-
-void Calibrator::ApplyMag22Gauge(Eigen::VectorXd* theta) const {
-  // Move along the two exact symmetries of seed eq. 21 (MODELS.md), which leave every prediction
-  // unchanged, to the representative with dB . u = 0 (u = R3(beta) B_NED) and det(K_) = 1.
-  const int kG = model_->index_of("g11"), kK = model_->index_of("k11"),
-            kBeta = model_->index_of("beta"), kDB = model_->index_of("dBx");
-  double* g = theta->data() + kG;
-  double* k = theta->data() + kK;
-  Mat3<double> G;
-  G << g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8];
-  Mat3<double> K;
-  K << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
-  Eigen::Vector3d dB = theta->segment<3>(kDB);
-  const Eigen::Vector3d u = R3((*theta)[kBeta]) * model_->excitation_ned();
-  // Symmetry 2: G' = G (I + t K_), K_' = (I + t K_)^-1 K_, dB' = dB - t u.
-  const double t = dB.dot(u) / u.squaredNorm();
-  const Mat3<double> A = Mat3<double>::Identity() + t * K;
-  G = G * A;
-  K = A.inverse() * K;
-  K = 0.5 * (K + K.transpose());
-  dB -= t * u;
-  // Symmetry 1: K_' = lambda K_, dB' = dB / lambda with lambda = det(K_)^(-1/3).
-  const double lambda = 1.0 / std::cbrt(K.determinant());
-  K *= lambda;
-  dB /= lambda;
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) g[3 * r + c] = G(r, c);
-  k[0] = K(0, 0), k[1] = K(0, 1), k[2] = K(0, 2), k[3] = K(1, 1), k[4] = K(1, 2), k[5] = K(2, 2);
-  theta->segment<3>(kDB) = dB;
-}
-
 Estimate Calibrator::solve() {
   Estimate est;
   est.model = options_.model;
@@ -336,7 +280,7 @@ Estimate Calibrator::solve() {
                                        est.iterations));
   }
   if (gauge) {
-    ApplyMag22Gauge(&theta);
+    ApplyMag22Gauge(*model_, &theta);
     est.gauge = ToString(options_.mag22_gauge);
   }
 
@@ -362,7 +306,7 @@ Estimate Calibrator::solve() {
   // information restricted to the gauge's tangent space, B (B^T J^T J B)^-1 B^T.
   Eigen::MatrixXd cov(N, N);
   if (gauge) {
-    const Eigen::MatrixXd B = GaugeTangentBasis(theta);
+    const Eigen::MatrixXd B = Mag22GaugeTangentBasis(*model_, theta);
     const Eigen::MatrixXd JB = J * B;
     Eigen::JacobiSVD<Eigen::MatrixXd> svd_b(JB, Eigen::ComputeThinU | Eigen::ComputeThinV);
     svd_b.setThreshold(options_.rank_tolerance);

@@ -138,8 +138,6 @@ class Calibrator {
  private:
   struct Pose;
   bool StartFromLinearForm(Eigen::VectorXd* theta, std::string* error) const;
-  void ApplyMag22Gauge(Eigen::VectorXd* theta) const;
-  Eigen::MatrixXd GaugeTangentBasis(const Eigen::VectorXd& theta) const;
 
   CalibratorOptions options_;
   std::unique_ptr<MeasurementModel> model_;

@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "core/mag22_gauge.h"
+
 namespace turncal {
 
 namespace {
@@ -75,21 +77,7 @@ Eigen::VectorXd DrawTruth(const MeasurementModel& model, const SensorClass& sens
       theta[i] += sensor.mag_hard_iron_sigma * normal(*rng);
     }
   }
-  if (model.name() == "mag22") {
-    // Into the calibrator's gauge: det K_ = 1 and dB . R3(beta) B_NED = 0.
-    const int kK = model.index_of("k11"), kDB = model.index_of("dBx");
-    const double beta = theta[model.index_of("beta")];
-    const Eigen::Vector3d u = R3(beta) * model.excitation_ned();
-    Eigen::Vector3d dB = theta.segment<3>(kDB);
-    dB -= dB.dot(u) / u.squaredNorm() * u;
-    theta.segment<3>(kDB) = dB;
-    double* k = theta.data() + kK;
-    Mat3<double> K;
-    K << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
-    const double lambda = 1.0 / std::cbrt(K.determinant());
-    for (int j = 0; j < 6; ++j) k[j] *= lambda;
-    theta.segment<3>(kDB) /= lambda;
-  }
+  if (model.name() == "mag22") ApplyMag22Gauge(model, &theta);
   return theta;
 }
 

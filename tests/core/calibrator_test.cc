@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "core/mag22_gauge.h"
 #include "core/synthetic.h"
 
 namespace turncal {
@@ -24,13 +25,15 @@ CalibratorOptions OptionsFor(const std::string& model, const SensorClass& sensor
 }
 
 SimRun Simulate(const std::string& name, const SensorClass& sensor, const std::vector<TablePose>& poses,
-             std::uint64_t seed, double dwell_s = 5.0) {
+             std::uint64_t seed, double dwell_s = 5.0,
+             const std::function<void(const MeasurementModel&, Eigen::VectorXd*)>& edit_truth = {}) {
   std::mt19937_64 rng(seed);
   SimRun run;
   std::string error;
   run.model = MakeModel(name, ModelContext{}, &error);
   EXPECT_NE(run.model, nullptr) << error;
   run.truth = DrawTruth(*run.model, sensor, &rng);
+  if (edit_truth) edit_truth(*run.model, &run.truth);
   Calibrator calibrator(OptionsFor(name, sensor));
   for (const auto& pose : poses) {
     EXPECT_TRUE(calibrator.add_pose(SimulateRecord(*run.model, run.truth, pose, sensor, dwell_s, &rng), &error))
@@ -98,33 +101,98 @@ TEST(Calibrator, Accel12FitsAccel13DataOnlyWhenHeadingIsZero) {
   EXPECT_GT(e.covariance_scale, 1.0);
 }
 
+// Predictions at new poses (gauge-independent) agree with the truth's within 4 sigma of the
+// propagated covariance, and the biases (untouched by the gauge) within 4 sigma.
+void ExpectGaugeIndependentQuantitiesMatch(const SimRun& run, std::uint64_t seed) {
+  const Estimate& e = run.estimate;
+  for (const char* name : {"bx", "by", "bz"}) {
+    const int i = run.model->index_of(name);
+    EXPECT_LT(std::abs(e.theta[i] - run.truth[i]), 4 * e.sigma[i]) << name;
+  }
+  std::mt19937_64 rng(seed);
+  for (const auto& pose : RandomPoses(20, &rng)) {
+    Jacobian3 J;
+    const Eigen::Vector3d y = run.model->Predict(e.theta, pose, &J);
+    const Eigen::Matrix3d cov = J * e.covariance * J.transpose();
+    const Eigen::Vector3d truth_y = run.model->Predict(run.truth, pose);
+    for (int k = 0; k < 3; ++k) EXPECT_LT(std::abs(y[k] - truth_y[k]), 4 * std::sqrt(cov(k, k)));
+  }
+}
+
+// A platform with clearly anisotropic soft iron: K_ = I + 0.3 * (symmetric), renormalised.
+void StrongPlatformSoftIron(const MeasurementModel& model, Eigen::VectorXd* theta) {
+  const double offsets[6] = {0.3, 0.1, -0.15, -0.2, 0.12, 0.05};
+  for (int j = 0; j < 6; ++j) (*theta)[model.index_of("k11") + j] += offsets[j];
+  (*theta)[model.index_of("dBy")] += 0.1;
+  ApplyMag22Gauge(model, theta);
+}
+
 TEST(Calibrator, Mag22ConvergesWithRankTwentyAndNamedGauge) {
   SensorClass sensor = IndustrialClass();
   std::mt19937_64 pose_rng(99);
   const auto poses = RandomPoses(60, &pose_rng);
   for (std::uint64_t seed = 11; seed <= 13; ++seed) {
-    const SimRun run = Simulate("mag22", sensor, poses, seed);
+    const SimRun run = Simulate("mag22", sensor, poses, seed, 5.0, StrongPlatformSoftIron);
     const Estimate& e = run.estimate;
     ASSERT_TRUE(e.ok) << e.error;
     EXPECT_EQ(e.rank, 20) << e.BriefReport();
     EXPECT_NE(e.gauge.find("det(K_) = 1"), std::string::npos);
     EXPECT_GT(e.p_value, 1e-4) << e.BriefReport();
-    // Gauge-independent quantities: beta and b within 4 sigma; predicted measurements at new poses
-    // match the truth's within 4 sigma of the propagated uncertainty.
-    for (const char* name : {"beta", "bx", "by", "bz"}) {
-      const int i = run.model->index_of(name);
-      EXPECT_LT(std::abs(e.theta[i] - run.truth[i]), 4 * e.sigma[i]) << name;
-    }
-    std::mt19937_64 rng(seed);
-    for (const auto& pose : RandomPoses(20, &rng)) {
-      Jacobian3 J;
-      const Eigen::Vector3d y = run.model->Predict(e.theta, pose, &J);
-      const Eigen::Matrix3d cov = J * e.covariance * J.transpose();
-      const Eigen::Vector3d truth_y = run.model->Predict(run.truth, pose);
-      for (int k = 0; k < 3; ++k) EXPECT_LT(std::abs(y[k] - truth_y[k]), 4 * std::sqrt(cov(k, k)) + 1e-12);
-    }
-    // Truth is drawn in the same gauge, so in this gauge every parameter is recovered too.
+    ExpectGaugeIndependentQuantitiesMatch(run, seed);
+    // Truth is in the same gauge and the platform is anisotropic: every parameter is recovered.
     ExpectWithinFourSigma(run);
+  }
+}
+
+// Numerical rank of the stacked prediction Jacobian over `poses` at theta, columns scaled to 1.
+int JacobianRank(const MeasurementModel& model, const Eigen::VectorXd& theta,
+                 const std::vector<TablePose>& poses) {
+  Eigen::MatrixXd J(3 * poses.size(), model.num_parameters());
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    Jacobian3 Ji;
+    model.Predict(theta, poses[i], &Ji);
+    J.middleRows(3 * static_cast<Eigen::Index>(i), 3) = Ji;
+  }
+  for (int c = 0; c < J.cols(); ++c) J.col(c).normalize();
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(J);
+  const Eigen::VectorXd s = svd.singularValues();
+  return static_cast<int>((s.array() > 1e-9 * s[0]).count());
+}
+
+// The seed claims 22 and MODELS.md 20 of 22; with an isotropic platform (K_ = I) a third
+// direction is lost: G C (R3(beta) B + dB) depends on the sum only, so beta trades against dB.
+TEST(Calibrator, Mag22WithIsotropicPlatformLosesAThirdDirection) {
+  std::mt19937_64 rng(98);
+  std::string error;
+  auto model = MakeModel("mag22", {}, &error);
+  Eigen::VectorXd theta = DrawTruth(*model, IndustrialClass(), &rng);
+  const auto poses = RandomPoses(60, &rng);
+  EXPECT_EQ(JacobianRank(*model, theta, poses), 20);
+  const double identity[6] = {1, 0, 0, 1, 0, 1};
+  for (int j = 0; j < 6; ++j) theta[model->index_of("k11") + j] = identity[j];
+  EXPECT_EQ(JacobianRank(*model, theta, poses), 19);
+  // The lost direction: turn beta and take up the change in dB.
+  Eigen::VectorXd moved = theta;
+  const double dbeta = 0.2;
+  moved[model->index_of("beta")] += dbeta;
+  const Eigen::Vector3d B = model->excitation_ned();
+  moved.segment<3>(model->index_of("dBx")) += R3(theta[model->index_of("beta")]) * B - R3(moved[model->index_of("beta")]) * B;
+  for (const auto& pose : poses) {
+    EXPECT_LT((model->Predict(moved, pose) - model->Predict(theta, pose)).norm(), 1e-14);
+  }
+}
+
+// The realistic case, a weak platform (K_ within a few percent of I): the fit explains the data
+// and the gauge-independent quantities match, but beta and dB are weakly determined.
+TEST(Calibrator, Mag22WithWeakPlatformStillPredictsTheMeasurements) {
+  std::mt19937_64 pose_rng(97);
+  const auto poses = RandomPoses(60, &pose_rng);
+  for (std::uint64_t seed = 15; seed <= 17; ++seed) {
+    const SimRun run = Simulate("mag22", IndustrialClass(), poses, seed);
+    ASSERT_TRUE(run.estimate.ok) << run.estimate.error;
+    EXPECT_EQ(run.estimate.rank, 20) << run.estimate.BriefReport();
+    EXPECT_GT(run.estimate.p_value, 1e-4) << run.estimate.BriefReport();
+    ExpectGaugeIndependentQuantitiesMatch(run, seed);
   }
 }
 
