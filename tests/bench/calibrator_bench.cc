@@ -1,0 +1,84 @@
+// Calibrator speed (issue "Calibration engine"): run on demand, never as a timed test.
+//   build/tests/calibrator_bench
+// Results and the machine are recorded in docs/PERFORMANCE.md.
+
+#include <benchmark/benchmark.h>
+
+#include "core/calibrator.h"
+#include "core/synthetic.h"
+
+namespace turncal {
+namespace {
+
+struct Session {
+  std::unique_ptr<MeasurementModel> model;
+  std::vector<PoseRecord> records;
+  CalibratorOptions options;
+};
+
+Session MakeSession(const std::string& name, int poses, std::uint64_t seed) {
+  Session s;
+  std::string error;
+  s.model = MakeModel(name, ModelContext{}, &error);
+  const SensorClass sensor = IndustrialClass();
+  std::mt19937_64 rng(seed);
+  const Eigen::VectorXd truth = DrawTruth(*s.model, sensor, &rng);
+  for (const auto& pose : RandomPoses(poses, &rng)) {
+    s.records.push_back(SimulateRecord(*s.model, truth, pose, sensor, 5.0, &rng));
+  }
+  s.options.model = name;
+  s.options.pose_offset_sigma =
+      s.model->sensor() == SensorKind::kAccelerometer ? sensor.acc_bias_instability : sensor.mag_bias_instability;
+  return s;
+}
+
+// Cold solve: add every pose, linear start, Levenberg-Marquardt, covariance, residuals.
+void FullSolve(benchmark::State& state, const std::string& model) {
+  const Session s = MakeSession(model, static_cast<int>(state.range(0)), 1);
+  std::string error;
+  for (auto _ : state) {
+    Calibrator calibrator(s.options);
+    for (const auto& r : s.records) calibrator.add_pose(r, &error);
+    Estimate e = calibrator.solve();
+    if (!e.ok) state.SkipWithError(e.error.c_str());
+    benchmark::DoNotOptimize(e.theta.data());
+  }
+  state.SetComplexityN(state.range(0));
+}
+
+void BM_Accel13FullSolve(benchmark::State& state) { FullSolve(state, "accel13"); }
+void BM_Mag13FullSolve(benchmark::State& state) { FullSolve(state, "mag13"); }
+void BM_Mag22FullSolve(benchmark::State& state) { FullSolve(state, "mag22"); }
+
+// The update after one more pose: a calibrator holding n poses and their estimate gets pose n+1
+// and re-solves, warm-started.
+void BM_Accel13IncrementalAddPose(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  const Session s = MakeSession("accel13", n + 1, 2);
+  std::string error;
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto calibrator = std::make_unique<Calibrator>(s.options);
+    for (int i = 0; i < n; ++i) calibrator->add_pose(s.records[i], &error);
+    calibrator->solve();
+    state.ResumeTiming();
+    calibrator->add_pose(s.records[n], &error);
+    Estimate e = calibrator->solve();
+    benchmark::DoNotOptimize(e.theta.data());
+    state.PauseTiming();
+    calibrator.reset();
+    state.ResumeTiming();
+  }
+}
+
+BENCHMARK(BM_Accel13FullSolve)->Arg(10)->Arg(26)->Arg(50)->Arg(100)->Arg(200)->Arg(500)->Arg(1000)
+    ->Unit(benchmark::kMillisecond)->Complexity();
+BENCHMARK(BM_Accel13IncrementalAddPose)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Mag13FullSolve)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Mag22FullSolve)->Arg(10)->Arg(50)->Arg(100)->Arg(200)->Arg(500)->Arg(1000)
+    ->Unit(benchmark::kMillisecond)->Complexity();
+
+}  // namespace
+}  // namespace turncal
+
+BENCHMARK_MAIN();
