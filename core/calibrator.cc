@@ -77,10 +77,11 @@ double Estimate::sigma_of(std::string_view name) const {
 
 std::string Estimate::BriefReport() const {
   if (!ok) return fmt::format("{}: no estimate: {}", model, error);
-  return fmt::format("{}: {} poses, rank {}/{}, chi2 {:.1f} on {} dof (p = {:.3g}){}{}, {} iterations, {}",
-                     model, poses, rank, parameters.size(), chi2, dof, p_value,
-                     covariance_scale > 1 ? fmt::format(", covariance x{:.2f}", covariance_scale) : "",
-                     gauge.empty() ? "" : ", gauge: " + gauge, iterations, termination);
+  return fmt::format(
+      "{}: {} poses, rank {}/{}, chi2 {:.1f} on {} dof (p = {:.3g}){}{}, {} iterations, {}", model,
+      poses, rank, parameters.size(), chi2, dof, p_value,
+      covariance_scale > 1 ? fmt::format(", covariance x{:.2f}", covariance_scale) : "",
+      gauge.empty() ? "" : ", gauge: " + gauge, iterations, termination);
 }
 
 std::string Estimate::FullReport() const {
@@ -163,9 +164,10 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   }
   if (triad->count < 1) return fail("the record has no samples");
 
-  Eigen::Matrix3d sigma = triad->mean_covariance
-                              ? *triad->mean_covariance
-                              : Eigen::Matrix3d(triad->covariance / static_cast<double>(triad->count));
+  Eigen::Matrix3d sigma =
+      triad->mean_covariance
+          ? *triad->mean_covariance
+          : Eigen::Matrix3d(triad->covariance / static_cast<double>(triad->count));
   sigma = 0.5 * (sigma + sigma.transpose());
   double floor_var = 0.0;
   if (options_.noise_density > 0 && record.duration_s() > 0) {
@@ -177,14 +179,15 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   Eigen::Vector3d lambda = eig.eigenvalues().cwiseMax(floor_var).array() +
                            options_.pose_offset_sigma * options_.pose_offset_sigma;
   if (!(lambda.minCoeff() > 0) || lambda.minCoeff() < 1e-12 * lambda.maxCoeff()) {
-    return fail("the record's covariance is singular and no noise floor is configured "
-                "(set noise_density or pose_offset_sigma)");
+    return fail(
+        "the record's covariance is singular and no noise floor is configured "
+        "(set noise_density or pose_offset_sigma)");
   }
   Pose pose;
   pose.pose = p;
   pose.measured = triad->mean;
-  pose.sqrt_information =
-      eig.eigenvectors() * lambda.cwiseInverse().cwiseSqrt().asDiagonal() * eig.eigenvectors().transpose();
+  pose.sqrt_information = eig.eigenvectors() * lambda.cwiseInverse().cwiseSqrt().asDiagonal() *
+                          eig.eigenvectors().transpose();
   pose.cost = model_->MakeResidual(p, pose.measured, pose.sqrt_information);
   poses_.push_back(std::move(pose));
   return true;
@@ -276,8 +279,8 @@ Estimate Calibrator::solve() {
     return est;
   }
   if (summary.termination_type == ceres::NO_CONVERGENCE) {
-    est.warnings.push_back(fmt::format("the solver stopped after {} iterations without converging",
-                                       est.iterations));
+    est.warnings.push_back(
+        fmt::format("the solver stopped after {} iterations without converging", est.iterations));
   }
   if (gauge) {
     ApplyMag22Gauge(*model_, &theta);
@@ -297,9 +300,9 @@ Estimate Calibrator::solve() {
   est.condition = s[s.size() - 1] > 0 ? s[0] / s[s.size() - 1] : INFINITY;
   const int expected_rank = identifiable;
   if (est.rank < expected_rank) {
-    est.warnings.push_back(fmt::format(
-        "rank {} of {}: the poses do not determine every parameter (pose diversity)", est.rank,
-        expected_rank));
+    est.warnings.push_back(
+        fmt::format("rank {} of {}: the poses do not determine every parameter (pose diversity)",
+                    est.rank, expected_rank));
   }
 
   // Covariance: Ceres' dense SVD for the models without a gauge; for mag22 the inverse Fisher

@@ -87,8 +87,8 @@ struct PoseResidual {
 };
 
 struct Estimate {
-  bool ok = false;     // a solution exists (it may still be flagged, see warnings)
-  std::string error;   // why not, when !ok
+  bool ok = false;    // a solution exists (it may still be flagged, see warnings)
+  std::string error;  // why not, when !ok
   std::string model;
   std::vector<ParameterInfo> parameters;
   Eigen::VectorXd theta;

@@ -5,11 +5,11 @@
 
 namespace turncal {
 
-Eigen::MatrixXd Mag22GaugeTangentBasis(const MeasurementModel& model, const Eigen::VectorXd& theta) {
+Eigen::MatrixXd Mag22GaugeTangentBasis(const MeasurementModel& model,
+                                       const Eigen::VectorXd& theta) {
   // Constraints h1 = det(K_) - 1 and h2 = dB . R3(beta) B_NED; the tangent space is the null
   // space of their 2 x 22 Jacobian.
-  const int kK = model.index_of("k11"), kBeta = model.index_of("beta"),
-            kDB = model.index_of("dBx");
+  const int kK = model.index_of("k11"), kBeta = model.index_of("beta"), kDB = model.index_of("dBx");
   const double* k = theta.data() + kK;
   Mat3<double> K;
   K << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
@@ -35,8 +35,8 @@ Eigen::MatrixXd Mag22GaugeTangentBasis(const MeasurementModel& model, const Eige
 void ApplyMag22Gauge(const MeasurementModel& model, Eigen::VectorXd* theta) {
   // Move along the two exact symmetries of seed eq. 21 (MODELS.md), which leave every prediction
   // unchanged, to the representative with dB . u = 0 (u = R3(beta) B_NED) and det(K_) = 1.
-  const int kG = model.index_of("g11"), kK = model.index_of("k11"),
-            kBeta = model.index_of("beta"), kDB = model.index_of("dBx");
+  const int kG = model.index_of("g11"), kK = model.index_of("k11"), kBeta = model.index_of("beta"),
+            kDB = model.index_of("dBx");
   double* g = theta->data() + kG;
   double* k = theta->data() + kK;
   Mat3<double> G;

@@ -30,7 +30,7 @@ SensorClass IndustrialClass() {
 SensorClass ConsumerClass() {
   SensorClass c;
   c.name = "consumer";
-  c.acc_noise_density = 200 * kMicroG;   // 200 ug/sqrt(Hz)
+  c.acc_noise_density = 200 * kMicroG;    // 200 ug/sqrt(Hz)
   c.acc_bias_instability = 0.02;          // SENSORS.md: 0.02 m/s^2
   c.acc_turn_on_bias = 20e-3 * 9.80665;   // 20 mg
   c.acc_scale_sigma = 3e-3;               // 0.3 %
@@ -136,7 +136,8 @@ PoseRecord SimulateRecord(const MeasurementModel& model, const Eigen::VectorXd& 
   stats.covariance = Eigen::Matrix3d::Zero();
   const double spread = std::sqrt(2.0 / static_cast<double>(std::max<std::int64_t>(count - 1, 1)));
   for (int i = 0; i < 3; ++i) {
-    stats.covariance(i, i) = sample_sigma * sample_sigma * std::max(0.1, 1.0 + spread * normal(*rng));
+    stats.covariance(i, i) =
+        sample_sigma * sample_sigma * std::max(0.1, 1.0 + spread * normal(*rng));
   }
 
   PoseRecord record;

@@ -23,10 +23,10 @@ struct SensorClass {
   double acc_scale_sigma = 0.0;       // 1 sigma relative
   double misalignment_sigma_rad = 0.0;
   // Magnetometer, Gauss.
-  double mag_noise_rms = 0.0;         // per sample at `rate_hz`
+  double mag_noise_rms = 0.0;  // per sample at `rate_hz`
   double mag_bias_instability = 0.0;
-  double mag_hard_iron_sigma = 0.0;   // 1 sigma of b
-  double mag_soft_iron_sigma = 0.0;   // 1 sigma of G's deviation from the mounting
+  double mag_hard_iron_sigma = 0.0;  // 1 sigma of b
+  double mag_soft_iron_sigma = 0.0;  // 1 sigma of G's deviation from the mounting
   double rate_hz = 100.0;
 };
 

@@ -30,7 +30,8 @@ void AddSimOptions(CLI::App* cmd, SimArgs* args) {
   cmd->add_option("--class", args->sensor_class, "sensor class: industrial|consumer (SENSORS.md)")
       ->check(CLI::IsMember({"industrial", "consumer"}))
       ->capture_default_str();
-  cmd->add_option("--poses", args->poses, "number of poses")->check(CLI::Range(1, 100000))
+  cmd->add_option("--poses", args->poses, "number of poses")
+      ->check(CLI::Range(1, 100000))
       ->capture_default_str();
   cmd->add_option("--design", args->design,
                   "pose design: cube (26 cube directions, repeated) | random | about-z")
@@ -96,7 +97,8 @@ int RunFit(const SimArgs& args) {
   const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
   Calibrator calibrator(OptionsFor(*model, sensor));
   for (const auto& pose : Design(args, &rng)) {
-    if (!calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng), &error)) {
+    if (!calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng),
+                             &error)) {
       fmt::print(stderr, "turncal fit-sim: {}\n", error);
       return 2;
     }
@@ -110,10 +112,17 @@ int RunFit(const SimArgs& args) {
                                       {"sigma", e.ok ? e.sigma[k] : NAN},
                                       {"truth", truth[k]}};
     }
-    fmt::print("{}\n", nlohmann::json{{"model", e.model}, {"ok", e.ok}, {"error", e.error},
-                                      {"poses", e.poses}, {"rank", e.rank}, {"chi2", e.chi2},
-                                      {"dof", e.dof}, {"p_value", e.p_value}, {"gauge", e.gauge},
-                                      {"warnings", e.warnings}, {"params", params}}
+    fmt::print("{}\n", nlohmann::json{{"model", e.model},
+                                      {"ok", e.ok},
+                                      {"error", e.error},
+                                      {"poses", e.poses},
+                                      {"rank", e.rank},
+                                      {"chi2", e.chi2},
+                                      {"dof", e.dof},
+                                      {"p_value", e.p_value},
+                                      {"gauge", e.gauge},
+                                      {"warnings", e.warnings},
+                                      {"params", params}}
                            .dump());
     return e.ok ? 0 : 1;
   }
@@ -121,8 +130,8 @@ int RunFit(const SimArgs& args) {
              args.model, sensor.name, args.poses, args.design, args.dwell_s, args.seed);
   fmt::print("{}\n", e.BriefReport());
   if (!e.ok) return 1;
-  fmt::print("\n  {:<8} {:>14} {:>14} {:>11}  {:<7} {:>7}\n", "param", "truth", "estimate", "1 sigma",
-             "unit", "z");
+  fmt::print("\n  {:<8} {:>14} {:>14} {:>11}  {:<7} {:>7}\n", "param", "truth", "estimate",
+             "1 sigma", "unit", "z");
   int beyond = 0;
   for (std::size_t i = 0; i < e.parameters.size(); ++i) {
     const auto k = static_cast<Eigen::Index>(i);
@@ -132,7 +141,8 @@ int RunFit(const SimArgs& args) {
     const auto [s, unused2] = Display(p, e.sigma[k], true);
     const double z = (e.theta[k] - truth[k]) / e.sigma[k];
     beyond += std::abs(z) > 3;
-    fmt::print("  {:<8} {:>14.6g} {:>14.6g} {:>11.3g}  {:<7} {:>+7.2f}\n", p.name, t, v, s, unit, z);
+    fmt::print("  {:<8} {:>14.6g} {:>14.6g} {:>11.3g}  {:<7} {:>+7.2f}\n", p.name, t, v, s, unit,
+               z);
   }
   if (model->sensor() == SensorKind::kAccelerometer) {
     AccelPhysical phys;
@@ -141,7 +151,8 @@ int RunFit(const SimArgs& args) {
     phys.eps = e.theta.segment<3>(6);
     const Mat3<double> G = AccelGFromPhysical(phys, model->context().mounting);
     fmt::print("\n  G = (I+S) T_r^s C_q^r (the linear form's matrix):\n");
-    for (int r = 0; r < 3; ++r) fmt::print("    [{:+.9f} {:+.9f} {:+.9f}]\n", G(r, 0), G(r, 1), G(r, 2));
+    for (int r = 0; r < 3; ++r)
+      fmt::print("    [{:+.9f} {:+.9f} {:+.9f}]\n", G(r, 0), G(r, 1), G(r, 2));
   }
   for (const auto& w : e.warnings) fmt::print("  warning: {}\n", w);
   fmt::print("\n  z = (estimate - truth) / sigma; {} of {} parameters beyond 3 sigma.\n", beyond,
@@ -159,7 +170,8 @@ int RunMonteCarlo(const SimArgs& args) {
     return 2;
   }
   const int N = model->num_parameters();
-  // One pose design for every run (the Cramer-Rao bound depends on it); new truth and noise each run.
+  // One pose design for every run (the Cramer-Rao bound depends on it); new truth and noise each
+  // run.
   std::mt19937_64 design_rng(args.seed);
   const auto poses = Design(args, &design_rng);
   Eigen::VectorXd sum_sq_err = Eigen::VectorXd::Zero(N), sum_var = Eigen::VectorXd::Zero(N),
@@ -189,10 +201,11 @@ int RunMonteCarlo(const SimArgs& args) {
   }
   nlohmann::json rows = nlohmann::json::array();
   if (!args.json) {
-    fmt::print("Monte Carlo: {} runs of {} ({} class, {} poses, {} design, {:.1f} s dwell, seed {}); "
-               "{} solved, {} failed; mean solve {:.2f} ms\n\n",
-               args.runs, args.model, sensor.name, poses.size(), args.design, args.dwell_s,
-               args.seed, ok, failed, ok ? 1e3 * solve_time / ok : 0.0);
+    fmt::print(
+        "Monte Carlo: {} runs of {} ({} class, {} poses, {} design, {:.1f} s dwell, seed {}); "
+        "{} solved, {} failed; mean solve {:.2f} ms\n\n",
+        args.runs, args.model, sensor.name, poses.size(), args.design, args.dwell_s, args.seed, ok,
+        failed, ok ? 1e3 * solve_time / ok : 0.0);
     fmt::print("| param | RMSE | mean CR sigma | RMSE / sigma | mean z | std z | verdict |\n");
     fmt::print("|---|---|---|---|---|---|---|\n");
   }
@@ -206,21 +219,29 @@ int RunMonteCarlo(const SimArgs& args) {
     bad += !honest;
     const auto& p = model->parameters()[i];
     if (args.json) {
-      rows.push_back({{"name", p.name}, {"rmse", rmse}, {"sigma", sigma}, {"mean_z", mean_z},
-                      {"std_z", std_z}, {"honest", honest}});
+      rows.push_back({{"name", p.name},
+                      {"rmse", rmse},
+                      {"sigma", sigma},
+                      {"mean_z", mean_z},
+                      {"std_z", std_z},
+                      {"honest", honest}});
     } else {
       fmt::print("| {} | {:.3g} | {:.3g} | {:.3f} | {:+.3f} | {:.3f} | {} |\n", p.name, rmse, sigma,
                  rmse / sigma, mean_z, std_z, honest ? "ok" : "NOT HONEST");
     }
   }
   if (args.json) {
-    fmt::print("{}\n", nlohmann::json{{"model", args.model}, {"class", sensor.name},
-                                      {"runs", args.runs}, {"solved", ok}, {"poses", poses.size()},
+    fmt::print("{}\n", nlohmann::json{{"model", args.model},
+                                      {"class", sensor.name},
+                                      {"runs", args.runs},
+                                      {"solved", ok},
+                                      {"poses", poses.size()},
                                       {"params", rows}}
                            .dump());
   } else {
-    fmt::print("\nCriteria: RMSE <= 1.1 x sigma and std z in [0.9, 1.1]; {} of {} parameters fail.\n",
-               bad, N);
+    fmt::print(
+        "\nCriteria: RMSE <= 1.1 x sigma and std z in [0.9, 1.1]; {} of {} parameters fail.\n", bad,
+        N);
   }
   return bad == 0 && failed == 0 ? 0 : 1;
 }
@@ -230,7 +251,8 @@ int RunMonteCarlo(const SimArgs& args) {
 void AddSimFitCommands(CLI::App* app) {
   auto fit_args = std::make_shared<SimArgs>();
   auto* fit = app->add_subcommand(
-      "fit-sim", "simulate one calibration session in memory, calibrate, print the parameter table");
+      "fit-sim",
+      "simulate one calibration session in memory, calibrate, print the parameter table");
   AddSimOptions(fit, fit_args.get());
   fit->callback([fit_args] { throw CLI::RuntimeError(RunFit(*fit_args)); });
 
@@ -240,7 +262,8 @@ void AddSimFitCommands(CLI::App* app) {
   auto* mc = app->add_subcommand(
       "montecarlo", "repeat simulated sessions and check the reported sigma against the errors");
   AddSimOptions(mc, mc_args.get());
-  mc->add_option("--runs", mc_args->runs, "number of sessions")->check(CLI::Range(2, 1000000))
+  mc->add_option("--runs", mc_args->runs, "number of sessions")
+      ->check(CLI::Range(2, 1000000))
       ->capture_default_str();
   mc->callback([mc_args] { throw CLI::RuntimeError(RunMonteCarlo(*mc_args)); });
 }

@@ -27,8 +27,9 @@ Session MakeSession(const std::string& name, int poses, std::uint64_t seed) {
     s.records.push_back(SimulateRecord(*s.model, truth, pose, sensor, 5.0, &rng));
   }
   s.options.model = name;
-  s.options.pose_offset_sigma =
-      s.model->sensor() == SensorKind::kAccelerometer ? sensor.acc_bias_instability : sensor.mag_bias_instability;
+  s.options.pose_offset_sigma = s.model->sensor() == SensorKind::kAccelerometer
+                                    ? sensor.acc_bias_instability
+                                    : sensor.mag_bias_instability;
   return s;
 }
 
@@ -71,12 +72,27 @@ void BM_Accel13IncrementalAddPose(benchmark::State& state) {
   }
 }
 
-BENCHMARK(BM_Accel13FullSolve)->Arg(10)->Arg(26)->Arg(50)->Arg(100)->Arg(200)->Arg(500)->Arg(1000)
-    ->Unit(benchmark::kMillisecond)->Complexity();
+BENCHMARK(BM_Accel13FullSolve)
+    ->Arg(10)
+    ->Arg(26)
+    ->Arg(50)
+    ->Arg(100)
+    ->Arg(200)
+    ->Arg(500)
+    ->Arg(1000)
+    ->Unit(benchmark::kMillisecond)
+    ->Complexity();
 BENCHMARK(BM_Accel13IncrementalAddPose)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Mag13FullSolve)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_Mag22FullSolve)->Arg(10)->Arg(50)->Arg(100)->Arg(200)->Arg(500)->Arg(1000)
-    ->Unit(benchmark::kMillisecond)->Complexity();
+BENCHMARK(BM_Mag22FullSolve)
+    ->Arg(10)
+    ->Arg(50)
+    ->Arg(100)
+    ->Arg(200)
+    ->Arg(500)
+    ->Arg(1000)
+    ->Unit(benchmark::kMillisecond)
+    ->Complexity();
 
 }  // namespace
 }  // namespace turncal

@@ -24,9 +24,10 @@ CalibratorOptions OptionsFor(const std::string& model, const SensorClass& sensor
   return o;
 }
 
-SimRun Simulate(const std::string& name, const SensorClass& sensor, const std::vector<TablePose>& poses,
-             std::uint64_t seed, double dwell_s = 5.0,
-             const std::function<void(const MeasurementModel&, Eigen::VectorXd*)>& edit_truth = {}) {
+SimRun Simulate(
+    const std::string& name, const SensorClass& sensor, const std::vector<TablePose>& poses,
+    std::uint64_t seed, double dwell_s = 5.0,
+    const std::function<void(const MeasurementModel&, Eigen::VectorXd*)>& edit_truth = {}) {
   std::mt19937_64 rng(seed);
   SimRun run;
   std::string error;
@@ -36,7 +37,8 @@ SimRun Simulate(const std::string& name, const SensorClass& sensor, const std::v
   if (edit_truth) edit_truth(*run.model, &run.truth);
   Calibrator calibrator(OptionsFor(name, sensor));
   for (const auto& pose : poses) {
-    EXPECT_TRUE(calibrator.add_pose(SimulateRecord(*run.model, run.truth, pose, sensor, dwell_s, &rng), &error))
+    EXPECT_TRUE(calibrator.add_pose(
+        SimulateRecord(*run.model, run.truth, pose, sensor, dwell_s, &rng), &error))
         << error;
   }
   run.estimate = calibrator.solve();
@@ -72,15 +74,16 @@ TEST_P(RecoversTruth, EveryParameterWithinFourSigma) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Models, RecoversTruth,
-    ::testing::Combine(::testing::Values("accel12", "accel13", "mag13"),
-                       ::testing::Values("industrial", "consumer"), ::testing::Values(26, 60)),
-    [](const auto& param_info) {
-      std::string name = std::get<0>(param_info.param) + "_" + std::get<1>(param_info.param) + "_" +
-                         std::to_string(std::get<2>(param_info.param));
-      return name;
-    });
+INSTANTIATE_TEST_SUITE_P(Models, RecoversTruth,
+                         ::testing::Combine(::testing::Values("accel12", "accel13", "mag13"),
+                                            ::testing::Values("industrial", "consumer"),
+                                            ::testing::Values(26, 60)),
+                         [](const auto& param_info) {
+                           std::string name = std::get<0>(param_info.param) + "_" +
+                                              std::get<1>(param_info.param) + "_" +
+                                              std::to_string(std::get<2>(param_info.param));
+                           return name;
+                         });
 
 TEST(Calibrator, Accel12FitsAccel13DataOnlyWhenHeadingIsZero) {
   // accel12 takes beta = 0: on data with beta != 0 its chi^2 must show the misfit (the paper's
@@ -93,7 +96,8 @@ TEST(Calibrator, Accel12FitsAccel13DataOnlyWhenHeadingIsZero) {
   truth[truth_model->index_of("beta")] = 0.25;
   Calibrator calibrator(OptionsFor("accel12", sensor));
   for (const auto& pose : RandomPoses(60, &rng)) {
-    ASSERT_TRUE(calibrator.add_pose(SimulateRecord(*truth_model, truth, pose, sensor, 5.0, &rng), &error));
+    ASSERT_TRUE(
+        calibrator.add_pose(SimulateRecord(*truth_model, truth, pose, sensor, 5.0, &rng), &error));
   }
   const Estimate e = calibrator.solve();
   ASSERT_TRUE(e.ok) << e.error;
@@ -176,7 +180,8 @@ TEST(Calibrator, Mag22WithIsotropicPlatformLosesAThirdDirection) {
   const double dbeta = 0.2;
   moved[model->index_of("beta")] += dbeta;
   const Eigen::Vector3d B = model->excitation_ned();
-  moved.segment<3>(model->index_of("dBx")) += R3(theta[model->index_of("beta")]) * B - R3(moved[model->index_of("beta")]) * B;
+  moved.segment<3>(model->index_of("dBx")) +=
+      R3(theta[model->index_of("beta")]) * B - R3(moved[model->index_of("beta")]) * B;
   for (const auto& pose : poses) {
     EXPECT_LT((model->Predict(moved, pose) - model->Predict(theta, pose)).norm(), 1e-14);
   }
