@@ -81,6 +81,16 @@ Eigen::VectorXd DrawTruth(const MeasurementModel& model, const SensorClass& sens
   return theta;
 }
 
+CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorClass& sensor) {
+  CalibratorOptions o;
+  o.model = model.name();
+  o.context = model.context();
+  const bool accel = model.sensor() == SensorKind::kAccelerometer;
+  o.pose_offset_sigma = accel ? sensor.acc_bias_instability : sensor.mag_bias_instability;
+  o.noise_density = accel ? sensor.acc_noise_density : 0.0;
+  return o;
+}
+
 std::vector<TablePose> RandomPoses(int n, std::mt19937_64* rng) {
   std::uniform_real_distribution<double> uniform(-1.0, 1.0);
   std::vector<TablePose> poses;

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "core/calibrator.h"
 #include "core/measurement_model.h"
 #include "core/pose_record.h"
 
@@ -48,6 +49,10 @@ std::vector<TablePose> RandomPoses(int n, std::mt19937_64* rng);
 std::vector<TablePose> CubePoses26();
 // All poses turning about the table's outer (z) axis only: the degenerate design.
 std::vector<TablePose> AboutZPoses(int n);
+
+// Calibrator options matching the class's noise for `model` (the pose-to-pose offset and the
+// white-noise density of the triad the model uses).
+CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorClass& sensor);
 
 // The record a stationary window of `dwell_s` at `pose` would give: the true measurement plus
 // white noise averaged over the window and a bias-instability offset, with the sample covariance

@@ -57,15 +57,6 @@ std::vector<TablePose> Design(const SimArgs& args, std::mt19937_64* rng) {
   return poses;
 }
 
-CalibratorOptions OptionsFor(const MeasurementModel& model, const SensorClass& sensor) {
-  CalibratorOptions o;
-  o.model = model.name();
-  const bool accel = model.sensor() == SensorKind::kAccelerometer;
-  o.pose_offset_sigma = accel ? sensor.acc_bias_instability : sensor.mag_bias_instability;
-  o.noise_density = accel ? sensor.acc_noise_density : 0.0;
-  return o;
-}
-
 // A value in the unit a test engineer reads: ppm, degrees, mg.
 std::pair<double, const char*> Display(const ParameterInfo& p, double v, bool is_sigma) {
   switch (p.unit) {
@@ -95,7 +86,7 @@ int RunFit(const SimArgs& args) {
   }
   std::mt19937_64 rng(args.seed);
   const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
-  Calibrator calibrator(OptionsFor(*model, sensor));
+  Calibrator calibrator(OptionsForClass(*model, sensor));
   for (const auto& pose : Design(args, &rng)) {
     if (!calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng),
                              &error)) {
@@ -181,7 +172,7 @@ int RunMonteCarlo(const SimArgs& args) {
   for (int run = 0; run < args.runs; ++run) {
     std::mt19937_64 rng(args.seed * 1000003 + static_cast<std::uint64_t>(run));
     const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
-    Calibrator calibrator(OptionsFor(*model, sensor));
+    Calibrator calibrator(OptionsForClass(*model, sensor));
     for (const auto& pose : poses) {
       calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng), &error);
     }

@@ -2,6 +2,7 @@
 // What accel12 and accel13 share: parameter table, sensor matrix, correction and linear start.
 // Parameter layout: Sx Sy Sz alpha1 alpha2 alpha3 eps_x eps_y eps_z [beta] bx by bz.
 
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -12,21 +13,25 @@ namespace turncal::accel {
 
 inline constexpr int kS = 0, kAlpha = 3, kEps = 6;
 
-inline std::vector<ParameterInfo> Parameters(bool with_beta) {
+// Sx Sy Sz alpha1 alpha2 alpha3 eps_x eps_y eps_z: the physical parameters of (I+S) T_r^s C_q^r.
+inline std::vector<ParameterInfo> SensorAndMountingParameters() {
   const auto S = ParameterKind::kSensor;
-  std::vector<ParameterInfo> p = {
-      {"Sx", S, ParameterUnit::kScaleFactor, 0.0},
-      {"Sy", S, ParameterUnit::kScaleFactor, 0.0},
-      {"Sz", S, ParameterUnit::kScaleFactor, 0.0},
-      {"alpha1", S, ParameterUnit::kAngle, 0.0},
-      {"alpha2", S, ParameterUnit::kAngle, 0.0},
-      {"alpha3", S, ParameterUnit::kAngle, 1.5707963267948966},
-      {"eps_x", ParameterKind::kMounting, ParameterUnit::kAngle, 0.0},
-      {"eps_y", ParameterKind::kMounting, ParameterUnit::kAngle, 0.0},
-      {"eps_z", ParameterKind::kMounting, ParameterUnit::kAngle, 0.0},
+  const auto M = ParameterKind::kMounting;
+  return {
+      {"Sx", S, ParameterUnit::kScaleFactor, 0.0}, {"Sy", S, ParameterUnit::kScaleFactor, 0.0},
+      {"Sz", S, ParameterUnit::kScaleFactor, 0.0}, {"alpha1", S, ParameterUnit::kAngle, 0.0},
+      {"alpha2", S, ParameterUnit::kAngle, 0.0},   {"alpha3", S, ParameterUnit::kAngle, M_PI / 2},
+      {"eps_x", M, ParameterUnit::kAngle, 0.0},    {"eps_y", M, ParameterUnit::kAngle, 0.0},
+      {"eps_z", M, ParameterUnit::kAngle, 0.0},
   };
+}
+
+inline std::vector<ParameterInfo> Parameters(bool with_beta) {
+  std::vector<ParameterInfo> p = SensorAndMountingParameters();
   if (with_beta) p.push_back({"beta", ParameterKind::kInstallation, ParameterUnit::kAngle, 0.0});
-  for (const char* b : {"bx", "by", "bz"}) p.push_back({b, S, ParameterUnit::kAcceleration, 0.0});
+  for (const char* b : {"bx", "by", "bz"}) {
+    p.push_back({b, ParameterKind::kSensor, ParameterUnit::kAcceleration, 0.0});
+  }
   return p;
 }
 

@@ -36,14 +36,7 @@ struct Mag13 {
   static OutputFrame CorrectedFrame(const ModelContext&) { return OutputFrame::kTable; }
   static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
                          const ModelContext&, double* theta, std::string* error) {
-    if (!G.allFinite() || std::abs(G.determinant()) < 1e-12 * std::pow(G.norm(), 3)) {
-      if (error) *error = "G is singular or not finite";
-      return false;
-    }
-    mag::SetG(G, theta);
-    theta[kBeta] = beta;
-    for (int i = 0; i < 3; ++i) theta[kBias + i] = b[i];
-    return true;
+    return mag::FromLinearG(G, beta, b, kBeta, kBias, theta, error);
   }
 };
 

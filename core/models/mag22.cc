@@ -42,21 +42,13 @@ struct Mag22 {
     return mag::CorrectWithG(theta, theta + kBias, raw);
   }
   static OutputFrame CorrectedFrame(const ModelContext&) { return OutputFrame::kTable; }
+  // Starting values: G, beta, b from the linear form (mag13's shape), K_ = I, dB = 0.
   static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
                          const ModelContext&, double* theta, std::string* error) {
-    if (!G.allFinite() || std::abs(G.determinant()) < 1e-12 * std::pow(G.norm(), 3)) {
-      if (error) *error = "G is singular or not finite";
-      return false;
-    }
-    mag::SetG(G, theta);
     const double K_nominal[6] = {1, 0, 0, 1, 0, 1};
     for (int i = 0; i < 6; ++i) theta[kK + i] = K_nominal[i];
-    theta[kBeta] = beta;
-    for (int i = 0; i < 3; ++i) {
-      theta[kDeltaB + i] = 0.0;
-      theta[kBias + i] = b[i];
-    }
-    return true;
+    for (int i = 0; i < 3; ++i) theta[kDeltaB + i] = 0.0;
+    return mag::FromLinearG(G, beta, b, kBeta, kBias, theta, error);
   }
 };
 

@@ -1,6 +1,8 @@
 #pragma once
 // What the magnetometer models share: the G matrix entries g11 ... g33 (row-major) and K.
 
+#include <Eigen/LU>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -58,6 +60,19 @@ inline Eigen::Vector3d CorrectWithG(const double* g, const double* b, const Eige
 inline void SetG(const Mat3<double>& G, double* theta) {
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c) theta[3 * r + c] = G(r, c);
+}
+
+// G (first nine parameters), beta and b from the linear start; false when G is singular.
+inline bool FromLinearG(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
+                        int beta_index, int bias_index, double* theta, std::string* error) {
+  if (!G.allFinite() || std::abs(G.determinant()) < 1e-12 * std::pow(G.norm(), 3)) {
+    if (error) *error = "G is singular or not finite";
+    return false;
+  }
+  SetG(G, theta);
+  theta[beta_index] = beta;
+  for (int i = 0; i < 3; ++i) theta[bias_index + i] = b[i];
+  return true;
 }
 
 }  // namespace turncal::mag

@@ -8,6 +8,7 @@
 
 #include "core/accel_physical.h"
 #include "core/model_adapter.h"
+#include "core/models/accel_common.h"
 #include "core/models/mag_common.h"
 
 namespace turncal {
@@ -20,22 +21,11 @@ struct MagPhysical {
   static constexpr int kS = 0, kAlpha = 3, kEps = 6, kK = 9, kBeta = 15, kDeltaB = 16, kBias = 19;
 
   static std::vector<ParameterInfo> Parameters(const ModelContext&) {
-    const auto S = ParameterKind::kSensor;
-    std::vector<ParameterInfo> p = {
-        {"Sx", S, ParameterUnit::kScaleFactor, 0.0},
-        {"Sy", S, ParameterUnit::kScaleFactor, 0.0},
-        {"Sz", S, ParameterUnit::kScaleFactor, 0.0},
-        {"alpha1", S, ParameterUnit::kAngle, 0.0},
-        {"alpha2", S, ParameterUnit::kAngle, 0.0},
-        {"alpha3", S, ParameterUnit::kAngle, 1.5707963267948966},
-        {"eps_x", ParameterKind::kMounting, ParameterUnit::kAngle, 0.0},
-        {"eps_y", ParameterKind::kMounting, ParameterUnit::kAngle, 0.0},
-        {"eps_z", ParameterKind::kMounting, ParameterUnit::kAngle, 0.0},
-    };
+    std::vector<ParameterInfo> p = accel::SensorAndMountingParameters();
     mag::AppendK(&p, ParameterKind::kSensor);
     p.push_back({"beta", ParameterKind::kInstallation, ParameterUnit::kAngle, 0.0});
     mag::AppendVector(&p, "dB", ParameterKind::kInstallation);
-    mag::AppendVector(&p, "b", S);
+    mag::AppendVector(&p, "b", ParameterKind::kSensor);
     return p;
   }
   template <typename T>

@@ -26,10 +26,7 @@ Session MakeSession(const std::string& name, int poses, std::uint64_t seed) {
   for (const auto& pose : RandomPoses(poses, &rng)) {
     s.records.push_back(SimulateRecord(*s.model, truth, pose, sensor, 5.0, &rng));
   }
-  s.options.model = name;
-  s.options.pose_offset_sigma = s.model->sensor() == SensorKind::kAccelerometer
-                                    ? sensor.acc_bias_instability
-                                    : sensor.mag_bias_instability;
+  s.options = OptionsForClass(*s.model, sensor);
   return s;
 }
 

@@ -17,11 +17,8 @@ struct SimRun {
 };
 
 CalibratorOptions OptionsFor(const std::string& model, const SensorClass& sensor) {
-  CalibratorOptions o;
-  o.model = model;
-  const bool accel = model.rfind("accel", 0) == 0;
-  o.pose_offset_sigma = accel ? sensor.acc_bias_instability : sensor.mag_bias_instability;
-  return o;
+  std::string error;
+  return OptionsForClass(*MakeModel(model, ModelContext{}, &error), sensor);
 }
 
 SimRun Simulate(
