@@ -294,7 +294,7 @@ Estimate Calibrator::solve() {
   Eigen::VectorXd scale = J.colwise().norm().transpose();
   for (int j = 0; j < N; ++j) scale[j] = scale[j] > 0 ? 1.0 / scale[j] : 1.0;
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(J * scale.asDiagonal(), Eigen::ComputeThinV);
-  const Eigen::VectorXd s = svd.singularValues();
+  const Eigen::VectorXd& s = svd.singularValues();
   est.rank = 0;
   for (int i = 0; i < s.size(); ++i) est.rank += s[i] > options_.rank_tolerance * s[0];
   est.condition = s[s.size() - 1] > 0 ? s[0] / s[s.size() - 1] : INFINITY;
@@ -329,7 +329,7 @@ Estimate Calibrator::solve() {
       covariance.GetCovarianceBlock(theta.data(), theta.data(), cov.data());
     } else {
       est.warnings.push_back("Ceres could not compute the covariance; using the pseudo-inverse");
-      const Eigen::MatrixXd V = svd.matrixV();
+      const Eigen::MatrixXd& V = svd.matrixV();
       Eigen::VectorXd inv = Eigen::VectorXd::Zero(s.size());
       for (int i = 0; i < est.rank; ++i) inv[i] = 1.0 / (s[i] * s[i]);
       cov = scale.asDiagonal() * V * inv.asDiagonal() * V.transpose() * scale.asDiagonal();

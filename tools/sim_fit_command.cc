@@ -51,7 +51,8 @@ std::vector<TablePose> Design(const SimArgs& args, std::mt19937_64* rng) {
   std::vector<TablePose> poses;
   for (int i = 0; i < args.poses; ++i) {
     TablePose p = cube[i % cube.size()];
-    p.psi_rad += (i / static_cast<int>(cube.size())) * M_PI / 4;  // repeats turn by 45 deg
+    const int repeat = i / static_cast<int>(cube.size());
+    p.psi_rad += repeat * M_PI / 4;  // repeats turn by 45 deg
     poses.push_back(p);
   }
   return poses;
