@@ -311,8 +311,7 @@ Estimate Calibrator::solve() {
   if (gauge) {
     const Eigen::MatrixXd B = Mag22GaugeTangentBasis(*model_, theta);
     const Eigen::MatrixXd JB = J * B;
-    Eigen::JacobiSVD<Eigen::MatrixXd> svd_b(JB, Eigen::ComputeThinU | Eigen::ComputeThinV);
-    svd_b.setThreshold(options_.rank_tolerance);
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd_b(JB, Eigen::ComputeThinV);
     const Eigen::VectorXd sb = svd_b.singularValues();
     Eigen::VectorXd inv = Eigen::VectorXd::Zero(sb.size());
     for (int i = 0; i < sb.size(); ++i)

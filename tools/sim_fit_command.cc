@@ -76,15 +76,21 @@ std::pair<double, const char*> Display(const ParameterInfo& p, double v, bool is
   return {v, ""};
 }
 
-int RunFit(const SimArgs& args) {
-  SensorClass sensor;
-  SensorClassByName(args.sensor_class, &sensor);
+// The model and sensor class the arguments name; nullptr (with the error printed) when unknown.
+std::unique_ptr<MeasurementModel> LoadModel(const SimArgs& args, const char* command,
+                                            SensorClass* sensor) {
+  SensorClassByName(args.sensor_class, sensor);  // CLI11 already restricted the name
   std::string error;
   auto model = MakeModel(args.model, ModelContext{}, &error);
-  if (!model) {
-    fmt::print(stderr, "turncal fit-sim: {}\n", error);
-    return 2;
-  }
+  if (!model) fmt::print(stderr, "turncal {}: {}\n", command, error);
+  return model;
+}
+
+int RunFit(const SimArgs& args) {
+  SensorClass sensor;
+  auto model = LoadModel(args, "fit-sim", &sensor);
+  if (!model) return 2;
+  std::string error;
   std::mt19937_64 rng(args.seed);
   const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
   Calibrator calibrator(OptionsForClass(*model, sensor));
@@ -154,13 +160,9 @@ int RunFit(const SimArgs& args) {
 
 int RunMonteCarlo(const SimArgs& args) {
   SensorClass sensor;
-  SensorClassByName(args.sensor_class, &sensor);
+  auto model = LoadModel(args, "montecarlo", &sensor);
+  if (!model) return 2;
   std::string error;
-  auto model = MakeModel(args.model, ModelContext{}, &error);
-  if (!model) {
-    fmt::print(stderr, "turncal montecarlo: {}\n", error);
-    return 2;
-  }
   const int N = model->num_parameters();
   // One pose design for every run (the Cramer-Rao bound depends on it); new truth and noise each
   // run.
