@@ -14,9 +14,7 @@
 namespace turncal {
 
 struct Calibrator::Pose {
-  TablePose pose;
-  Eigen::Vector3d measured;
-  Eigen::Matrix3d sqrt_information;  // Sigma^{-1/2}, Sigma the covariance of the mean
+  WeightedPose weighted;
   std::unique_ptr<ceres::CostFunction> cost;
 };
 
@@ -144,6 +142,13 @@ Calibrator::~Calibrator() = default;
 
 int Calibrator::num_poses() const { return static_cast<int>(poses_.size()); }
 
+std::vector<WeightedPose> Calibrator::weighted_poses() const {
+  std::vector<WeightedPose> out;
+  out.reserve(poses_.size());
+  for (const auto& p : poses_) out.push_back(p.weighted);
+  return out;
+}
+
 bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   auto fail = [&](const std::string& message) {
     if (error) *error = message;
@@ -184,11 +189,12 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
         "(set noise_density or pose_offset_sigma)");
   }
   Pose pose;
-  pose.pose = p;
-  pose.measured = triad->mean;
-  pose.sqrt_information = eig.eigenvectors() * lambda.cwiseInverse().cwiseSqrt().asDiagonal() *
-                          eig.eigenvectors().transpose();
-  pose.cost = model_->MakeResidual(p, pose.measured, pose.sqrt_information);
+  WeightedPose& w = pose.weighted;
+  w.pose = p;
+  w.measured = triad->mean;
+  w.sqrt_information = eig.eigenvectors() * lambda.cwiseInverse().cwiseSqrt().asDiagonal() *
+                       eig.eigenvectors().transpose();
+  pose.cost = model_->MakeResidual(p, w.measured, w.sqrt_information);
   poses_.push_back(std::move(pose));
   return true;
 }
@@ -197,8 +203,8 @@ bool Calibrator::StartFromLinearForm(Eigen::VectorXd* theta, std::string* error)
   std::vector<TablePose> poses;
   std::vector<Eigen::Vector3d> measured;
   for (const auto& p : poses_) {
-    poses.push_back(p.pose);
-    measured.push_back(p.measured);
+    poses.push_back(p.weighted.pose);
+    measured.push_back(p.weighted.measured);
   }
   LinearStart start;
   if (!SolveLinearStart(poses, measured, model_->excitation_ned(), &start, error)) return false;
@@ -216,8 +222,8 @@ Estimate Calibrator::solve() {
   est.parameters = model_->parameters();
   const int N = model_->num_parameters();
   const int n = num_poses();
-  const bool gauge = model_->name() == "mag22";
-  const int identifiable = gauge ? N - 2 : N;
+  const bool gauge = model_->gauge_dimension() > 0;
+  const int identifiable = N - model_->gauge_dimension();
   if (3 * n < identifiable) {
     est.error = fmt::format("{} poses give {} equations for {} parameters: add at least {} poses",
                             n, 3 * n, identifiable, (identifiable + 2) / 3 - n);
@@ -339,8 +345,8 @@ Estimate Calibrator::solve() {
   est.chi2 = 0;
   for (const auto& p : poses_) {
     PoseResidual r;
-    r.raw = p.measured - model_->Predict(theta, p.pose);
-    r.whitened = p.sqrt_information * r.raw;
+    r.raw = p.weighted.measured - model_->Predict(theta, p.weighted.pose);
+    r.whitened = p.weighted.sqrt_information * r.raw;
     r.normalized = std::sqrt(r.whitened.squaredNorm() / 3.0);
     r.outlier = r.normalized > options_.outlier_threshold;
     est.chi2 += r.whitened.squaredNorm();

@@ -132,6 +132,9 @@ class Calibrator {
   Estimate solve();
 
   int num_poses() const;
+  // The poses added so far with the weights the estimator gives them (for the observability
+  // analysis and the pose planner).
+  std::vector<WeightedPose> weighted_poses() const;
   const MeasurementModel* model() const { return model_.get(); }
   const CalibratorOptions& options() const { return options_; }
 

@@ -32,6 +32,30 @@ Eigen::MatrixXd Mag22GaugeTangentBasis(const MeasurementModel& model,
   return svd.matrixV().rightCols(theta.size() - 2);
 }
 
+Eigen::MatrixXd Mag22NullDirections(const MeasurementModel& model, const Eigen::VectorXd& theta) {
+  const int kG = model.index_of("g11"), kK = model.index_of("k11"), kBeta = model.index_of("beta"),
+            kDB = model.index_of("dBx");
+  const double* g = theta.data() + kG;
+  const double* k = theta.data() + kK;
+  Mat3<double> G;
+  G << g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8];
+  Mat3<double> K;
+  K << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
+  auto set_K = [&](const Mat3<double>& m, int col, Eigen::MatrixXd* d) {
+    const double entries[6] = {m(0, 0), m(0, 1), m(0, 2), m(1, 1), m(1, 2), m(2, 2)};
+    for (int i = 0; i < 6; ++i) (*d)(kK + i, col) = entries[i];
+  };
+  Eigen::MatrixXd d = Eigen::MatrixXd::Zero(theta.size(), 2);
+  set_K(K, 0, &d);
+  d.block<3, 1>(kDB, 0) = -theta.segment<3>(kDB);
+  const Mat3<double> GK = G * K;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) d(kG + 3 * r + c, 1) = GK(r, c);
+  set_K(-K * K, 1, &d);
+  d.block<3, 1>(kDB, 1) = -(R3(theta[kBeta]) * model.excitation_ned());
+  return d;
+}
+
 void ApplyMag22Gauge(const MeasurementModel& model, Eigen::VectorXd* theta) {
   // Move along the two exact symmetries of seed eq. 21 (MODELS.md), which leave every prediction
   // unchanged, to the representative with dB . u = 0 (u = R3(beta) B_NED) and det(K_) = 1.

@@ -20,6 +20,11 @@ namespace turncal {
 // Predictions are unchanged to rounding. `model` must be mag22.
 void ApplyMag22Gauge(const MeasurementModel& model, Eigen::VectorXd* theta);
 
+// The two symmetries' tangent directions at theta (22 x 2, columns in parameter units, not
+// normalised): 1. dK_ = K_, ddB = -dB; 2. dG = G K_, dK_ = -K_ K_, ddB = -R3(beta) B_NED.
+// The data-level null space of mag22 is their span (tests/core/observability_test.cc).
+Eigen::MatrixXd Mag22NullDirections(const MeasurementModel& model, const Eigen::VectorXd& theta);
+
 // A 22 x 20 orthonormal basis of the tangent space of the gauge constraints at theta.
 Eigen::MatrixXd Mag22GaugeTangentBasis(const MeasurementModel& model, const Eigen::VectorXd& theta);
 

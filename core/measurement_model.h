@@ -91,6 +91,16 @@ class MeasurementModel {
   // model: the mounting is wrong).
   virtual bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
                           Eigen::VectorXd* theta, std::string* error) const = 0;
+
+  // The seed's extended parameter vector theta^e (its eq. 11 and 28): the entries of H' (and, for
+  // mag22, H'_2) row by row, then the bias. The structural observability test is the rank of
+  // d(theta^e)/d(theta) (automatic differentiation, written to `jacobian` when not null).
+  virtual Eigen::VectorXd Extended(const Eigen::VectorXd& theta,
+                                   Eigen::MatrixXd* jacobian) const = 0;
+
+  // Number of exact symmetries of the model that no turntable data can resolve (mag22: 2, see
+  // MODELS.md "The mag22 gauge"); the calibrator fixes them with a documented gauge.
+  virtual int gauge_dimension() const = 0;
 };
 
 // A model by name with the given context; nullptr with a message when the name is unknown or the

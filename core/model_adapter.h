@@ -13,12 +13,16 @@
 //   static OutputFrame CorrectedFrame(const ModelContext&);
 //   static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
 //                          const ModelContext&, double* theta, std::string* error);
+//   template <typename T>
+//   static void Extended(const T* theta, const ModelContext&, std::vector<T>* theta_e);
+// and optionally `static constexpr int kGaugeDimension` (0 when absent),
 // and registers itself with TURNCAL_REGISTER_MODEL(file_stem, Def).
 
 #include <ceres/autodiff_cost_function.h>
 #include <ceres/jet.h>
 
 #include <cassert>
+#include <vector>
 
 #include "core/measurement_model.h"
 
@@ -85,6 +89,31 @@ class ModelAdapter final : public MeasurementModel {
                   Eigen::VectorXd* theta, std::string* error) const override {
     theta->resize(N);
     return Def::FromLinear(G, beta, b, context_, theta->data(), error);
+  }
+
+  Eigen::VectorXd Extended(const Eigen::VectorXd& theta, Eigen::MatrixXd* jacobian) const override {
+    assert(theta.size() == N);
+    using Jet = ceres::Jet<double, N>;
+    Jet theta_jet[N];
+    for (int i = 0; i < N; ++i) theta_jet[i] = Jet(theta[i], i);
+    std::vector<Jet> theta_e;
+    Def::template Extended<Jet>(theta_jet, context_, &theta_e);
+    const auto M = static_cast<Eigen::Index>(theta_e.size());
+    Eigen::VectorXd value(M);
+    if (jacobian) jacobian->resize(M, N);
+    for (Eigen::Index r = 0; r < M; ++r) {
+      value[r] = theta_e[r].a;
+      if (jacobian) jacobian->row(r) = theta_e[r].v.transpose();
+    }
+    return value;
+  }
+
+  int gauge_dimension() const override {
+    if constexpr (requires { Def::kGaugeDimension; }) {
+      return Def::kGaugeDimension;
+    } else {
+      return 0;
+    }
   }
 
  private:

@@ -31,4 +31,15 @@ struct ParameterInfo {
 const char* ToString(ParameterKind kind);
 const char* ToString(ParameterUnit unit);
 
+// A value in the unit a test engineer reads: ppm for scale factors, degrees for angles (alpha3
+// as its deviation from 90 degrees), mg for accelerations, mG for fields (the magnetometer's unit
+// taken as Gauss). Sigmas are shown without alpha3's offset.
+struct DisplayQuantity {
+  double value = 0.0;
+  const char* unit = "";
+};
+DisplayQuantity ForDisplay(const ParameterInfo& parameter, double value, bool is_sigma);
+// "230 ppm", "0.012 deg", "1.5 mg"; "inf" for an undetermined sigma.
+std::string FormatSigma(const ParameterInfo& parameter, double sigma);
+
 }  // namespace turncal

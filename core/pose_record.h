@@ -33,4 +33,12 @@ struct PoseRecord {
   double duration_s() const { return t_end_s - t_start_s; }
 };
 
+// One pose as the estimator weighs it: the measured mean of the model's triad and
+// Sigma^{-1/2}, Sigma the covariance of that mean (floored, with the pose-to-pose offset).
+struct WeightedPose {
+  TablePose pose;
+  Eigen::Vector3d measured = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d sqrt_information = Eigen::Matrix3d::Identity();
+};
+
 }  // namespace turncal

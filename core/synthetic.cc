@@ -77,7 +77,7 @@ Eigen::VectorXd DrawTruth(const MeasurementModel& model, const SensorClass& sens
       theta[i] += sensor.mag_hard_iron_sigma * normal(*rng);
     }
   }
-  if (model.name() == "mag22") ApplyMag22Gauge(model, &theta);
+  if (model.gauge_dimension() > 0) ApplyMag22Gauge(model, &theta);
   return theta;
 }
 

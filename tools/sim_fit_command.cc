@@ -58,24 +58,6 @@ std::vector<TablePose> Design(const SimArgs& args, std::mt19937_64* rng) {
   return poses;
 }
 
-// A value in the unit a test engineer reads: ppm, degrees, mg.
-std::pair<double, const char*> Display(const ParameterInfo& p, double v, bool is_sigma) {
-  switch (p.unit) {
-    case ParameterUnit::kScaleFactor:
-      return {v * 1e6, "ppm"};
-    case ParameterUnit::kAngle:
-      return {(is_sigma || p.name != "alpha3" ? v : v - M_PI / 2) * 180 / M_PI,
-              p.name == "alpha3" && !is_sigma ? "deg-90" : "deg"};
-    case ParameterUnit::kAcceleration:
-      return {v / 9.80665 * 1e3, "mg"};
-    case ParameterUnit::kField:
-      return {v * 1e3, "mG"};
-    case ParameterUnit::kGain:
-      return {v, ""};
-  }
-  return {v, ""};
-}
-
 // The model and sensor class the arguments name; nullptr (with the error printed) when unknown.
 std::unique_ptr<MeasurementModel> LoadModel(const SimArgs& args, const char* command,
                                             SensorClass* sensor) {
@@ -134,9 +116,9 @@ int RunFit(const SimArgs& args) {
   for (std::size_t i = 0; i < e.parameters.size(); ++i) {
     const auto k = static_cast<Eigen::Index>(i);
     const auto& p = e.parameters[i];
-    const auto [t, unit] = Display(p, truth[k], false);
-    const auto [v, unused] = Display(p, e.theta[k], false);
-    const auto [s, unused2] = Display(p, e.sigma[k], true);
+    const auto [t, unit] = ForDisplay(p, truth[k], false);
+    const auto [v, unused] = ForDisplay(p, e.theta[k], false);
+    const auto [s, unused2] = ForDisplay(p, e.sigma[k], true);
     const double z = (e.theta[k] - truth[k]) / e.sigma[k];
     beyond += std::abs(z) > 3;
     fmt::print("  {:<8} {:>14.6g} {:>14.6g} {:>11.3g}  {:<7} {:>+7.2f}\n", p.name, t, v, s, unit,

@@ -3,6 +3,8 @@
 #include <CLI/CLI.hpp>
 
 #include "tools/models_command.h"
+#include "tools/observability_command.h"
+#include "tools/plan_compare_command.h"
 #include "tools/sim_fit_command.h"
 #include "turncal/version.h"
 
@@ -13,6 +15,8 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   turncal::tools::AddModelsCommand(&app);
   turncal::tools::AddSimFitCommands(&app);
+  turncal::tools::AddObservabilityCommands(&app);
+  turncal::tools::AddPlanCompareCommand(&app);
   CLI11_PARSE(app, argc, argv);
   return 0;
 }

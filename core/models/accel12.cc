@@ -2,6 +2,7 @@
 // (MODELS.md; the table's heading is taken as known, beta = 0).
 
 #include "core/model_adapter.h"
+#include "core/models/extended.h"
 #include "core/models/accel_common.h"
 
 namespace turncal {
@@ -30,6 +31,12 @@ struct Accel12 {
   static bool FromLinear(const Mat3<double>& G, double /*beta*/, const Eigen::Vector3d& b,
                          const ModelContext& context, double* theta, std::string* error) {
     return accel::FromLinear(G, b, context, kBias, theta, error);
+  }
+  // The traditional model has no beta: H' = [G | 0 | G].
+  template <typename T>
+  static void Extended(const T* theta, const ModelContext& context, std::vector<T>* out) {
+    extended::AppendHPrime(accel::G(theta, context.mounting), T(0.0), out);
+    extended::AppendVector(Vec3<T>(theta[kBias], theta[kBias + 1], theta[kBias + 2]), out);
   }
 };
 

@@ -2,6 +2,7 @@
 // a_m = (I+S) T_r^s C_q^r C_p^q C_NED^p f_NED + b, beta the table's heading offset.
 
 #include "core/model_adapter.h"
+#include "core/models/extended.h"
 #include "core/models/accel_common.h"
 
 namespace turncal {
@@ -32,6 +33,11 @@ struct Accel13 {
                          const ModelContext& context, double* theta, std::string* error) {
     theta[kBeta] = beta;
     return accel::FromLinear(G, b, context, kBias, theta, error);
+  }
+  template <typename T>
+  static void Extended(const T* theta, const ModelContext& context, std::vector<T>* out) {
+    extended::AppendHPrime(accel::G(theta, context.mounting), theta[kBeta], out);
+    extended::AppendVector(Vec3<T>(theta[kBias], theta[kBias + 1], theta[kBias + 2]), out);
   }
 };
 

@@ -4,6 +4,7 @@
 #include <Eigen/LU>
 
 #include "core/model_adapter.h"
+#include "core/models/extended.h"
 #include "core/models/mag_common.h"
 
 namespace turncal {
@@ -37,6 +38,11 @@ struct Mag13 {
   static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
                          const ModelContext&, double* theta, std::string* error) {
     return mag::FromLinearG(G, beta, b, kBeta, kBias, theta, error);
+  }
+  template <typename T>
+  static void Extended(const T* theta, const ModelContext&, std::vector<T>* out) {
+    extended::AppendHPrime(mag::MatrixRowMajor(theta), theta[kBeta], out);
+    extended::AppendVector(mag::Vector(theta + kBias), out);
   }
 };
 

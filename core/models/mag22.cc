@@ -8,6 +8,7 @@
 #include <Eigen/LU>
 
 #include "core/model_adapter.h"
+#include "core/models/extended.h"
 #include "core/models/mag_common.h"
 
 namespace turncal {
@@ -18,6 +19,7 @@ struct Mag22 {
   static constexpr int kNumParams = 22;
   static constexpr SensorKind kSensor = SensorKind::kMagnetometer;
   static constexpr int kK = 9, kBeta = 15, kDeltaB = 16, kBias = 19;
+  static constexpr int kGaugeDimension = 2;
 
   static std::vector<ParameterInfo> Parameters(const ModelContext& context) {
     std::vector<ParameterInfo> p;
@@ -49,6 +51,14 @@ struct Mag22 {
     for (int i = 0; i < 6; ++i) theta[kK + i] = K_nominal[i];
     for (int i = 0; i < 3; ++i) theta[kDeltaB + i] = 0.0;
     return mag::FromLinearG(G, beta, b, kBeta, kBias, theta, error);
+  }
+  // theta^e = (H'_1, H'_2, b), 57 entries (seed eq. 26-28).
+  template <typename T>
+  static void Extended(const T* theta, const ModelContext&, std::vector<T>* out) {
+    const Mat3<T> G = mag::MatrixRowMajor(theta);
+    extended::AppendHPrime(G, theta[kBeta], out);
+    extended::AppendHPrime2<T>(G * mag::Symmetric(theta + kK), mag::Vector(theta + kDeltaB), out);
+    extended::AppendVector(mag::Vector(theta + kBias), out);
   }
 };
 

@@ -8,6 +8,7 @@
 
 #include "core/accel_physical.h"
 #include "core/model_adapter.h"
+#include "core/models/extended.h"
 #include "core/models/accel_common.h"
 #include "core/models/mag_common.h"
 
@@ -65,6 +66,13 @@ struct MagPhysical {
     for (int i = 0; i < 6; ++i) theta[kK + i] = K_nominal[i];
     theta[kBeta] = beta;
     return true;
+  }
+  // Seed eq. 16: H' with G = (I+S) T C_q^r K, and b' = (I+S) T C_q^r dB + b.
+  template <typename T>
+  static void Extended(const T* theta, const ModelContext& context, std::vector<T>* out) {
+    const Mat3<T> V = SensorMatrix(theta, context.mounting);
+    extended::AppendHPrime<T>(V * mag::Symmetric(theta + kK), theta[kBeta], out);
+    extended::AppendVector<T>(V * mag::Vector(theta + kDeltaB) + mag::Vector(theta + kBias), out);
   }
 };
 

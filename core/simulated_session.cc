@@ -1,0 +1,60 @@
+#include "core/simulated_session.h"
+
+namespace turncal {
+
+SessionOutcome RunSimulatedSession(const MeasurementModel& model, const Eigen::VectorXd& truth,
+                                   const SensorClass& sensor, const CalibratorOptions& options,
+                                   const GateOptions& gate, double dwell_s, int max_poses,
+                                   const PoseChooser& choose, std::mt19937_64* rng) {
+  SessionOutcome out;
+  Calibrator calibrator(options);
+  std::optional<Estimate> estimate;
+  for (int i = 0; i < max_poses; ++i) {
+    const std::optional<TablePose> pose =
+        choose(i, calibrator, estimate && estimate->ok ? &*estimate : nullptr);
+    if (!pose) break;
+    out.poses.push_back(*pose);
+    const PoseRecord record = SimulateRecord(model, truth, *pose, sensor, dwell_s, rng);
+    if (!calibrator.add_pose(record, nullptr)) continue;
+    estimate = calibrator.solve();
+    if (!estimate->ok) continue;
+    const DataReport data = AnalyzeData(model, estimate->theta, calibrator.weighted_poses(),
+                                        ObservabilityOptions{});
+    out.last_gate = EvaluateGate(model, *estimate, data, gate);
+    out.last_estimate = *estimate;
+    if (out.last_gate.pass) {
+      out.poses_to_gate = i + 1;
+      break;
+    }
+  }
+  return out;
+}
+
+PoseChooser FixedSequence(std::vector<TablePose> design) {
+  return [design = std::move(design)](int index, const Calibrator&,
+                                      const Estimate*) -> std::optional<TablePose> {
+    if (index >= static_cast<int>(design.size())) return std::nullopt;
+    return design[static_cast<std::size_t>(index)];
+  };
+}
+
+PoseChooser PlannedSequence(const MeasurementModel& model, const CalibratorOptions& options,
+                            const GateOptions& gate, double dwell_s, PlannerOptions planner) {
+  planner.horizon = 1;  // only the recommendation is needed
+  return [&model, options, gate, dwell_s, planner](
+             int, const Calibrator& calibrator,
+             const Estimate* estimate) -> std::optional<TablePose> {
+    PlanningTarget target;
+    target.model = &model;
+    target.theta = estimate ? estimate->theta : model.nominal();
+    target.sqrt_information =
+        ExpectedSqrtInformation(options.noise_density, options.pose_offset_sigma, dwell_s);
+    target.captured = calibrator.weighted_poses();
+    target.gate = gate;
+    const NextPoseAdvice advice = PlanNextPose({target}, planner);
+    if (!advice.ok) return std::nullopt;
+    return advice.pose;
+  };
+}
+
+}  // namespace turncal

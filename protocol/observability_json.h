@@ -1,0 +1,23 @@
+#pragma once
+// JSON encoding of the observability reports, the publish gate and next-pose advice (DESIGN.md
+// "JSON shapes scripts rely on": `{"model":M,"params":N,"rank":r,"null_directions":[{NAME:coef}],
+// ...}` for `turncal observability --json`). Angles of poses are written in degrees, sigmas in the
+// parameters' own units (null when undetermined).
+
+#include <nlohmann/json.hpp>
+
+#include "core/observability.h"
+#include "core/pose_planner.h"
+#include "core/publish_gate.h"
+
+namespace turncal {
+
+nlohmann::json ToJson(const NamedDirection& direction, const MeasurementModel& model);
+nlohmann::json ToJson(const StructuralReport& report, const MeasurementModel& model);
+nlohmann::json ToJson(const PoseDiversity& diversity);
+nlohmann::json ToJson(const DataReport& report, const MeasurementModel& model);
+nlohmann::json ToJson(const GateResult& gate);
+nlohmann::json ToJson(const TablePose& pose);
+nlohmann::json ToJson(const NextPoseAdvice& advice);
+
+}  // namespace turncal

@@ -1,0 +1,127 @@
+#include "protocol/pose_file.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+namespace turncal {
+
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+bool FromDegrees(double phi, double gamma, double psi, TablePose* out) {
+  if (!std::isfinite(phi) || !std::isfinite(gamma) || !std::isfinite(psi)) return false;
+  *out = TablePose{phi * kDeg, gamma * kDeg, psi * kDeg};
+  return true;
+}
+
+bool ParseJson(const std::string& text, std::vector<TablePose>* poses, std::string* error) {
+  const nlohmann::json doc = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (doc.is_discarded()) {
+    *error = "not valid JSON";
+    return false;
+  }
+  const nlohmann::json* list = &doc;
+  if (doc.is_object()) {
+    if (!doc.contains("poses")) {
+      *error = "a JSON object must hold a \"poses\" array";
+      return false;
+    }
+    list = &doc["poses"];
+  }
+  if (!list->is_array()) {
+    *error = "the poses must be a JSON array";
+    return false;
+  }
+  for (std::size_t i = 0; i < list->size(); ++i) {
+    const auto& e = (*list)[i];
+    double a[3];
+    bool ok = true;
+    if (e.is_array() && e.size() == 3) {
+      for (int k = 0; k < 3; ++k) {
+        ok = ok && e[k].is_number();
+        if (ok) a[k] = e[k].get<double>();
+      }
+    } else if (e.is_object()) {
+      const char* keys[3][2] = {{"phi_deg", "phi"}, {"gamma_deg", "gamma"}, {"psi_deg", "psi"}};
+      for (int k = 0; k < 3 && ok; ++k) {
+        const auto it = e.contains(keys[k][0]) ? e.find(keys[k][0]) : e.find(keys[k][1]);
+        ok = it != e.end() && it->is_number();
+        if (ok) a[k] = it->get<double>();
+      }
+    } else {
+      ok = false;
+    }
+    TablePose pose;
+    if (!ok || !FromDegrees(a[0], a[1], a[2], &pose)) {
+      *error = fmt::format(
+          "pose {} (counting from 0): need [phi, gamma, psi] or {{\"phi_deg\", \"gamma_deg\", "
+          "\"psi_deg\"}} with finite numbers in degrees",
+          i);
+      return false;
+    }
+    poses->push_back(pose);
+  }
+  return true;
+}
+
+bool ParseCsv(const std::string& text, std::vector<TablePose>* poses, std::string* error) {
+  std::istringstream in(text);
+  std::string line;
+  int number = 0;
+  bool first_content = true;
+  while (std::getline(in, line)) {
+    ++number;
+    const auto start = line.find_first_not_of(" \t\r");
+    if (start == std::string::npos || line[start] == '#') continue;
+    const bool header = first_content && std::any_of(line.begin(), line.end(), [](char c) {
+                          return std::isalpha(static_cast<unsigned char>(c)) && c != 'e' &&
+                                 c != 'E';
+                        });
+    first_content = false;
+    if (header) continue;
+    std::string cleaned = line;
+    std::replace(cleaned.begin(), cleaned.end(), ',', ' ');
+    std::replace(cleaned.begin(), cleaned.end(), ';', ' ');
+    std::istringstream fields(cleaned);
+    double a[3];
+    std::string extra;
+    TablePose pose;
+    if (!(fields >> a[0] >> a[1] >> a[2]) || (fields >> extra) ||
+        !FromDegrees(a[0], a[1], a[2], &pose)) {
+      *error = fmt::format("line {}: need three finite numbers phi, gamma, psi in degrees: '{}'",
+                           number, line);
+      return false;
+    }
+    poses->push_back(pose);
+  }
+  return true;
+}
+
+}  // namespace
+
+bool ParsePoses(const std::string& text, std::vector<TablePose>* poses, std::string* error) {
+  std::string local_error;
+  std::string* err = error ? error : &local_error;
+  poses->clear();
+  const auto start = text.find_first_not_of(" \t\r\n");
+  if (start == std::string::npos) {
+    *err = "no poses";
+    return false;
+  }
+  const bool ok = (text[start] == '[' || text[start] == '{') ? ParseJson(text, poses, err)
+                                                               : ParseCsv(text, poses, err);
+  if (ok && poses->empty()) {
+    *err = "no poses";
+    return false;
+  }
+  if (!ok) poses->clear();
+  return ok;
+}
+
+}  // namespace turncal
