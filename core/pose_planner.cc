@@ -168,6 +168,8 @@ NextPoseAdvice PlanNextPose(const std::vector<PlanningTarget>& targets,
     advice.models.push_back(o);
   }
   if (all_pass()) advice.poses_to_gate = 0;
+  const bool blocked = std::any_of(states.begin(), states.end(),
+                                   [](const TargetState& s) { return s.gauge_blocks; });
 
   for (int step = 0; step < options.horizon; ++step) {
     std::vector<Eigen::LDLT<Eigen::MatrixXd>> factors;
@@ -207,7 +209,8 @@ NextPoseAdvice PlanNextPose(const std::vector<PlanningTarget>& targets,
         states[t].Passes(advice.models[t].sigma_after, &advice.models[t].shortfalls_after);
       }
     }
-    if (advice.poses_to_gate == 0) break;  // already passing: only the recommendation is wanted
+    // Already passing, or never passing (a gauge blocks the gate): only the recommendation.
+    if (advice.poses_to_gate == 0 || blocked) break;
     advice.continuation.push_back(candidates[best]);
     if (all_pass()) {
       advice.poses_to_gate = step + 1;

@@ -78,7 +78,8 @@ struct NextPoseAdvice {
   std::vector<CandidateScore> top;  // best first
   std::vector<ModelOutlook> models;
   // Poses still needed for the predicted gate, counting the recommended one; 0 when the captured
-  // poses already meet it; -1 when the horizon is not enough (or a gauge blocks the gate).
+  // poses already meet it; -1 when the horizon is not enough or a gauge blocks the gate (then the
+  // continuation is empty).
   int poses_to_gate = -1;
   std::vector<TablePose> continuation;  // the greedy plan those poses form, recommended first
 };

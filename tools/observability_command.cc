@@ -246,7 +246,11 @@ int RunPlan(const Args& args) {
                                                         m.shortfalls_after.size(),
                                                         m.shortfalls_after.front()));
   }
-  if (a.poses_to_gate == 0) {
+  const bool blocked = std::any_of(a.models.begin(), a.models.end(),
+                                   [](const ModelOutlook& m) { return m.gauge_blocks; });
+  if (blocked) {
+    fmt::print("the gate cannot pass while a correction rests on a gauge direction\n");
+  } else if (a.poses_to_gate == 0) {
     fmt::print("the captured poses already meet the predicted gate\n");
   } else if (a.poses_to_gate > 0) {
     fmt::print("predicted poses to the gate: {} (greedy plan below)\n", a.poses_to_gate);
