@@ -10,6 +10,7 @@
 
 #include "core/linear_start.h"
 #include "core/mag22_gauge.h"
+#include "core/observability.h"
 
 namespace turncal {
 
@@ -372,6 +373,21 @@ Estimate Calibrator::solve() {
   est.theta = theta;
   est.covariance = cov;
   est.sigma = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  if (est.rank < identifiable) {
+    // The pseudo-inverse gives a finite number for a parameter the data do not determine; say
+    // infinity instead (the observability analysis names the directions).
+    ObservabilityOptions analysis_options;
+    analysis_options.rank_tolerance = options_.rank_tolerance;
+    const DataReport data = AnalyzeData(*model_, theta, weighted_poses(), analysis_options);
+    std::string names;
+    for (int j = 0; j < N; ++j) {
+      if (std::isinf(data.sigma[j])) {
+        est.sigma[j] = INFINITY;
+        names += (names.empty() ? "" : " ") + est.parameters[static_cast<std::size_t>(j)].name;
+      }
+    }
+    if (!names.empty()) est.warnings.push_back("not determined by these poses: " + names);
+  }
   est.ok = true;
   theta_ = theta;
   last_cost_per_dof_ = est.dof > 0 ? est.chi2 / est.dof : 0.0;

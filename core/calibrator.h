@@ -93,7 +93,7 @@ struct Estimate {
   std::vector<ParameterInfo> parameters;
   Eigen::VectorXd theta;
   Eigen::MatrixXd covariance;  // in the parameters' order; in the gauge for mag22
-  Eigen::VectorXd sigma;       // sqrt of the covariance's diagonal
+  Eigen::VectorXd sigma;       // sqrt of the covariance's diagonal; inf when undetermined
   int rank = 0;                // of the whitened Jacobian, out of parameters.size()
   double condition = 0.0;      // of the column-scaled whitened Jacobian
   int poses = 0;

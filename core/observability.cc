@@ -60,9 +60,8 @@ NamedDirection Name(const Eigen::VectorXd& scaled_in, double relative_singular,
   const auto& params = model.parameters();
   std::vector<int> order(params.size());
   for (int i = 0; i < static_cast<int>(order.size()); ++i) order[i] = i;
-  std::sort(order.begin(), order.end(), [&](int a, int b) {
-    return std::abs(d.scaled[a]) > std::abs(d.scaled[b]);
-  });
+  std::sort(order.begin(), order.end(),
+            [&](int a, int b) { return std::abs(d.scaled[a]) > std::abs(d.scaled[b]); });
   for (int i : order) {
     if (std::abs(d.scaled[i]) > options.involvement) d.involved.push_back(params[i].name);
   }
@@ -93,8 +92,8 @@ Eigen::VectorXd OutsideGauge(const MeasurementModel& model, const Eigen::VectorX
   if (model.gauge_dimension() == 0) return scaled;
   const Eigen::MatrixXd gauge =
       ParameterScales(model).cwiseInverse().asDiagonal() * GaugeDirections(model, theta);
-  const Eigen::MatrixXd Q = gauge.householderQr().householderQ() *
-                            Eigen::MatrixXd::Identity(gauge.rows(), gauge.cols());
+  const Eigen::MatrixXd Q =
+      gauge.householderQr().householderQ() * Eigen::MatrixXd::Identity(gauge.rows(), gauge.cols());
   return scaled - Q * (Q.transpose() * scaled);
 }
 
@@ -134,7 +133,8 @@ Eigen::VectorXd GenericParameterPoint(const MeasurementModel& model, std::mt1993
   Eigen::VectorXd theta = model.nominal();
   for (int i = 0; i < theta.size(); ++i) {
     const ParameterInfo& p = model.parameters()[i];
-    theta[i] = p.name == "beta" ? heading(*rng) : theta[i] + ParameterScale(p, model) * normal(*rng);
+    theta[i] =
+        p.name == "beta" ? heading(*rng) : theta[i] + ParameterScale(p, model) * normal(*rng);
   }
   return theta;
 }
@@ -283,8 +283,8 @@ DataReport AnalyzeData(const MeasurementModel& model, const Eigen::VectorXd& the
 
 Eigen::Matrix3d ExpectedSqrtInformation(double noise_density, double pose_offset_sigma,
                                         double dwell_s) {
-  const double var = noise_density * noise_density / (2.0 * dwell_s) +
-                     pose_offset_sigma * pose_offset_sigma;
+  const double var =
+      noise_density * noise_density / (2.0 * dwell_s) + pose_offset_sigma * pose_offset_sigma;
   return Eigen::Matrix3d::Identity() / std::sqrt(var);
 }
 

@@ -55,10 +55,10 @@ struct NamedDirection {
 struct RankAnalysis {
   int rank = 0;
   int columns = 0;
-  double condition = 0.0;                 // s_max / s_min of the scaled Jacobian (inf if singular)
-  Eigen::VectorXd relative_singular;      // s_i / s_max, descending
-  std::vector<NamedDirection> null;       // below rank_tolerance
-  std::vector<NamedDirection> weak;       // below weak_ratio, or the weakest one
+  double condition = 0.0;             // s_max / s_min of the scaled Jacobian (inf if singular)
+  Eigen::VectorXd relative_singular;  // s_i / s_max, descending
+  std::vector<NamedDirection> null;   // below rank_tolerance
+  std::vector<NamedDirection> weak;   // below weak_ratio, or the weakest one
 };
 
 RankAnalysis AnalyzeRank(const Eigen::MatrixXd& jacobian, const MeasurementModel& model,
@@ -85,12 +85,12 @@ StructuralReport AnalyzeStructure(const MeasurementModel& model, const Eigen::Ve
 // [m'^T 1] of the linear form (MODELS.md) and where "down" points in the table frame q.
 struct PoseDiversity {
   int poses = 0;
-  int regressor_rank = 0;                  // of N x 10 [m'^T 1], columns scaled to unit norm
-  double regressor_min_singular = 0.0;     // relative to the largest
-  int distinct_down = 0;                   // distinct directions of down in q (to 1e-6)
-  int distinct_heading = 0;                // distinct psi (mod 2 pi, to 1e-6 rad)
+  int regressor_rank = 0;               // of N x 10 [m'^T 1], columns scaled to unit norm
+  double regressor_min_singular = 0.0;  // relative to the largest
+  int distinct_down = 0;                // distinct directions of down in q (to 1e-6)
+  int distinct_heading = 0;             // distinct psi (mod 2 pi, to 1e-6 rad)
   Eigen::Vector3d down_scatter = Eigen::Vector3d::Zero();  // eigenvalues of mean d d^T, desc
-  std::vector<std::string> findings;       // plain-language diagnosis; empty when diverse
+  std::vector<std::string> findings;  // plain-language diagnosis; empty when diverse
 };
 
 PoseDiversity AnalyzePoseDiversity(const std::vector<TablePose>& poses,

@@ -19,8 +19,8 @@ bool AxisValid(const AxisRange& a, const char* name, std::string* error) {
   if (!std::isfinite(a.min_deg) || !std::isfinite(a.max_deg) || !std::isfinite(a.step_deg) ||
       a.max_deg < a.min_deg || a.step_deg < 0 || (a.step_deg == 0 && a.max_deg != a.min_deg)) {
     if (error) {
-      *error = fmt::format("{} range: need min <= max and step > 0 (step 0 only when min = max)",
-                           name);
+      *error =
+          fmt::format("{} range: need min <= max and step > 0 (step 0 only when min = max)", name);
     }
     return false;
   }
@@ -42,8 +42,8 @@ std::vector<double> AxisValues(const AxisRange& a) {
 struct TargetState {
   const PlanningTarget* target = nullptr;
   Eigen::VectorXd scales;
-  Eigen::MatrixXd information;           // D F D + prior
-  std::vector<Eigen::MatrixXd> cand_J;   // per candidate: W J D, 3 x N
+  Eigen::MatrixXd information;          // D F D + prior
+  std::vector<Eigen::MatrixXd> cand_J;  // per candidate: W J D, 3 x N
   int poses = 0;
   bool gauge_blocks = false;
 
@@ -136,8 +136,9 @@ NextPoseAdvice PlanNextPose(const std::vector<PlanningTarget>& targets,
     const int N = model.num_parameters();
     const Eigen::MatrixXd J =
         WhitenedJacobian(model, target.theta, target.captured) * s.scales.asDiagonal();
-    s.information = J.transpose() * J + Eigen::MatrixXd::Identity(N, N) /
-                                            (options.prior_sigma_scaled * options.prior_sigma_scaled);
+    s.information =
+        J.transpose() * J +
+        Eigen::MatrixXd::Identity(N, N) / (options.prior_sigma_scaled * options.prior_sigma_scaled);
     s.poses = static_cast<int>(target.captured.size());
     Jacobian3 Ji;
     s.cand_J.reserve(candidates.size());

@@ -27,9 +27,9 @@ struct AxisRange {
 };
 
 struct PoseGrid {
-  AxisRange phi{-180.0, 150.0, 30.0};   // inner axis
-  AxisRange gamma{-90.0, 90.0, 30.0};   // middle axis
-  AxisRange psi{-180.0, 135.0, 45.0};   // outer axis
+  AxisRange phi{-180.0, 150.0, 30.0};  // inner axis
+  AxisRange gamma{-90.0, 90.0, 30.0};  // middle axis
+  AxisRange psi{-180.0, 135.0, 45.0};  // outer axis
 
   bool IsValid(std::string* error) const;
   std::vector<TablePose> Candidates() const;
@@ -63,8 +63,8 @@ struct CandidateScore {
 struct ModelOutlook {
   std::string model;
   std::vector<std::string> names;
-  Eigen::VectorXd sigma_now;    // predicted from the captured poses (and the prior)
-  Eigen::VectorXd sigma_after;  // after the recommended pose
+  Eigen::VectorXd sigma_now;                  // predicted from the captured poses (and the prior)
+  Eigen::VectorXd sigma_after;                // after the recommended pose
   std::vector<std::string> shortfalls_after;  // gated parameters still above tolerance
   bool gauge_blocks = false;  // the correction rests on a gauge the gate does not accept
 };

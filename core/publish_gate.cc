@@ -149,7 +149,8 @@ GateResult EvaluateGate(const MeasurementModel& model, const Estimate& estimate,
     if (options.accept_gauge_dependent_correction) {
       result.notes.push_back(text);
     } else {
-      reasons.push_back(text + " only when accept_gauge_dependent_correction is set (or use mag13)");
+      reasons.push_back(text +
+                        " only when accept_gauge_dependent_correction is set (or use mag13)");
     }
   }
 
@@ -190,9 +191,8 @@ GateResult EvaluateGate(const MeasurementModel& model, const Estimate& estimate,
   for (int j = 0; j < static_cast<int>(params.size()); ++j) {
     if (is_gated(j)) continue;
     if (undetermined[j]) {
-      result.notes.push_back(
-          fmt::format("{} ({}) is not determined by these poses; not gated", params[j].name,
-                      ToString(params[j].kind)));
+      result.notes.push_back(fmt::format("{} ({}) is not determined by these poses; not gated",
+                                         params[j].name, ToString(params[j].kind)));
     } else {
       result.notes.push_back(fmt::format("{} ({}) = {:.6g} +- {}; not gated", params[j].name,
                                          ToString(params[j].kind), estimate.theta[j],

@@ -16,11 +16,11 @@ namespace turncal {
 
 // Tolerances on 1 sigma, by the kind of quantity.
 struct GateTolerances {
-  double scale_factor = 100e-6;              // S: 100 ppm
-  double angle_rad = 0.01 * M_PI / 180;      // alpha (and eps in the table frame): 0.01 deg
+  double scale_factor = 100e-6;               // S: 100 ppm
+  double angle_rad = 0.01 * M_PI / 180;       // alpha (and eps in the table frame): 0.01 deg
   double acceleration_mps2 = 1e-3 * 9.80665;  // accelerometer bias: 1 mg
-  double gain = 1e-3;                        // magnetometer G entries (and K): 0.1 %
-  double field = 1e-3;                       // magnetometer bias: 1 mG (device unit: Gauss)
+  double gain = 1e-3;                         // magnetometer G entries (and K): 0.1 %
+  double field = 1e-3;                        // magnetometer bias: 1 mG (device unit: Gauss)
 };
 
 // Defaults for a sensor class of SENSORS.md: "industrial" (tactical-grade targets: 100 ppm,

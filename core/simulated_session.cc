@@ -18,8 +18,8 @@ SessionOutcome RunSimulatedSession(const MeasurementModel& model, const Eigen::V
     if (!calibrator.add_pose(record, nullptr)) continue;
     estimate = calibrator.solve();
     if (!estimate->ok) continue;
-    const DataReport data = AnalyzeData(model, estimate->theta, calibrator.weighted_poses(),
-                                        ObservabilityOptions{});
+    const DataReport data =
+        AnalyzeData(model, estimate->theta, calibrator.weighted_poses(), ObservabilityOptions{});
     out.last_gate = EvaluateGate(model, *estimate, data, gate);
     out.last_estimate = *estimate;
     if (out.last_gate.pass) {
@@ -41,20 +41,20 @@ PoseChooser FixedSequence(std::vector<TablePose> design) {
 PoseChooser PlannedSequence(const MeasurementModel& model, const CalibratorOptions& options,
                             const GateOptions& gate, double dwell_s, PlannerOptions planner) {
   planner.horizon = 1;  // only the recommendation is needed
-  return [&model, options, gate, dwell_s, planner](
-             int, const Calibrator& calibrator,
-             const Estimate* estimate) -> std::optional<TablePose> {
-    PlanningTarget target;
-    target.model = &model;
-    target.theta = estimate ? estimate->theta : model.nominal();
-    target.sqrt_information =
-        ExpectedSqrtInformation(options.noise_density, options.pose_offset_sigma, dwell_s);
-    target.captured = calibrator.weighted_poses();
-    target.gate = gate;
-    const NextPoseAdvice advice = PlanNextPose({target}, planner);
-    if (!advice.ok) return std::nullopt;
-    return advice.pose;
-  };
+  return
+      [&model, options, gate, dwell_s, planner](
+          int, const Calibrator& calibrator, const Estimate* estimate) -> std::optional<TablePose> {
+        PlanningTarget target;
+        target.model = &model;
+        target.theta = estimate ? estimate->theta : model.nominal();
+        target.sqrt_information =
+            ExpectedSqrtInformation(options.noise_density, options.pose_offset_sigma, dwell_s);
+        target.captured = calibrator.weighted_poses();
+        target.gate = gate;
+        const NextPoseAdvice advice = PlanNextPose({target}, planner);
+        if (!advice.ok) return std::nullopt;
+        return advice.pose;
+      };
 }
 
 }  // namespace turncal

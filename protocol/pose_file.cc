@@ -79,10 +79,10 @@ bool ParseCsv(const std::string& text, std::vector<TablePose>* poses, std::strin
     ++number;
     const auto start = line.find_first_not_of(" \t\r");
     if (start == std::string::npos || line[start] == '#') continue;
-    const bool header = first_content && std::any_of(line.begin(), line.end(), [](char c) {
-                          return std::isalpha(static_cast<unsigned char>(c)) && c != 'e' &&
-                                 c != 'E';
-                        });
+    const bool header =
+        first_content && std::any_of(line.begin(), line.end(), [](char c) {
+          return std::isalpha(static_cast<unsigned char>(c)) && c != 'e' && c != 'E';
+        });
     first_content = false;
     if (header) continue;
     std::string cleaned = line;
@@ -115,7 +115,7 @@ bool ParsePoses(const std::string& text, std::vector<TablePose>* poses, std::str
     return false;
   }
   const bool ok = (text[start] == '[' || text[start] == '{') ? ParseJson(text, poses, err)
-                                                               : ParseCsv(text, poses, err);
+                                                             : ParseCsv(text, poses, err);
   if (ok && poses->empty()) {
     *err = "no poses";
     return false;

@@ -74,14 +74,16 @@ bool ReadPoses(const std::string& path, std::vector<TablePose>* poses, const cha
 Eigen::VectorXd Point(const MeasurementModel& model, const Args& args, const SensorClass& sensor,
                       bool structural) {
   std::mt19937_64 rng(args.seed);
-  const std::string point = args.point == "auto" ? (structural ? "generic" : "typical") : args.point;
+  const std::string point =
+      args.point == "auto" ? (structural ? "generic" : "typical") : args.point;
   if (point == "nominal") return model.nominal();
   if (point == "generic") return GenericParameterPoint(model, &rng);
   return DrawTruth(model, sensor, &rng);
 }
 
 std::string PointName(const Args& args, bool structural) {
-  const std::string point = args.point == "auto" ? (structural ? "generic" : "typical") : args.point;
+  const std::string point =
+      args.point == "auto" ? (structural ? "generic" : "typical") : args.point;
   return point == "nominal" ? "the nominal parameters"
                             : fmt::format("a {} parameter point (seed {})", point, args.seed);
 }
@@ -210,7 +212,8 @@ int RunPlan(const Args& args) {
     t.model = model.get();
     t.theta = Point(*model, args, sensor, false);
     t.sqrt_information = ExpectedWeight(*model, sensor, args.dwell_s);
-    for (const auto& p : captured) t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information});
+    for (const auto& p : captured)
+      t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information});
     GateTolerancesForClass(args.sensor_class, &t.gate.tolerances);
     t.gate.accept_gauge_dependent_correction = args.accept_gauge;
     targets.push_back(t);
@@ -237,14 +240,16 @@ int RunPlan(const Args& args) {
   for (const auto& c : a.top) fmt::print("  candidate {}   gain {:.3f}\n", show(c.pose), c.gain);
   for (const auto& m : a.models) {
     if (m.gauge_blocks) {
-      fmt::print("  {}: the correction rests on a gauge direction; the gate will not pass without "
-                 "--accept-gauge\n", m.model);
+      fmt::print(
+          "  {}: the correction rests on a gauge direction; the gate will not pass without "
+          "--accept-gauge\n",
+          m.model);
     }
     fmt::print("  {} after this pose: {}\n", m.model,
-               m.shortfalls_after.empty() ? "precision met"
-                                          : fmt::format("{} shortfall(s), e.g. {}",
-                                                        m.shortfalls_after.size(),
-                                                        m.shortfalls_after.front()));
+               m.shortfalls_after.empty()
+                   ? "precision met"
+                   : fmt::format("{} shortfall(s), e.g. {}", m.shortfalls_after.size(),
+                                 m.shortfalls_after.front()));
   }
   const bool blocked = std::any_of(a.models.begin(), a.models.end(),
                                    [](const ModelOutlook& m) { return m.gauge_blocks; });
@@ -306,9 +311,7 @@ void AddObservabilityCommands(CLI::App* app) {
       "observability",
       "rank, null directions and Cramer-Rao sigma of a model: the seed's structural test "
       "(--structural) or the data-level test over a pose list (--poses FILE)");
-  obs->add_option("--model", args->models, "model (turncal models)")
-      ->required()
-      ->expected(1);
+  obs->add_option("--model", args->models, "model (turncal models)")->required()->expected(1);
   auto* structural = obs->add_flag("--structural", args->structural,
                                    "Jacobian of theta -> theta^e (H' entries and biases)");
   auto* poses = obs->add_option("--poses", args->poses_file,

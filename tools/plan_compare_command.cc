@@ -69,8 +69,7 @@ int Run(const Args& args) {
     equal += cb == ca;
     runs.push_back({{"run", run}, {"cube", a.poses_to_gate}, {"planned", b.poses_to_gate}});
     if (!args.json) {
-      fmt::print("run {:>3}: cube {:>3}   planned {:>3}{}\n", run, a.poses_to_gate,
-                 b.poses_to_gate,
+      fmt::print("run {:>3}: cube {:>3}   planned {:>3}{}\n", run, a.poses_to_gate, b.poses_to_gate,
                  b.poses_to_gate < 0 && !b.last_gate.reasons.empty()
                      ? "   (" + b.last_gate.reasons.front() + ")"
                      : "");

@@ -7,7 +7,9 @@
 
 #include "core/accel_physical.h"
 #include "core/calibrator.h"
+#include "core/publish_gate.h"
 #include "core/synthetic.h"
+#include "protocol/observability_json.h"
 
 namespace turncal::tools {
 
@@ -84,6 +86,17 @@ int RunFit(const SimArgs& args) {
     }
   }
   const Estimate e = calibrator.solve();
+  // The publish gate with the class's default tolerances (docs/OBSERVABILITY.md).
+  GateResult gate;
+  if (e.ok) {
+    GateOptions gate_options;
+    GateTolerancesForClass(sensor.name, &gate_options.tolerances);
+    const DataReport data =
+        AnalyzeData(*model, e.theta, calibrator.weighted_poses(), ObservabilityOptions{});
+    gate = EvaluateGate(*model, e, data, gate_options);
+  } else {
+    gate.reasons.push_back("no estimate: " + e.error);
+  }
   if (args.json) {
     nlohmann::json params;
     for (std::size_t i = 0; i < e.parameters.size(); ++i) {
@@ -102,6 +115,7 @@ int RunFit(const SimArgs& args) {
                                       {"p_value", e.p_value},
                                       {"gauge", e.gauge},
                                       {"warnings", e.warnings},
+                                      {"gate", ToJson(gate)},
                                       {"params", params}}
                            .dump());
     return e.ok ? 0 : 1;
@@ -137,6 +151,9 @@ int RunFit(const SimArgs& args) {
   for (const auto& w : e.warnings) fmt::print("  warning: {}\n", w);
   fmt::print("\n  z = (estimate - truth) / sigma; {} of {} parameters beyond 3 sigma.\n", beyond,
              e.parameters.size());
+  fmt::print("\n  publish gate ({} tolerances): {}\n", sensor.name, gate.pass ? "PASS" : "FAIL");
+  for (const auto& r : gate.reasons) fmt::print("    reason: {}\n", r);
+  for (const auto& n : gate.notes) fmt::print("    note: {}\n", n);
   return 0;
 }
 

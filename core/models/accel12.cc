@@ -2,8 +2,8 @@
 // (MODELS.md; the table's heading is taken as known, beta = 0).
 
 #include "core/model_adapter.h"
-#include "core/models/extended.h"
 #include "core/models/accel_common.h"
+#include "core/models/extended.h"
 
 namespace turncal {
 namespace {

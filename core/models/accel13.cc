@@ -2,8 +2,8 @@
 // a_m = (I+S) T_r^s C_q^r C_p^q C_NED^p f_NED + b, beta the table's heading offset.
 
 #include "core/model_adapter.h"
-#include "core/models/extended.h"
 #include "core/models/accel_common.h"
+#include "core/models/extended.h"
 
 namespace turncal {
 namespace {

@@ -8,8 +8,8 @@
 
 #include "core/accel_physical.h"
 #include "core/model_adapter.h"
-#include "core/models/extended.h"
 #include "core/models/accel_common.h"
+#include "core/models/extended.h"
 #include "core/models/mag_common.h"
 
 namespace turncal {

@@ -24,14 +24,15 @@ std::unique_ptr<MeasurementModel> Model(const std::string& name) {
 // How much of `v` lies outside the column span of `basis` (both in the same coordinates),
 // relative to |v|.
 double OutsideSpan(const Eigen::MatrixXd& basis, const Eigen::VectorXd& v) {
-  const Eigen::MatrixXd Q = basis.householderQr().householderQ() *
-                            Eigen::MatrixXd::Identity(basis.rows(), basis.cols());
+  const Eigen::MatrixXd Q =
+      basis.householderQr().householderQ() * Eigen::MatrixXd::Identity(basis.rows(), basis.cols());
   return (v - Q * (Q.transpose() * v)).norm() / v.norm();
 }
 
 Eigen::MatrixXd NullBasisRaw(const RankAnalysis& a, int N) {
   Eigen::MatrixXd basis(N, static_cast<Eigen::Index>(a.null.size()));
-  for (std::size_t i = 0; i < a.null.size(); ++i) basis.col(static_cast<Eigen::Index>(i)) = a.null[i].coefficients;
+  for (std::size_t i = 0; i < a.null.size(); ++i)
+    basis.col(static_cast<Eigen::Index>(i)) = a.null[i].coefficients;
   return basis;
 }
 
@@ -126,8 +127,8 @@ TEST(Structural, Mag22NullDirectionIsTheScaleOfKAgainstDeltaB) {
 // --- Data level --------------------------------------------------------------------------------
 
 std::vector<WeightedPose> Weighted(const MeasurementModel& model,
-                                   const std::vector<TablePose>& poses,
-                                   const SensorClass& sensor, double dwell_s = 5.0) {
+                                   const std::vector<TablePose>& poses, const SensorClass& sensor,
+                                   double dwell_s = 5.0) {
   const CalibratorOptions o = OptionsForClass(model, sensor);
   const Eigen::Matrix3d W = ExpectedSqrtInformation(o.noise_density, o.pose_offset_sigma, dwell_s);
   std::vector<WeightedPose> out;
@@ -148,9 +149,9 @@ TEST_P(DataRank, DiversePosesReachTheIdentifiableRank) {
   for (std::uint64_t seed : {1, 2, 3}) {
     std::mt19937_64 rng(seed);
     const Eigen::VectorXd theta = DrawTruth(*model, ConsumerClass(), &rng);
-    const DataReport r = AnalyzeData(*model, theta, Weighted(*model, RandomPoses(60, &rng),
-                                                             ConsumerClass()),
-                                     ObservabilityOptions{});
+    const DataReport r =
+        AnalyzeData(*model, theta, Weighted(*model, RandomPoses(60, &rng), ConsumerClass()),
+                    ObservabilityOptions{});
     EXPECT_EQ(r.analysis.rank, c.rank) << c.model << " seed " << seed;
     EXPECT_EQ(r.expected_rank, c.rank);
     EXPECT_EQ(r.diversity.regressor_rank, 10);
@@ -169,9 +170,9 @@ TEST(Data, Mag22NullSpaceIsSpannedByBothGaugeDirections) {
   for (std::uint64_t seed : {1, 2, 3}) {
     std::mt19937_64 rng(seed);
     const Eigen::VectorXd theta = GenericParameterPoint(*model, &rng);
-    const DataReport r = AnalyzeData(
-        *model, theta, Weighted(*model, RandomPoses(40, &rng), IndustrialClass()),
-        ObservabilityOptions{});
+    const DataReport r =
+        AnalyzeData(*model, theta, Weighted(*model, RandomPoses(40, &rng), IndustrialClass()),
+                    ObservabilityOptions{});
     ASSERT_EQ(r.analysis.null.size(), 2u);
     const Eigen::MatrixXd analytic = Mag22NullDirections(*model, theta);
     const Eigen::MatrixXd numeric = NullBasisRaw(r.analysis, 22);
@@ -190,9 +191,8 @@ TEST(Data, AboutOneAxisOnlyLosesFourDirectionsAndSaysWhy) {
   auto model = Model("accel13");
   std::mt19937_64 rng(7);
   const Eigen::VectorXd theta = DrawTruth(*model, IndustrialClass(), &rng);
-  const DataReport r = AnalyzeData(*model, theta, Weighted(*model, AboutZPoses(12),
-                                                           IndustrialClass()),
-                                   ObservabilityOptions{});
+  const DataReport r = AnalyzeData(
+      *model, theta, Weighted(*model, AboutZPoses(12), IndustrialClass()), ObservabilityOptions{});
   EXPECT_EQ(r.analysis.rank, 9);
   ASSERT_EQ(r.analysis.null.size(), 4u);
   EXPECT_EQ(r.diversity.distinct_down, 1);
@@ -254,7 +254,8 @@ TEST(Data, CramerRaoSigmaEqualsTheCalibratorsCovariance) {
     options.inflate_covariance_by_chi2 = false;
     Calibrator calibrator(options);
     for (const auto& p : RandomPoses(40, &rng)) {
-      ASSERT_TRUE(calibrator.add_pose(SimulateRecord(*model, truth, p, sensor, 5.0, &rng), nullptr));
+      ASSERT_TRUE(
+          calibrator.add_pose(SimulateRecord(*model, truth, p, sensor, 5.0, &rng), nullptr));
     }
     const Estimate e = calibrator.solve();
     ASSERT_TRUE(e.ok) << e.error;

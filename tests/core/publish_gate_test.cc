@@ -34,9 +34,9 @@ std::string Join(const std::vector<std::string>& list) {
 // Simulates `poses`, calibrates and gates. `edit` may change the calibrator's options (to lie
 // about the noise) or the records (to spoil a pose).
 Session RunSession(const std::string& name, const SensorClass& sensor,
-            const std::vector<TablePose>& poses, std::uint64_t seed, GateOptions gate = {},
-            const std::function<void(CalibratorOptions*)>& edit_options = {},
-            const std::function<void(int, PoseRecord*)>& edit_record = {}) {
+                   const std::vector<TablePose>& poses, std::uint64_t seed, GateOptions gate = {},
+                   const std::function<void(CalibratorOptions*)>& edit_options = {},
+                   const std::function<void(int, PoseRecord*)>& edit_record = {}) {
   Session s;
   std::string error;
   s.model = MakeModel(name, ModelContext{}, &error);
@@ -122,10 +122,10 @@ TEST(Gate, ToleranceTighterThanTheDataAllowFails) {
 TEST(Gate, NoiseUnderstatedTenfoldFailsTheChiSquareCheck) {
   std::mt19937_64 rng(18);
   const Session s = RunSession("accel13", IndustrialClass(), RandomPoses(26, &rng), 19, {},
-                        [](CalibratorOptions* o) {
-                          o->pose_offset_sigma /= 10;
-                          o->noise_density /= 10;
-                        });
+                               [](CalibratorOptions* o) {
+                                 o->pose_offset_sigma /= 10;
+                                 o->noise_density /= 10;
+                               });
   EXPECT_FALSE(s.gate.pass);
   EXPECT_TRUE(Contains(s.gate.reasons, "chi^2")) << Join(s.gate.reasons);
 }
@@ -133,9 +133,9 @@ TEST(Gate, NoiseUnderstatedTenfoldFailsTheChiSquareCheck) {
 TEST(Gate, APoseThatIsNotWhatWasCommandedFails) {
   std::mt19937_64 rng(20);
   const Session s = RunSession("accel13", IndustrialClass(), RandomPoses(26, &rng), 21, {}, {},
-                        [](int i, PoseRecord* r) {
-                          if (i == 7) r->acc->mean += Eigen::Vector3d(0.05, -0.05, 0.0);
-                        });
+                               [](int i, PoseRecord* r) {
+                                 if (i == 7) r->acc->mean += Eigen::Vector3d(0.05, -0.05, 0.0);
+                               });
   EXPECT_FALSE(s.gate.pass);
   EXPECT_TRUE(Contains(s.gate.reasons, "pose 7 has normalised residual")) << Join(s.gate.reasons);
 }
@@ -195,7 +195,8 @@ TEST(Planner, RecommendsTheLargestGainAndShowsItsReasoning) {
   t.theta = model->nominal();
   const CalibratorOptions o = OptionsForClass(*model, IndustrialClass());
   t.sqrt_information = ExpectedSqrtInformation(o.noise_density, o.pose_offset_sigma, 5.0);
-  for (const auto& p : AboutZPoses(8)) t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information});
+  for (const auto& p : AboutZPoses(8))
+    t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information});
   PlannerOptions options;
   const NextPoseAdvice a = PlanNextPose({t}, options);
   ASSERT_TRUE(a.ok) << a.error;
@@ -208,7 +209,8 @@ TEST(Planner, RecommendsTheLargestGainAndShowsItsReasoning) {
   EXPECT_LT(a.pose.C_p_q()(2, 2), 0.99);
   ASSERT_EQ(a.models.size(), 1u);
   const auto& m = a.models[0];
-  for (int i = 0; i < model->num_parameters(); ++i) EXPECT_LE(m.sigma_after[i], m.sigma_now[i] * (1 + 1e-9));
+  for (int i = 0; i < model->num_parameters(); ++i)
+    EXPECT_LE(m.sigma_after[i], m.sigma_now[i] * (1 + 1e-9));
   EXPECT_GT(a.poses_to_gate, 0);
   EXPECT_EQ(static_cast<int>(a.continuation.size()), a.poses_to_gate);
 }

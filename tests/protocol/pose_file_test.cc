@@ -33,9 +33,10 @@ TEST(PoseFile, CsvWithHeaderCommentsAndMixedSeparators) {
 TEST(PoseFile, JsonArraysObjectsAndWrapper) {
   std::vector<TablePose> poses;
   std::string error;
-  ASSERT_TRUE(ParsePoses("[[1,2,3],{\"phi_deg\":4,\"gamma_deg\":5,\"psi_deg\":6},"
-                         "{\"phi\":7,\"gamma\":8,\"psi\":9}]",
-                         &poses, &error))
+  ASSERT_TRUE(
+      ParsePoses("[[1,2,3],{\"phi_deg\":4,\"gamma_deg\":5,\"psi_deg\":6},"
+                 "{\"phi\":7,\"gamma\":8,\"psi\":9}]",
+                 &poses, &error))
       << error;
   ASSERT_EQ(poses.size(), 3u);
   ExpectPose(poses[1], 4, 5, 6);
@@ -89,7 +90,8 @@ TEST(ObservabilityJson, UndeterminedSigmaIsNull) {
   std::string error;
   auto model = MakeModel("accel13", ModelContext{}, &error);
   std::vector<WeightedPose> poses;
-  for (const auto& p : AboutZPoses(10)) poses.push_back({p, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity()});
+  for (const auto& p : AboutZPoses(10))
+    poses.push_back({p, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity()});
   const DataReport r = AnalyzeData(*model, model->nominal(), poses, ObservabilityOptions{});
   const nlohmann::json j = ToJson(r, *model);
   EXPECT_EQ(j["rank"], 9);
