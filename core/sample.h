@@ -14,18 +14,24 @@ enum SampleFlag : std::uint32_t {
   kGyrSaturated = 1u << 1,
   kMagSaturated = 1u << 2,
   kStatusError = 1u << 3,  // the device's status word reports an error
+  kClipping = 1u << 4,     // the device reports clipping without saying which sensor
 };
 
+// The frame a device expressed its vectors in, when it says (Xbus XDI bits 2-3). Values are
+// stored as the device sent them; the frame is recorded so nothing is silently rotated.
+enum class VectorFrame : std::uint8_t { kUnknown, kEnu, kNed, kNwu };
+
 struct Sample {
-  std::string device;                        // configured device name
-  std::optional<double> t_device_s;          // device clock, seconds
-  std::int64_t t_host_ns = 0;                // host monotonic receive time
-  std::optional<std::uint32_t> counter;      // device sequence counter
-  std::optional<Eigen::Vector3d> acc_mps2;   // specific force, m/s^2
-  std::optional<Eigen::Vector3d> gyr_radps;  // angular rate, rad/s
-  std::optional<Eigen::Vector3d> mag;        // field, device unit
-  std::optional<double> temp_c;              // temperature, deg C
-  std::uint32_t flags = 0;                   // SampleFlag bits
+  std::string device;                         // configured device name
+  std::optional<double> t_device_s;           // device clock, seconds
+  std::int64_t t_host_ns = 0;                 // host monotonic receive time
+  std::optional<std::uint32_t> counter;       // device sequence counter
+  std::optional<Eigen::Vector3d> acc_mps2;    // specific force, m/s^2
+  std::optional<Eigen::Vector3d> gyr_radps;   // angular rate, rad/s
+  std::optional<Eigen::Vector3d> mag;         // field, device unit
+  std::optional<double> temp_c;               // temperature, deg C
+  std::uint32_t flags = 0;                    // SampleFlag bits
+  VectorFrame frame = VectorFrame::kUnknown;  // of acc, gyr, mag as sent
 };
 
 }  // namespace turncal

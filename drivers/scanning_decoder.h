@@ -1,0 +1,114 @@
+#pragma once
+// The byte-level machinery every protocol shares: a buffer allocated once, a scan loop that asks
+// the protocol to examine the bytes at the current position, and the counters. A protocol derives
+// from ScanningDecoder<Derived> and provides
+//   Examination Examine(const std::uint8_t* p, std::size_t n);   // n >= 1
+//   bool Accept(std::span<const std::uint8_t> frame, std::int64_t t_host_ns);  // false: malformed
+//   void Release();  // emit a sample still waiting for parts (timeout, end of input)
+
+#include <cstring>
+#include <memory>
+
+#include "drivers/decoder.h"
+
+namespace turncal::drivers {
+
+struct Examination {
+  // kMalformed: a header no valid frame can have (e.g. a length over the protocol's cap).
+  enum Verdict { kNeedMore, kGarbage, kBadChecksum, kMalformed, kFrame } verdict = kNeedMore;
+  std::size_t length = 0;  // kGarbage: bytes to skip (>= 1); kFrame: frame length
+};
+
+template <class Derived>
+class ScanningDecoder : public Decoder {
+ public:
+  void Push(std::span<const std::uint8_t> bytes, std::int64_t t_host_ns) override {
+    counters_.bytes_in += bytes.size();
+    while (!bytes.empty()) {
+      const std::size_t take = std::min(bytes.size(), capacity_ - size_);
+      std::memcpy(buffer_.get() + size_, bytes.data(), take);
+      if (size_ == 0) pending_since_ns_ = t_host_ns;
+      size_ += take;
+      bytes = bytes.subspan(take);
+      Scan(t_host_ns);
+    }
+  }
+
+  void CheckTimeout(std::int64_t now_ns) override {
+    if (size_ > 0 && now_ns - pending_since_ns_ > timeout_ns_) {
+      ++counters_.timeouts;
+      Skip(1);
+      pending_since_ns_ = now_ns;
+      Scan(now_ns);
+    }
+    if (now_ns - last_frame_ns_ > timeout_ns_) static_cast<Derived*>(this)->Release();
+  }
+
+  void Finish() override {
+    counters_.bytes_skipped += size_;
+    size_ = 0;
+    static_cast<Derived*>(this)->Release();
+  }
+
+  const DecoderCounters& counters() const override { return counters_; }
+  std::size_t pending_bytes() const override { return size_; }
+
+ protected:
+  ScanningDecoder(std::size_t max_frame, std::int64_t timeout_ns, DecoderSink* sink)
+      : sink_(sink),
+        capacity_(max_frame + 65536),
+        buffer_(new std::uint8_t[max_frame + 65536]),
+        timeout_ns_(timeout_ns) {}
+
+  DecoderCounters counters_;
+  DecoderSink* sink_;
+
+ private:
+  void Skip(std::size_t n) {
+    counters_.bytes_skipped += n;
+    std::memmove(buffer_.get(), buffer_.get() + n, size_ - n);
+    size_ -= n;
+  }
+
+  void Scan(std::int64_t t_host_ns) {
+    Derived& self = *static_cast<Derived*>(this);
+    std::size_t pos = 0;
+    std::uint8_t* data = buffer_.get();
+    while (pos < size_) {
+      const Examination e = self.Examine(data + pos, size_ - pos);
+      if (e.verdict == Examination::kNeedMore) break;
+      if (e.verdict == Examination::kGarbage) {
+        counters_.bytes_skipped += e.length;
+        pos += e.length;
+      } else if (e.verdict == Examination::kBadChecksum || e.verdict == Examination::kMalformed) {
+        ++(e.verdict == Examination::kBadChecksum ? counters_.bad_checksums
+                                                  : counters_.bad_structure);
+        ++counters_.bytes_skipped;
+        ++pos;
+      } else if (self.Accept(std::span<const std::uint8_t>(data + pos, e.length), t_host_ns)) {
+        ++counters_.frames;
+        counters_.bytes_in_frames += e.length;
+        last_frame_ns_ = t_host_ns;
+        pos += e.length;
+      } else {
+        ++counters_.bad_structure;
+        ++counters_.bytes_skipped;
+        ++pos;
+      }
+    }
+    if (pos > 0) {
+      std::memmove(data, data + pos, size_ - pos);
+      size_ -= pos;
+      pending_since_ns_ = t_host_ns;
+    }
+  }
+
+  std::size_t capacity_;
+  std::unique_ptr<std::uint8_t[]> buffer_;
+  std::size_t size_ = 0;
+  std::int64_t timeout_ns_;
+  std::int64_t pending_since_ns_ = 0;
+  std::int64_t last_frame_ns_ = 0;
+};
+
+}  // namespace turncal::drivers

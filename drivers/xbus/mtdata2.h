@@ -1,0 +1,89 @@
+#pragma once
+// Xsens MTData2 items (PROTOCOLS.md "MTData2"): XDI u16 | size u8 | data, in any order.
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/sample.h"
+
+namespace turncal::drivers::xbus {
+
+struct Item {
+  std::uint16_t xdi = 0;
+  std::span<const std::uint8_t> data;
+
+  std::uint16_t type() const { return static_cast<std::uint16_t>(xdi & 0xFFF0); }
+  int format() const { return xdi & 0x3; }  // 0 f32, 1 fp12.20, 2 fp16.32, 3 f64
+};
+
+// Known item types.
+enum : std::uint16_t {
+  kTemperature = 0x0810,
+  kUtcTime = 0x1010,
+  kPacketCounter = 0x1020,
+  kSampleTimeFine = 0x1060,
+  kSampleTimeCoarse = 0x1070,
+  kQuaternion = 0x2010,
+  kRotationMatrix = 0x2020,
+  kEulerAngles = 0x2030,
+  kDeltaV = 0x4010,
+  kAcceleration = 0x4020,
+  kFreeAcceleration = 0x4030,
+  kAltitudeEllipsoid = 0x5020,
+  kLatLon = 0x5040,
+  kGnssPvtData = 0x7010,
+  kRateOfTurn = 0x8020,
+  kDeltaQ = 0x8030,
+  kMagneticField = 0xC020,
+  kVelocityXyz = 0xD010,
+  kStatusByte = 0xE010,
+  kStatusWord = 0xE020,
+};
+
+// Bytes per value of a number format: 4, 4, 6, 8.
+int ValueSize(int format);
+// One value at p in the given format (fp12.20: int32 / 2^20; fp16.32: (int16 hi * 2^32 + u32
+// lo) / 2^32 with the fraction first on the wire).
+double DecodeValue(const std::uint8_t* p, int format);
+// The item's values as numbers (size / ValueSize); returns how many were written (at most max),
+// or -1 when the size is not a whole number of values.
+int DecodeValues(const Item& item, double* out, int max);
+// The frame bits (XDI & 0xC) of a vector item.
+VectorFrame FrameOf(std::uint16_t xdi);
+// "Acceleration", "RateOfTurn", ... ; nullptr when unknown.
+const char* ItemName(std::uint16_t type);
+
+// Calls f(item) for every item of an MTData2 payload; false (after calling f for the items before
+// the fault) when the items do not fill the payload exactly.
+template <class F>
+bool ForEachItem(std::span<const std::uint8_t> payload, F&& f) {
+  std::size_t at = 0;
+  while (at < payload.size()) {
+    if (payload.size() - at < 3) return false;
+    const std::size_t size = payload[at + 2];
+    if (payload.size() - at - 3 < size) return false;
+    f(Item{static_cast<std::uint16_t>(payload[at] << 8 | payload[at + 1]),
+           payload.subspan(at + 3, size)});
+    at += 3 + size;
+  }
+  return true;
+}
+
+// A decoded value with the label Xsens' documentation gives it ("X", "Q0", "Lat", "ITOW", ...;
+// empty for single-value items). Integers are exact in a double.
+struct NamedValue {
+  const char* name = "";
+  double value = 0.0;
+};
+
+// Every value of a known item, for diagnostics (`turncal decode`) and golden-file tests: vectors
+// X/Y/Z, quaternions Q0-Q3, LatLon Lat/Lon, UTCTime Ns/Year/Month/Day/Hour/Minute/Second/Flags,
+// GNSSPVTData's 35 fields, counters, times and status words as integers. False when the item is
+// unknown or its size does not match its type.
+bool ItemValues(const Item& item, std::vector<NamedValue>* out);
+
+// True when the payload's items fill it exactly (structural validation before use).
+bool ItemsFillPayload(std::span<const std::uint8_t> payload);
+
+}  // namespace turncal::drivers::xbus
