@@ -56,7 +56,9 @@ class Decoder {
   // `now_ns` (a corrupted length byte must not stall the stream) and releases a sample waiting
   // for more of its parts.
   virtual void CheckTimeout(std::int64_t now_ns) = 0;
-  // End of input: emits a waiting sample and counts the pending bytes as skipped.
+  // End of input: rescans the pending bytes one start position at a time (frames inside an
+  // incomplete false candidate are recovered), counts what is left as skipped, and emits a
+  // waiting sample.
   virtual void Finish() = 0;
   virtual const DecoderCounters& counters() const = 0;
   virtual std::size_t pending_bytes() const = 0;

@@ -45,8 +45,12 @@ class ScanningDecoder : public Decoder {
   }
 
   void Finish() override {
-    counters_.bytes_skipped += size_;
-    size_ = 0;
+    // Nothing more will come: a candidate still waiting for bytes is not a frame. Drop its first
+    // byte and scan again, so frames inside a false candidate's claimed length are recovered.
+    while (size_ > 0) {
+      Skip(1);
+      Scan(last_frame_ns_);
+    }
     static_cast<Derived*>(this)->Release();
   }
 
