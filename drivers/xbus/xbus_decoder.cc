@@ -47,10 +47,12 @@ std::optional<std::size_t> XbusLegacyLayout::PayloadSize(std::string* error) con
 }
 
 XbusDecoder::XbusDecoder(std::string device, DecoderSink* sink,
-                         std::optional<XbusLegacyLayout> legacy, std::int64_t timeout_ns)
+                         std::optional<XbusLegacyLayout> legacy, std::int64_t timeout_ns,
+                         std::optional<std::uint8_t> bus_id)
     : ScanningDecoder(kXbusMaxFrame, timeout_ns, sink),
       device_(std::move(device)),
-      legacy_(legacy) {
+      legacy_(legacy),
+      bus_id_(bus_id) {
   if (legacy_) legacy_size_ = legacy_->PayloadSize(nullptr).value_or(0);
 }
 
@@ -65,6 +67,8 @@ Examination XbusDecoder::Examine(const std::uint8_t* p, std::size_t n) {
     return {Examination::kGarbage,
             next ? static_cast<std::size_t>(static_cast<const std::uint8_t*>(next) - p) : n};
   }
+  if (n < 2) return {};
+  if (bus_id_ && p[1] != *bus_id_) return {Examination::kGarbage, 1};
   if (n < 4) return {};
   std::size_t header = 4, len = p[3];
   if (len == 0xFF) {
@@ -78,6 +82,28 @@ Examination XbusDecoder::Examine(const std::uint8_t* p, std::size_t n) {
   std::uint8_t sum = 0;
   for (std::size_t i = 1; i < total; ++i) sum = static_cast<std::uint8_t>(sum + p[i]);
   if (sum != 0) return {Examination::kBadChecksum, 1};
+  // The 8-bit checksum passes for 1 in 256 corrupted candidates. A candidate whose length was
+  // corrupted reaches into the next message; when a message of the same bus ID starts inside
+  // this candidate and is itself valid, the candidate is the corrupted one (otherwise accepting it
+  // would swallow that intact message).
+  for (std::size_t q = 1; q + 1 < total; ++q) {
+    if (p[q] != kPreamble || p[q + 1] != p[1]) continue;
+    const std::size_t m = n - q;
+    if (m < 4) return {};
+    std::size_t other_header = 4, other_len = p[q + 3];
+    if (other_len == 0xFF) {
+      if (m < 6) return {};
+      other_header = 6;
+      other_len = LoadU16(p + q + 4);
+    }
+    const std::size_t other_total = other_header + other_len + 1;
+    if (other_total > kXbusMaxFrame || q + other_total <= total) continue;  // not competing
+    if (m < other_total) return {};  // wait for it (bounded by the timeout)
+    std::uint8_t other_sum = 0;
+    for (std::size_t i = 1; i < other_total; ++i)
+      other_sum = static_cast<std::uint8_t>(other_sum + p[q + i]);
+    if (other_sum == 0) return {Examination::kMalformed, 1};
+  }
   return {Examination::kFrame, total};
 }
 

@@ -30,11 +30,15 @@ struct XbusLegacyLayout {
 
 class XbusDecoder final : public ScanningDecoder<XbusDecoder> {
  public:
+  // `bus_id`: only messages with this BID are candidates (0xFF: a standalone device; nullopt:
+  // any, for a bus master). Filtering on it keeps 0xFA bytes inside data from posing as
+  // messages after a corruption.
   // A message cannot take longer than 8192 bytes x 10 bits x 1.5 at 115200 baud (~1.07 s); a
   // header claiming that much is rejected anyway, so the default waits 0.2 s for the rest.
   XbusDecoder(std::string device, DecoderSink* sink,
               std::optional<XbusLegacyLayout> legacy = std::nullopt,
-              std::int64_t timeout_ns = 200'000'000);
+              std::int64_t timeout_ns = 200'000'000,
+              std::optional<std::uint8_t> bus_id = std::uint8_t{0xFF});
   Protocol protocol() const override { return legacy_ ? Protocol::kXbusLegacy : Protocol::kXbus; }
 
   Examination Examine(const std::uint8_t* p, std::size_t n);
@@ -53,6 +57,7 @@ class XbusDecoder final : public ScanningDecoder<XbusDecoder> {
   std::optional<XbusLegacyLayout> legacy_;
   std::size_t legacy_size_ = 0;
   std::optional<std::uint16_t> last_counter_;
+  std::optional<std::uint8_t> bus_id_;
 };
 
 }  // namespace turncal::drivers
