@@ -22,15 +22,35 @@ struct Examination {
 template <class Derived>
 class ScanningDecoder : public Decoder {
  public:
+  // Bytes are scanned where they are (no copy) when nothing is pending; only a frame split
+  // between two pushes is assembled in the buffer.
   void Push(std::span<const std::uint8_t> bytes, std::int64_t t_host_ns) override {
     counters_.bytes_in += bytes.size();
     while (!bytes.empty()) {
-      const std::size_t take = std::min(bytes.size(), capacity_ - size_);
-      std::memcpy(buffer_.get() + size_, bytes.data(), take);
-      if (size_ == 0) pending_since_ns_ = t_host_ns;
-      size_ += take;
-      bytes = bytes.subspan(take);
-      Scan(t_host_ns);
+      if (size_ == 0) {
+        const std::size_t used = ScanRange(bytes.data(), bytes.size(), t_host_ns);
+        const std::size_t rest = bytes.size() - used;  // < max_frame_: an incomplete candidate
+        std::memcpy(buffer_.get(), bytes.data() + used, rest);
+        size_ = rest;
+        pending_since_ns_ = t_host_ns;
+        return;
+      }
+      // Complete the pending frame with at most one frame's worth of new bytes.
+      const std::size_t k = std::min(bytes.size(), max_frame_);
+      std::memcpy(buffer_.get() + size_, bytes.data(), k);
+      size_ += k;
+      const std::size_t used = ScanRange(buffer_.get(), size_, t_host_ns);
+      const std::size_t rest = size_ - used;
+      if (rest <= k) {
+        // Everything that was pending is consumed; the rest is still in `bytes`.
+        size_ = 0;
+        bytes = bytes.subspan(k - rest);
+      } else {
+        std::memmove(buffer_.get(), buffer_.get() + used, rest);
+        size_ = rest;
+        if (used > 0) pending_since_ns_ = t_host_ns;
+        bytes = bytes.subspan(k);
+      }
     }
   }
 
@@ -39,7 +59,7 @@ class ScanningDecoder : public Decoder {
       ++counters_.timeouts;
       Skip(1);
       pending_since_ns_ = now_ns;
-      Scan(now_ns);
+      ScanBuffer(now_ns);
     }
     if (now_ns - last_frame_ns_ > timeout_ns_) static_cast<Derived*>(this)->Release();
   }
@@ -49,7 +69,7 @@ class ScanningDecoder : public Decoder {
     // byte and scan again, so frames inside a false candidate's claimed length are recovered.
     while (size_ > 0) {
       Skip(1);
-      Scan(last_frame_ns_);
+      ScanBuffer(last_frame_ns_);
     }
     static_cast<Derived*>(this)->Release();
   }
@@ -60,8 +80,8 @@ class ScanningDecoder : public Decoder {
  protected:
   ScanningDecoder(std::size_t max_frame, std::int64_t timeout_ns, DecoderSink* sink)
       : sink_(sink),
-        capacity_(max_frame + 65536),
-        buffer_(new std::uint8_t[max_frame + 65536]),
+        max_frame_(max_frame),
+        buffer_(new std::uint8_t[2 * max_frame]),
         timeout_ns_(timeout_ns) {}
 
   DecoderCounters counters_;
@@ -74,12 +94,21 @@ class ScanningDecoder : public Decoder {
     size_ -= n;
   }
 
-  void Scan(std::int64_t t_host_ns) {
+  void ScanBuffer(std::int64_t t_host_ns) {
+    const std::size_t used = ScanRange(buffer_.get(), size_, t_host_ns);
+    if (used > 0) {
+      std::memmove(buffer_.get(), buffer_.get() + used, size_ - used);
+      size_ -= used;
+    }
+  }
+
+  // Scans data[0, n) and returns how many bytes were consumed (frames and skipped bytes); the
+  // rest is the start of an incomplete candidate.
+  std::size_t ScanRange(const std::uint8_t* data, std::size_t n, std::int64_t t_host_ns) {
     Derived& self = *static_cast<Derived*>(this);
     std::size_t pos = 0;
-    std::uint8_t* data = buffer_.get();
-    while (pos < size_) {
-      const Examination e = self.Examine(data + pos, size_ - pos);
+    while (pos < n) {
+      const Examination e = self.Examine(data + pos, n - pos);
       if (e.verdict == Examination::kNeedMore) break;
       if (e.verdict == Examination::kGarbage) {
         counters_.bytes_skipped += e.length;
@@ -100,14 +129,10 @@ class ScanningDecoder : public Decoder {
         ++pos;
       }
     }
-    if (pos > 0) {
-      std::memmove(data, data + pos, size_ - pos);
-      size_ -= pos;
-      pending_since_ns_ = t_host_ns;
-    }
+    return pos;
   }
 
-  std::size_t capacity_;
+  std::size_t max_frame_;
   std::unique_ptr<std::uint8_t[]> buffer_;
   std::size_t size_ = 0;
   std::int64_t timeout_ns_;

@@ -2,6 +2,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "tools/decode_command.h"
 #include "tools/models_command.h"
 #include "tools/observability_command.h"
 #include "tools/plan_compare_command.h"
@@ -13,6 +14,7 @@ int main(int argc, char** argv) {
                "turncal"};
   app.set_version_flag("--version", std::string("turncal ") + turncal::kVersion);
   app.require_subcommand(1);
+  turncal::tools::AddDecodeCommand(&app);
   turncal::tools::AddModelsCommand(&app);
   turncal::tools::AddSimFitCommands(&app);
   turncal::tools::AddObservabilityCommands(&app);

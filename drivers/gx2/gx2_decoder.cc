@@ -1,6 +1,7 @@
 #include "drivers/gx2/gx2_decoder.h"
 
 #include "drivers/bytes.h"
+#include "drivers/checksum.h"
 #include "drivers/mip/mip_decoder.h"
 
 namespace turncal::drivers {
@@ -32,9 +33,9 @@ Examination Gx2Decoder::Examine(const std::uint8_t* p, std::size_t n) {
     return {Examination::kGarbage, skip};
   }
   if (n < length) return {};
-  std::uint16_t sum = 0;
-  for (std::size_t i = 0; i < length - 2; ++i) sum = static_cast<std::uint16_t>(sum + p[i]);
-  if (sum != LoadU16(p + length - 2)) return {Examination::kBadChecksum, 1};
+  if ((ByteSum(p, length - 2) & 0xFFFF) != LoadU16(p + length - 2)) {
+    return {Examination::kBadChecksum, 1};
+  }
   return {Examination::kFrame, length};
 }
 

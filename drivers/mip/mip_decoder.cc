@@ -32,12 +32,9 @@ Examination MipDecoder::Examine(const std::uint8_t* p, std::size_t n) {
   if (n < 4) return {};
   const std::size_t total = 6u + p[3];
   if (n < total) return {};
-  std::uint8_t a = 0, b = 0;
-  for (std::size_t i = 0; i < total - 2; ++i) {
-    a = static_cast<std::uint8_t>(a + p[i]);
-    b = static_cast<std::uint8_t>(b + a);
+  if (MipChecksumFast(p, total - 2) != LoadU16(p + total - 2)) {
+    return {Examination::kBadChecksum, 1};
   }
-  if (a != p[total - 2] || b != p[total - 1]) return {Examination::kBadChecksum, 1};
   return {Examination::kFrame, total};
 }
 
@@ -106,11 +103,18 @@ bool MipDecoder::Accept(std::span<const std::uint8_t> frame, std::int64_t t_host
           if (bits & 0x0700) s.flags |= kMagSaturated;
         }
         break;
-      case 0x07:
-      case 0x08:
-      case 0xD0:
-      case 0xD6:
-        break;  // known, not used for calibration
+      case 0x07:  // delta theta
+      case 0x08:  // delta velocity
+      case 0x09:  // orientation matrix
+      case 0x0A:  // orientation quaternion
+      case 0x0B:  // orientation update matrix
+      case 0x0C:  // Euler angles
+      case 0x10:  // stabilised mag (north vector)
+      case 0x11:  // stabilised accel (up vector)
+      case 0x17:  // ambient pressure
+      case 0xD0:  // event source
+      case 0xD6:  // reference time delta
+        break;    // known, not used for calibration
       default:
         ++counters_.unknown_fields;
         break;

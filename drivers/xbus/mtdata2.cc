@@ -8,35 +8,6 @@
 
 namespace turncal::drivers::xbus {
 
-int ValueSize(int format) {
-  static constexpr int kSizes[4] = {4, 4, 6, 8};
-  return kSizes[format & 3];
-}
-
-double DecodeValue(const std::uint8_t* p, int format) {
-  switch (format & 3) {
-    case 0:
-      return LoadF32(p);
-    case 1:
-      return static_cast<std::int32_t>(LoadU32(p)) / 1048576.0;
-    case 2: {
-      const auto fraction = LoadU32(p);
-      const auto integer = static_cast<std::int16_t>(LoadU16(p + 4));
-      return (static_cast<double>(integer) * 4294967296.0 + fraction) / 4294967296.0;
-    }
-    default:
-      return LoadF64(p);
-  }
-}
-
-int DecodeValues(const Item& item, double* out, int max) {
-  const int size = ValueSize(item.format());
-  if (item.data.size() % static_cast<std::size_t>(size) != 0) return -1;
-  const int n = std::min(max, static_cast<int>(item.data.size()) / size);
-  for (int i = 0; i < n; ++i) out[i] = DecodeValue(item.data.data() + i * size, item.format());
-  return n;
-}
-
 VectorFrame FrameOf(std::uint16_t xdi) {
   switch (xdi & 0xC) {
     case 0x0:

@@ -1,11 +1,13 @@
 #pragma once
 // Xsens MTData2 items (PROTOCOLS.md "MTData2"): XDI u16 | size u8 | data, in any order.
 
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <vector>
 
 #include "core/sample.h"
+#include "drivers/bytes.h"
 
 namespace turncal::drivers::xbus {
 
@@ -42,13 +44,36 @@ enum : std::uint16_t {
 };
 
 // Bytes per value of a number format: 4, 4, 6, 8.
-int ValueSize(int format);
+inline int ValueSize(int format) {
+  constexpr int kSizes[4] = {4, 4, 6, 8};
+  return kSizes[format & 3];
+}
 // One value at p in the given format (fp12.20: int32 / 2^20; fp16.32: (int16 hi * 2^32 + u32
 // lo) / 2^32 with the fraction first on the wire).
-double DecodeValue(const std::uint8_t* p, int format);
+inline double DecodeValue(const std::uint8_t* p, int format) {
+  switch (format & 3) {
+    case 0:
+      return LoadF32(p);
+    case 1:
+      return static_cast<std::int32_t>(LoadU32(p)) / 1048576.0;
+    case 2: {
+      const auto fraction = LoadU32(p);
+      const auto integer = static_cast<std::int16_t>(LoadU16(p + 4));
+      return (static_cast<double>(integer) * 4294967296.0 + fraction) / 4294967296.0;
+    }
+    default:
+      return LoadF64(p);
+  }
+}
 // The item's values as numbers (size / ValueSize); returns how many were written (at most max),
 // or -1 when the size is not a whole number of values.
-int DecodeValues(const Item& item, double* out, int max);
+inline int DecodeValues(const Item& item, double* out, int max) {
+  const int size = ValueSize(item.format());
+  if (item.data.size() % static_cast<std::size_t>(size) != 0) return -1;
+  const int n = std::min(max, static_cast<int>(item.data.size()) / size);
+  for (int i = 0; i < n; ++i) out[i] = DecodeValue(item.data.data() + i * size, item.format());
+  return n;
+}
 // The frame bits (XDI & 0xC) of a vector item.
 VectorFrame FrameOf(std::uint16_t xdi);
 // "Acceleration", "RateOfTurn", ... ; nullptr when unknown.

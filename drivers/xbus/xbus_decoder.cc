@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include "drivers/bytes.h"
+#include "drivers/checksum.h"
 
 namespace turncal::drivers {
 
@@ -79,15 +80,16 @@ Examination XbusDecoder::Examine(const std::uint8_t* p, std::size_t n) {
   const std::size_t total = header + len + 1;
   if (total > kXbusMaxFrame) return {Examination::kMalformed, 1};
   if (n < total) return {};
-  std::uint8_t sum = 0;
-  for (std::size_t i = 1; i < total; ++i) sum = static_cast<std::uint8_t>(sum + p[i]);
-  if (sum != 0) return {Examination::kBadChecksum, 1};
+  if ((ByteSum(p + 1, total - 1) & 0xFF) != 0) return {Examination::kBadChecksum, 1};
   // The 8-bit checksum passes for 1 in 256 corrupted candidates. A candidate whose length was
   // corrupted reaches into the next message; when a message of the same bus ID starts inside
   // this candidate and is itself valid, the candidate is the corrupted one (otherwise accepting it
   // would swallow that intact message).
   for (std::size_t q = 1; q + 1 < total; ++q) {
-    if (p[q] != kPreamble || p[q + 1] != p[1]) continue;
+    const void* next = std::memchr(p + q, kPreamble, total - 1 - q);
+    if (next == nullptr) break;
+    q = static_cast<std::size_t>(static_cast<const std::uint8_t*>(next) - p);
+    if (p[q + 1] != p[1]) continue;
     const std::size_t m = n - q;
     if (m < 4) return {};
     std::size_t other_header = 4, other_len = p[q + 3];
@@ -99,10 +101,7 @@ Examination XbusDecoder::Examine(const std::uint8_t* p, std::size_t n) {
     const std::size_t other_total = other_header + other_len + 1;
     if (other_total > kXbusMaxFrame || q + other_total <= total) continue;  // not competing
     if (m < other_total) return {};  // wait for it (bounded by the timeout)
-    std::uint8_t other_sum = 0;
-    for (std::size_t i = 1; i < other_total; ++i)
-      other_sum = static_cast<std::uint8_t>(other_sum + p[q + i]);
-    if (other_sum == 0) return {Examination::kMalformed, 1};
+    if ((ByteSum(p + q + 1, other_total - 1) & 0xFF) == 0) return {Examination::kMalformed, 1};
   }
   return {Examination::kFrame, total};
 }
@@ -116,19 +115,18 @@ void XbusDecoder::CountGap(std::uint16_t counter) {
 }
 
 bool XbusDecoder::AcceptMtData2(std::span<const std::uint8_t> payload, Sample* s) {
-  if (!xbus::ItemsFillPayload(payload)) return false;
   bool malformed = false;
-  xbus::ForEachItem(payload, [&](const xbus::Item& item) {
+  const bool filled = xbus::ForEachItem(payload, [&](const xbus::Item& item) {
     double v[3];
     switch (item.type()) {
       case xbus::kAcceleration:
       case xbus::kRateOfTurn:
       case xbus::kMagneticField: {
-        if (xbus::DecodeValues(item, v, 3) != 3 ||
-            item.data.size() != 3u * static_cast<std::size_t>(xbus::ValueSize(item.format()))) {
+        if (item.data.size() != 3u * static_cast<std::size_t>(xbus::ValueSize(item.format()))) {
           malformed = true;
           return;
         }
+        xbus::DecodeValues(item, v, 3);
         const Eigen::Vector3d vec(v[0], v[1], v[2]);
         if (item.type() == xbus::kAcceleration) s->acc_mps2 = vec;
         if (item.type() == xbus::kRateOfTurn) s->gyr_radps = vec;
@@ -174,7 +172,7 @@ bool XbusDecoder::AcceptMtData2(std::span<const std::uint8_t> payload, Sample* s
         break;
     }
   });
-  return !malformed;
+  return filled && !malformed;
 }
 
 bool XbusDecoder::AcceptLegacy(std::span<const std::uint8_t> payload, Sample* s) {

@@ -54,3 +54,27 @@ TEST(Checksum, Gx2IsTheSumOfAllBytesModulo65536) {
 
 }  // namespace
 }  // namespace turncal::drivers
+
+namespace turncal::drivers {
+namespace {
+
+// The vectorised checksums equal the byte-at-a-time definitions for every length 0..600.
+TEST(Checksum, FastFormsEqualTheDefinitions) {
+  std::vector<std::uint8_t> data(600);
+  std::uint32_t x = 12345;
+  for (auto& b : data) {
+    x = x * 1103515245u + 12345u;
+    b = static_cast<std::uint8_t>(x >> 16);
+  }
+  for (std::size_t n = 0; n <= data.size(); ++n) {
+    const std::span<const std::uint8_t> span(data.data(), n);
+    ASSERT_EQ(MipChecksumFast(data.data(), n), MipChecksum(span)) << n;
+    std::uint8_t sum = 0;
+    for (auto b : span) sum = static_cast<std::uint8_t>(sum + b);
+    ASSERT_EQ(ByteSum(data.data(), n) & 0xFF, sum) << n;
+    ASSERT_EQ(ByteSum(data.data(), n) & 0xFFFF, Gx2Checksum(span)) << n;
+  }
+}
+
+}  // namespace
+}  // namespace turncal::drivers

@@ -1,0 +1,250 @@
+#include "tools/decode_command.h"
+
+#include <fmt/format.h>
+
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "drivers/decoder_factory.h"
+#include "drivers/xbus/xbus_encoder.h"
+
+namespace turncal::tools {
+
+namespace {
+
+struct Args {
+  std::string file;
+  std::string protocol;
+  bool json = false;
+  double gx2_ticks_per_s = 19'660'800.0;
+  bool gx2_little_endian = false;
+  std::string legacy_mode = "0x0002";
+  std::string legacy_settings = "0x00000001";
+  std::size_t chunk = 4096;
+};
+
+const char* ToString(VectorFrame f) {
+  switch (f) {
+    case VectorFrame::kEnu:
+      return "ENU";
+    case VectorFrame::kNed:
+      return "NED";
+    case VectorFrame::kNwu:
+      return "NWU";
+    default:
+      return "unknown";
+  }
+}
+
+std::vector<std::string> FlagNames(std::uint32_t flags) {
+  std::vector<std::string> out;
+  if (flags & kAccSaturated) out.push_back("acc_saturated");
+  if (flags & kGyrSaturated) out.push_back("gyr_saturated");
+  if (flags & kMagSaturated) out.push_back("mag_saturated");
+  if (flags & kStatusError) out.push_back("status_error");
+  if (flags & kClipping) out.push_back("clipping");
+  return out;
+}
+
+class PrintingSink : public drivers::DecoderSink {
+ public:
+  PrintingSink(drivers::Protocol protocol, bool json) : protocol_(protocol), json_(json) {}
+
+  void OnFrame(const drivers::FrameView& f) override {
+    if (f.carries_sample) return;  // its sample is printed
+    nlohmann::json j = {{"class", "FRAME"},
+                        {"protocol", drivers::ToString(protocol_)},
+                        {"kind", fmt::format("0x{:02X}", f.kind)},
+                        {"length", f.bytes.size()}};
+    std::string text = fmt::format("FRAME  {:<11} kind 0x{:02X} {:>4} bytes",
+                                   drivers::ToString(protocol_), f.kind, f.bytes.size());
+    if (protocol_ == drivers::Protocol::kMip) {
+      std::vector<std::string> fields;
+      for (std::size_t at = 4; at < 4u + f.bytes[3]; at += f.bytes[at]) {
+        fields.push_back(fmt::format("{:02X}", f.bytes[at + 1]));
+        if (f.bytes[at + 1] == 0xF1 && f.bytes[at] >= 4) {
+          j["reply_to"] = fmt::format("0x{:02X}", f.bytes[at + 2]);
+          j["reply_code"] = f.bytes[at + 3];
+          text += fmt::format("  reply to 0x{:02X}: code {}", f.bytes[at + 2], f.bytes[at + 3]);
+        }
+      }
+      j["fields"] = fields;
+      text += "  fields";
+      for (const auto& s : fields) text += " " + s;
+    } else if (protocol_ == drivers::Protocol::kXbus ||
+               protocol_ == drivers::Protocol::kXbusLegacy) {
+      const auto payload = drivers::XbusDecoder::Payload(f.bytes);
+      if (f.kind == drivers::xbus::kError && !payload.empty()) {
+        j["error_code"] = payload[0];
+        j["error"] = drivers::xbus::ErrorMeaning(payload[0]);
+        text += fmt::format("  error 0x{:02X}: {}", payload[0],
+                            drivers::xbus::ErrorMeaning(payload[0]));
+      } else if (f.kind == drivers::xbus::kMtData2) {
+        nlohmann::json items = nlohmann::json::object();
+        drivers::xbus::ForEachItem(payload, [&](const drivers::xbus::Item& item) {
+          std::vector<drivers::xbus::NamedValue> values;
+          const char* name = drivers::xbus::ItemName(item.type());
+          const std::string key = name ? name : fmt::format("0x{:04X}", item.xdi);
+          if (!drivers::xbus::ItemValues(item, &values)) {
+            items[key] = nullptr;
+            return;
+          }
+          nlohmann::json v = nlohmann::json::object();
+          for (const auto& nv : values) v[*nv.name ? nv.name : "value"] = nv.value;
+          items[key] = v;
+          text += " " + key;
+        });
+        j["items"] = items;
+      }
+    }
+    Print(j, text);
+  }
+
+  void OnSample(const Sample& s) override {
+    nlohmann::json j = {{"class", "SAMPLE"}, {"protocol", drivers::ToString(protocol_)}};
+    std::string text = "SAMPLE";
+    if (s.t_device_s) {
+      j["t_device"] = *s.t_device_s;
+      text += fmt::format(" t {:.6f}", *s.t_device_s);
+    }
+    if (s.counter) {
+      j["counter"] = *s.counter;
+      text += fmt::format(" n {}", *s.counter);
+    }
+    auto vec = [&](const char* key, const std::optional<Eigen::Vector3d>& v) {
+      if (!v) return;
+      j[key] = {v->x(), v->y(), v->z()};
+      text += fmt::format(" {} [{:+.6f} {:+.6f} {:+.6f}]", key, v->x(), v->y(), v->z());
+    };
+    vec("acc", s.acc_mps2);
+    vec("gyr", s.gyr_radps);
+    vec("mag", s.mag);
+    if (s.temp_c) {
+      j["temp"] = *s.temp_c;
+      text += fmt::format(" temp {:.2f}", *s.temp_c);
+    }
+    j["flags"] = FlagNames(s.flags);
+    for (const auto& f : FlagNames(s.flags)) text += " " + f;
+    if (s.frame != VectorFrame::kUnknown) {
+      j["frame"] = ToString(s.frame);
+      text += std::string(" frame ") + ToString(s.frame);
+    }
+    Print(j, text);
+  }
+
+ private:
+  void Print(const nlohmann::json& j, const std::string& text) {
+    if (json_) {
+      std::fputs(j.dump().c_str(), stdout);
+    } else {
+      std::fputs(text.c_str(), stdout);
+    }
+    std::fputc('\n', stdout);
+  }
+  drivers::Protocol protocol_;
+  bool json_;
+};
+
+bool ParseHex(const std::string& text, std::uint32_t* out) {
+  try {
+    std::size_t used = 0;
+    const unsigned long v = std::stoul(text, &used, 0);
+    if (used != text.size() || v > 0xFFFFFFFFul) return false;
+    *out = static_cast<std::uint32_t>(v);
+    return true;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+int Run(const Args& args) {
+  const auto protocol = drivers::ParseProtocol(args.protocol);
+  if (!protocol) {
+    fmt::print(stderr, "turncal decode: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)\n",
+               args.protocol);
+    return 2;
+  }
+  std::ifstream in(args.file, std::ios::binary);
+  if (!in) {
+    fmt::print(stderr, "turncal decode: cannot open '{}'\n", args.file);
+    return 2;
+  }
+  drivers::DecoderOptions options;
+  options.gx2.timer_ticks_per_s = args.gx2_ticks_per_s;
+  options.gx2.little_endian_floats = args.gx2_little_endian;
+  std::uint32_t mode = 0, settings = 0;
+  if (!ParseHex(args.legacy_mode, &mode) || mode > 0xFFFF ||
+      !ParseHex(args.legacy_settings, &settings)) {
+    fmt::print(stderr,
+               "turncal decode: --output-mode and --output-settings take numbers (0x...)\n");
+    return 2;
+  }
+  options.xbus_legacy.output_mode = static_cast<std::uint16_t>(mode);
+  options.xbus_legacy.output_settings = settings;
+  PrintingSink sink(*protocol, args.json);
+  std::string error;
+  auto decoder = drivers::MakeDecoder(*protocol, options, &sink, &error);
+  if (!decoder) {
+    fmt::print(stderr, "turncal decode: {}\n", error);
+    return 2;
+  }
+  std::vector<char> buffer(args.chunk);
+  while (in) {
+    in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+    const auto n = static_cast<std::size_t>(in.gcount());
+    if (n == 0) break;
+    decoder->Push(
+        std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(buffer.data()), n), 0);
+  }
+  decoder->Finish();
+  const drivers::DecoderCounters& c = decoder->counters();
+  if (args.json) {
+    fmt::print("{}\n", nlohmann::json{{"class", "SUMMARY"},
+                                      {"protocol", drivers::ToString(*protocol)},
+                                      {"bytes", c.bytes_in},
+                                      {"frames", c.frames},
+                                      {"samples", c.samples},
+                                      {"bad_checksums", c.bad_checksums},
+                                      {"bad_structure", c.bad_structure},
+                                      {"skipped_bytes", c.bytes_skipped},
+                                      {"timeouts", c.timeouts},
+                                      {"lost_samples", c.lost_samples},
+                                      {"unknown_fields", c.unknown_fields}}
+                           .dump());
+  } else {
+    fmt::print(
+        "SUMMARY {} bytes: {} frames, {} samples, {} bad checksums, {} malformed, {} bytes "
+        "skipped, {} lost samples (counter gaps), {} unknown fields\n",
+        c.bytes_in, c.frames, c.samples, c.bad_checksums, c.bad_structure, c.bytes_skipped,
+        c.lost_samples, c.unknown_fields);
+  }
+  return 0;
+}
+
+}  // namespace
+
+void AddDecodeCommand(CLI::App* app) {
+  auto args = std::make_shared<Args>();
+  auto* cmd = app->add_subcommand(
+      "decode", "decode a raw byte stream: frames and samples, then a summary of the counters");
+  cmd->add_option("file", args->file, "raw capture (.bin)")->required();
+  cmd->add_option("--protocol", args->protocol, "mip | gx2 | xbus | xbus-legacy")->required();
+  cmd->add_flag("--json", args->json, "one JSON object a line");
+  cmd->add_option("--gx2-timer-rate", args->gx2_ticks_per_s,
+                  "GX2 timer ticks per second (GX2 19660800, GX3-25 62500)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_flag("--gx2-little-endian", args->gx2_little_endian,
+                "GX3-25 with little-endian floats (0xDB flags bit 4)");
+  cmd->add_option("--output-mode", args->legacy_mode, "xbus-legacy OutputMode")
+      ->capture_default_str();
+  cmd->add_option("--output-settings", args->legacy_settings, "xbus-legacy OutputSettings")
+      ->capture_default_str();
+  cmd->add_option("--chunk", args->chunk, "bytes read and pushed at a time")
+      ->check(CLI::Range(1, 1 << 24))
+      ->capture_default_str();
+  cmd->callback([args] { throw CLI::RuntimeError(Run(*args)); });
+}
+
+}  // namespace turncal::tools
