@@ -32,6 +32,8 @@ enum Mid : std::uint8_t {
   kWakeUpAck = 0x3F,
   kReset = 0x40,
   kError = 0x42,
+  kReqOutputMode = 0xD0,
+  kReqOutputSettings = 0xD2,
   kSetOutputConfiguration = 0xC0,
   kOutputConfiguration = 0xC1,
 };

@@ -1,0 +1,68 @@
+#pragma once
+// The MIP configuration dialogue (PROTOCOLS.md "Commands"): set to idle with retries (a reply
+// lost among streaming data is common), device information, IMU base rate, message format,
+// enable stream, resume, and the calibration the device applies itself before output (stored
+// accel/gyro bias, hard- and soft-iron), which must be recorded with every calibration.
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "drivers/exchange.h"
+
+namespace turncal::drivers::mip {
+
+struct DeviceInfo {
+  std::uint16_t firmware = 0;
+  std::string model_name, model_number, serial, lot, options;
+};
+
+// Absent entries: the device does not know that command (NACK "unknown command").
+struct StoredCalibration {
+  std::optional<Eigen::Vector3d> accel_bias;  // g
+  std::optional<Eigen::Vector3d> gyro_bias;   // rad/s
+  std::optional<Eigen::Vector3d> hard_iron;   // Gauss
+  std::optional<Eigen::Matrix3d> soft_iron;
+};
+
+struct Configured {
+  DeviceInfo info;
+  std::uint16_t base_rate_hz = 0;
+  std::uint16_t decimation = 0;
+  StoredCalibration stored;
+};
+
+// "unknown command", "bad checksum", "bad parameter", "failed", "timeout".
+const char* NackMeaning(std::uint8_t code);
+
+class Dialogue {
+ public:
+  explicit Dialogue(ByteLink* link, ExchangeOptions options = {});
+
+  bool SetToIdle(std::string* error);
+  std::optional<DeviceInfo> GetDeviceInfo(std::string* error);
+  std::optional<std::uint16_t> GetImuBaseRate(std::string* error);
+  bool SetImuMessageFormat(std::span<const std::pair<std::uint8_t, std::uint16_t>> descriptors,
+                           std::string* error);
+  bool EnableStream(std::uint8_t data_set, bool on, std::string* error);
+  bool Resume(std::string* error);
+  std::optional<StoredCalibration> ReadStoredCalibration(std::string* error);
+
+  // The whole sequence: idle, device info, base rate, accel+gyro+mag at the decimation closest to
+  // `rate_hz`, stored calibration, enable the sensor stream, resume. nullopt with the step that
+  // failed.
+  std::optional<Configured> Configure(double rate_hz, std::string* error);
+
+ private:
+  // Sends a command and waits for its ACK/NACK; the reply's data fields are returned.
+  std::optional<std::vector<std::pair<std::uint8_t, std::vector<std::uint8_t>>>> Command(
+      const std::vector<std::uint8_t>& request, const std::string& what, std::string* error,
+      std::uint8_t* nack_code = nullptr);
+
+  ByteLink* link_;
+  ExchangeOptions options_;
+};
+
+}  // namespace turncal::drivers::mip
