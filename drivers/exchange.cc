@@ -50,8 +50,8 @@ ExchangeResult Exchange(ByteLink* link, std::span<const std::uint8_t> request,
     while (!sink.found) {
       const std::int64_t left_ns = deadline - link->NowNs();
       if (left_ns <= 0) break;
-      const long n = link->Read(buffer, std::chrono::milliseconds(left_ns / 1'000'000 + 1),
-                                &result.error);
+      const long n =
+          link->Read(buffer, std::chrono::milliseconds(left_ns / 1'000'000 + 1), &result.error);
       if (n < 0) {
         result.error = fmt::format("{}: read failed: {}", what, result.error);
         return result;
@@ -62,8 +62,8 @@ ExchangeResult Exchange(ByteLink* link, std::span<const std::uint8_t> request,
   }
   result.skipped_frames = sink.skipped;
   if (!sink.found) {
-    result.error = fmt::format("{}: no reply after {} attempt(s) of {} ms", what,
-                               options.attempts, options.reply_timeout.count());
+    result.error = fmt::format("{}: no reply after {} attempt(s) of {} ms", what, options.attempts,
+                               options.reply_timeout.count());
     return result;
   }
   result.reply = std::move(sink.reply);

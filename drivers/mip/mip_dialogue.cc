@@ -48,14 +48,17 @@ std::optional<std::vector<std::pair<std::uint8_t, std::vector<std::uint8_t>>>> D
   const std::uint8_t code = r.reply[7];
   if (nack_code) *nack_code = code;
   if (code != 0) {
-    if (error) *error = fmt::format("{}: the device answered NACK {} ({})", what, code, NackMeaning(code));
+    if (error)
+      *error = fmt::format("{}: the device answered NACK {} ({})", what, code, NackMeaning(code));
     return std::nullopt;
   }
   std::vector<std::pair<std::uint8_t, std::vector<std::uint8_t>>> fields;
   const std::size_t end = 4u + r.reply[3];
   for (std::size_t at = 4 + r.reply[4]; at < end; at += r.reply[at]) {
-    fields.emplace_back(r.reply[at + 1], std::vector<std::uint8_t>(r.reply.begin() + static_cast<long>(at) + 2,
-                                                                  r.reply.begin() + static_cast<long>(at) + r.reply[at]));
+    fields.emplace_back(
+        r.reply[at + 1],
+        std::vector<std::uint8_t>(r.reply.begin() + static_cast<long>(at) + 2,
+                                  r.reply.begin() + static_cast<long>(at) + r.reply[at]));
   }
   return fields;
 }
@@ -64,7 +67,9 @@ bool Dialogue::SetToIdle(std::string* error) {
   return Command(mip::SetToIdle(), "set to idle", error).has_value();
 }
 
-bool Dialogue::Resume(std::string* error) { return Command(mip::Resume(), "resume", error).has_value(); }
+bool Dialogue::Resume(std::string* error) {
+  return Command(mip::Resume(), "resume", error).has_value();
+}
 
 std::optional<DeviceInfo> Dialogue::GetDeviceInfo(std::string* error) {
   const auto fields = Command(mip::GetDeviceInfo(), "get device info", error);
@@ -144,8 +149,9 @@ std::optional<StoredCalibration> Dialogue::ReadStoredCalibration(std::string* er
         return std::nullopt;
       }
       const Eigen::Vector3d v(f(0), f(1), f(2));
-      (r.descriptor == 0x37 ? stored.accel_bias : r.descriptor == 0x38 ? stored.gyro_bias
-                                                                       : stored.hard_iron) = v;
+      (r.descriptor == 0x37   ? stored.accel_bias
+       : r.descriptor == 0x38 ? stored.gyro_bias
+                              : stored.hard_iron) = v;
     }
   }
   return stored;
@@ -161,7 +167,8 @@ std::optional<Configured> Dialogue::Configure(double rate_hz, std::string* error
   if (!base) return std::nullopt;
   c.base_rate_hz = *base;
   if (!(rate_hz > 0) || rate_hz > *base) {
-    if (error) *error = fmt::format("rate {} Hz is not in (0, {}] (the IMU base rate)", rate_hz, *base);
+    if (error)
+      *error = fmt::format("rate {} Hz is not in (0, {}] (the IMU base rate)", rate_hz, *base);
     return std::nullopt;
   }
   c.decimation = static_cast<std::uint16_t>(std::max(1.0, std::round(*base / rate_hz)));

@@ -26,7 +26,9 @@ std::optional<std::vector<std::uint8_t>> Dialogue::Request(std::uint8_t mid,
   const auto payload = XbusDecoder::Payload(r.reply);
   if (r.reply[2] == kError) {
     const std::uint8_t code = payload.empty() ? 0 : payload[0];
-    if (error) *error = fmt::format("{}: the device answered error 0x{:02X} ({})", what, code, ErrorMeaning(code));
+    if (error)
+      *error = fmt::format("{}: the device answered error 0x{:02X} ({})", what, code,
+                           ErrorMeaning(code));
     return std::nullopt;
   }
   return std::vector<std::uint8_t>(payload.begin(), payload.end());

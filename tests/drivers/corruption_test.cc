@@ -4,6 +4,7 @@
 // for every byte.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <functional>
 #include <map>
 #include <random>
@@ -101,6 +102,11 @@ Outcome RunCorrupted(Protocol protocol, const std::vector<Bytes>& frames, std::u
       ++o.recovered;
     }
   }
+  std::printf(
+      "%s: %d flips, %d inserts, %d drops; %zu of %zu frames intact, %zu recovered, %zu "
+      "corrupted frames accepted\n",
+      ToString(protocol), c.flips, c.inserts, c.drops, o.intact, frames.size(), o.recovered,
+      o.false_accepts);
   return o;
 }
 

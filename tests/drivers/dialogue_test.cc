@@ -19,7 +19,7 @@ using Bytes = std::vector<std::uint8_t>;
 class ScriptedLink : public ByteLink {
  public:
   std::function<Bytes(std::span<const std::uint8_t>)> on_write;  // the device's answer
-  std::function<Bytes()> stream;                                   // data while streaming
+  std::function<Bytes()> stream;                                 // data while streaming
   bool streaming = true;
   bool unplugged = false;
   int writes = 0;
@@ -106,7 +106,8 @@ struct MipDevice {
       }
       if (set == 0x0C && cmd == 0x08) return mip::Reply(set, cmd, format_code);
       if (set == 0x0C && (cmd == 0x37 || cmd == 0x38 || cmd == 0x3A)) {
-        const mip::Field f{static_cast<std::uint8_t>(cmd + 0x60), Floats({0.001f, -0.002f, 0.003f})};
+        const mip::Field f{static_cast<std::uint8_t>(cmd + 0x60),
+                           Floats({0.001f, -0.002f, 0.003f})};
         return mip::Reply(set, cmd, 0, std::span<const mip::Field>(&f, 1));
       }
       if (set == 0x0C && cmd == 0x3B) return mip::Reply(set, cmd, 1);  // unknown command

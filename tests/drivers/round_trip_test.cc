@@ -107,6 +107,18 @@ TEST(XbusEncoder, MtData2RoundTripInEveryFormatAndFrame) {
   }
 }
 
+TEST(XbusEncoder, PacketCounterGapsAreLostSamples) {
+  CollectingSink sink;
+  XbusDecoder d("mti", &sink);
+  for (std::uint32_t counter : {65534u, 65535u, 0u, 3u, 4u}) {  // wraps, then 1, 2 are lost
+    Sample s = Full();
+    s.counter = counter;
+    d.Push(xbus::MtData2(s), 0);
+  }
+  EXPECT_EQ(d.counters().samples, 5u);
+  EXPECT_EQ(d.counters().lost_samples, 2u);
+}
+
 TEST(XbusEncoder, ExtendedLengthAndConfigurationRoundTrip) {
   std::vector<std::pair<std::uint16_t, std::uint16_t>> outputs(32, {0x4020, 100});
   const auto set = xbus::SetOutputConfiguration(outputs);

@@ -33,8 +33,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   DecoderOptions options;
   options.xbus_legacy.output_mode = 0x0807;
   options.xbus_legacy.output_settings = 0x00000101;
-  auto decoder =
-      MakeDecoder(static_cast<Protocol>(TURNCAL_FUZZ_PROTOCOL), options, &sink, nullptr);
+  auto decoder = MakeDecoder(static_cast<Protocol>(TURNCAL_FUZZ_PROTOCOL), options, &sink, nullptr);
   if (!decoder) __builtin_trap();
   std::int64_t t = 0;
   std::size_t at = 0;
