@@ -1,0 +1,102 @@
+#pragma once
+// The capture file format `.tcap` (DESIGN.md "Capture file"; docs/capture-format.md): one text
+// line `TCAP1 <json header>\n`, then records `type u8 | device u8 | t_ns u64 LE | length u32 LE |
+// payload`. Type 'D' bytes received from a device, 'T' bytes sent to it, 'E' an event (JSON, e.g.
+// a pose command); t_ns is host monotonic time since the capture began. Appending never rewrites
+// earlier bytes, so a capture cut short is readable up to its last whole record.
+
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "drivers/device_spec.h"
+
+namespace turncal::drivers {
+
+inline constexpr std::size_t kCaptureRecordHeader = 14;     // type, device, t_ns, length
+inline constexpr std::uint32_t kCaptureMaxPayload = 1u << 24;  // 16 MiB: larger is corruption
+inline constexpr std::size_t kCaptureMaxHeaderLine = 1u << 20;
+
+struct CaptureDevice {
+  std::string name;
+  Protocol protocol = Protocol::kMip;
+  int baud = 115200;
+};
+
+struct CaptureHeader {
+  std::vector<CaptureDevice> devices;
+  std::string created;  // ISO 8601 UTC, or "simulated" for simulator output
+  std::string note;
+};
+
+enum class RecordType : std::uint8_t { kReceived = 'D', kSent = 'T', kEvent = 'E' };
+
+struct CaptureRecord {
+  RecordType type = RecordType::kReceived;
+  std::uint8_t device = 0;  // index into CaptureHeader::devices
+  std::uint64_t t_ns = 0;
+  std::vector<std::uint8_t> payload;
+};
+
+// The header line (with its '\n') and one record, as bytes.
+std::string EncodeCaptureHeader(const CaptureHeader& header);
+void AppendCaptureRecord(RecordType type, std::uint8_t device, std::uint64_t t_ns,
+                         std::span<const std::uint8_t> payload, std::vector<std::uint8_t>* out);
+
+// Writes a capture: the header at creation, then appended records. Buffered; Flush() hands
+// everything to the kernel, Close() also fsyncs.
+class CaptureWriter {
+ public:
+  // nullptr with a message when the file cannot be created.
+  static std::unique_ptr<CaptureWriter> Create(const std::string& path,
+                                               const CaptureHeader& header, std::string* error);
+  ~CaptureWriter();
+  CaptureWriter(const CaptureWriter&) = delete;
+  CaptureWriter& operator=(const CaptureWriter&) = delete;
+
+  bool Append(RecordType type, std::uint8_t device, std::uint64_t t_ns,
+              std::span<const std::uint8_t> payload, std::string* error);
+  bool Flush(std::string* error);
+  bool Close(std::string* error);
+  std::uint64_t records() const { return records_; }
+
+ private:
+  CaptureWriter(std::FILE* file, std::string path) : file_(file), path_(std::move(path)) {}
+  std::FILE* file_;
+  std::string path_;
+  std::vector<std::uint8_t> scratch_;
+  std::uint64_t records_ = 0;
+};
+
+// Reads a capture from memory or a file. A truncated last record ends the records cleanly
+// (truncated() is then true); a record whose type or length cannot be valid stops with an error.
+class CaptureReader {
+ public:
+  // From the bytes of a whole file; false with a message when the header line is not a TCAP1
+  // header.
+  bool Parse(std::vector<std::uint8_t> bytes, std::string* error);
+  bool Open(const std::string& path, std::string* error);
+
+  const CaptureHeader& header() const { return header_; }
+  // The next whole record; false at the end (see truncated() and error()).
+  bool Next(CaptureRecord* record);
+  bool truncated() const { return truncated_; }
+  const std::string& error() const { return error_; }
+  std::size_t trailing_bytes() const { return truncated_ ? bytes_.size() - at_ : 0; }
+
+ private:
+  std::vector<std::uint8_t> bytes_;
+  std::size_t at_ = 0;
+  CaptureHeader header_;
+  bool truncated_ = false;
+  std::string error_;
+};
+
+// True when the file starts with "TCAP1 " (otherwise it is taken as a raw .bin stream).
+bool LooksLikeCapture(std::span<const std::uint8_t> first_bytes);
+
+}  // namespace turncal::drivers
