@@ -6,6 +6,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "drivers/capture/tcap.h"
 #include "drivers/decoder_factory.h"
 #include "drivers/xbus/xbus_encoder.h"
 
@@ -158,33 +159,136 @@ bool ParseHex(const std::string& text, std::uint32_t* out) {
   }
 }
 
-int Run(const Args& args) {
-  const auto protocol = drivers::ParseProtocol(args.protocol);
-  if (!protocol) {
-    fmt::print(stderr, "turncal decode: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)\n",
-               args.protocol);
+bool MakeOptions(const Args& args, drivers::DecoderOptions* options) {
+  options->gx2.timer_ticks_per_s = args.gx2_ticks_per_s;
+  options->gx2.little_endian_floats = args.gx2_little_endian;
+  std::uint32_t mode = 0, settings = 0;
+  if (!ParseHex(args.legacy_mode, &mode) || mode > 0xFFFF ||
+      !ParseHex(args.legacy_settings, &settings)) {
+    fmt::print(stderr, "turncal decode: --output-mode and --output-settings take numbers (0x...)\n");
+    return false;
+  }
+  options->xbus_legacy.output_mode = static_cast<std::uint16_t>(mode);
+  options->xbus_legacy.output_settings = settings;
+  return true;
+}
+
+void PrintSummary(const drivers::Decoder& decoder, const std::string& device, bool json) {
+  const drivers::DecoderCounters& c = decoder.counters();
+  if (json) {
+    fmt::print("{}\n", nlohmann::json{{"class", "SUMMARY"},
+                                      {"device", device},
+                                      {"protocol", drivers::ToString(decoder.protocol())},
+                                      {"bytes", c.bytes_in},
+                                      {"frames", c.frames},
+                                      {"samples", c.samples},
+                                      {"bad_checksums", c.bad_checksums},
+                                      {"bad_structure", c.bad_structure},
+                                      {"skipped_bytes", c.bytes_skipped},
+                                      {"timeouts", c.timeouts},
+                                      {"lost_samples", c.lost_samples},
+                                      {"unknown_fields", c.unknown_fields}}
+                           .dump());
+  } else {
+    fmt::print(
+        "SUMMARY {}{} bytes: {} frames, {} samples, {} bad checksums, {} malformed, {} bytes "
+        "skipped, {} lost samples (counter gaps), {} unknown fields\n",
+        device.empty() ? "" : device + ": ", c.bytes_in, c.frames, c.samples, c.bad_checksums,
+        c.bad_structure, c.bytes_skipped, c.lost_samples, c.unknown_fields);
+  }
+}
+
+// A .tcap capture: one decoder per device of the header, events printed as they come.
+int RunCapture(const Args& args, const drivers::DecoderOptions& base) {
+  drivers::CaptureReader reader;
+  std::string error;
+  if (!reader.Open(args.file, &error)) {
+    fmt::print(stderr, "turncal decode: {}\n", error);
     return 2;
   }
+  std::optional<drivers::Protocol> forced;
+  if (!args.protocol.empty()) forced = drivers::ParseProtocol(args.protocol);
+  std::vector<std::unique_ptr<PrintingSink>> sinks;
+  std::vector<std::unique_ptr<drivers::Decoder>> decoders;
+  for (const auto& d : reader.header().devices) {
+    const drivers::Protocol p = forced.value_or(d.protocol);
+    drivers::DecoderOptions options = base;
+    options.device = d.name;
+    sinks.push_back(std::make_unique<PrintingSink>(p, args.json));
+    decoders.push_back(drivers::MakeDecoder(p, options, sinks.back().get(), &error));
+    if (!decoders.back()) {
+      fmt::print(stderr, "turncal decode: device '{}': {}\n", d.name, error);
+      return 2;
+    }
+  }
+  drivers::CaptureRecord r;
+  std::uint64_t events = 0, sent = 0;
+  while (reader.Next(&r)) {
+    if (r.type == drivers::RecordType::kEvent) {
+      ++events;
+      const std::string text(r.payload.begin(), r.payload.end());
+      auto j = nlohmann::json::parse(text, nullptr, false);
+      if (args.json) {
+        fmt::print("{}\n", nlohmann::json{{"class", "EVENT"}, {"t_ns", r.t_ns},
+                                          {"event", j.is_discarded() ? nlohmann::json(text) : j}}
+                               .dump());
+      } else {
+        fmt::print("EVENT  t {:.6f} s  {}\n", r.t_ns * 1e-9, text);
+      }
+      continue;
+    }
+    if (r.device >= decoders.size()) {
+      fmt::print(stderr, "turncal decode: a record names device {} of {}; skipped\n", r.device,
+                 decoders.size());
+      continue;
+    }
+    if (r.type == drivers::RecordType::kSent) {
+      ++sent;
+      continue;
+    }
+    decoders[r.device]->Push(r.payload, static_cast<std::int64_t>(r.t_ns));
+  }
+  if (!reader.error().empty()) fmt::print(stderr, "turncal decode: {}\n", reader.error());
+  if (reader.truncated()) {
+    fmt::print(stderr, "turncal decode: the capture ends inside a record ({} bytes ignored)\n",
+               reader.trailing_bytes());
+  }
+  for (std::size_t i = 0; i < decoders.size(); ++i) {
+    decoders[i]->Finish();
+    PrintSummary(*decoders[i], reader.header().devices[i].name, args.json);
+  }
+  if (!args.json) fmt::print("{} events, {} sent records\n", events, sent);
+  return reader.error().empty() ? 0 : 1;
+}
+
+int Run(const Args& args) {
+  drivers::DecoderOptions options;
+  if (!MakeOptions(args, &options)) return 2;
   std::ifstream in(args.file, std::ios::binary);
   if (!in) {
     fmt::print(stderr, "turncal decode: cannot open '{}'\n", args.file);
     return 2;
   }
-  drivers::DecoderOptions options;
-  options.gx2.timer_ticks_per_s = args.gx2_ticks_per_s;
-  options.gx2.little_endian_floats = args.gx2_little_endian;
-  std::uint32_t mode = 0, settings = 0;
-  if (!ParseHex(args.legacy_mode, &mode) || mode > 0xFFFF ||
-      !ParseHex(args.legacy_settings, &settings)) {
-    fmt::print(stderr,
-               "turncal decode: --output-mode and --output-settings take numbers (0x...)\n");
+  char magic[6] = {};
+  in.read(magic, 6);
+  const bool capture = in.gcount() == 6 && drivers::LooksLikeCapture(std::span<const std::uint8_t>(
+                                               reinterpret_cast<const std::uint8_t*>(magic), 6));
+  if (!args.protocol.empty() && !drivers::ParseProtocol(args.protocol)) {
+    fmt::print(stderr, "turncal decode: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)\n",
+               args.protocol);
     return 2;
   }
-  options.xbus_legacy.output_mode = static_cast<std::uint16_t>(mode);
-  options.xbus_legacy.output_settings = settings;
-  PrintingSink sink(*protocol, args.json);
+  if (capture) return RunCapture(args, options);
+  if (args.protocol.empty()) {
+    fmt::print(stderr, "turncal decode: '{}' is a raw stream: name its --protocol\n", args.file);
+    return 2;
+  }
+  in.clear();
+  in.seekg(0);
+  const drivers::Protocol protocol = *drivers::ParseProtocol(args.protocol);
+  PrintingSink sink(protocol, args.json);
   std::string error;
-  auto decoder = drivers::MakeDecoder(*protocol, options, &sink, &error);
+  auto decoder = drivers::MakeDecoder(protocol, options, &sink, &error);
   if (!decoder) {
     fmt::print(stderr, "turncal decode: {}\n", error);
     return 2;
@@ -198,27 +302,7 @@ int Run(const Args& args) {
         std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(buffer.data()), n), 0);
   }
   decoder->Finish();
-  const drivers::DecoderCounters& c = decoder->counters();
-  if (args.json) {
-    fmt::print("{}\n", nlohmann::json{{"class", "SUMMARY"},
-                                      {"protocol", drivers::ToString(*protocol)},
-                                      {"bytes", c.bytes_in},
-                                      {"frames", c.frames},
-                                      {"samples", c.samples},
-                                      {"bad_checksums", c.bad_checksums},
-                                      {"bad_structure", c.bad_structure},
-                                      {"skipped_bytes", c.bytes_skipped},
-                                      {"timeouts", c.timeouts},
-                                      {"lost_samples", c.lost_samples},
-                                      {"unknown_fields", c.unknown_fields}}
-                           .dump());
-  } else {
-    fmt::print(
-        "SUMMARY {} bytes: {} frames, {} samples, {} bad checksums, {} malformed, {} bytes "
-        "skipped, {} lost samples (counter gaps), {} unknown fields\n",
-        c.bytes_in, c.frames, c.samples, c.bad_checksums, c.bad_structure, c.bytes_skipped,
-        c.lost_samples, c.unknown_fields);
-  }
+  PrintSummary(*decoder, "", args.json);
   return 0;
 }
 
@@ -228,8 +312,10 @@ void AddDecodeCommand(CLI::App* app) {
   auto args = std::make_shared<Args>();
   auto* cmd = app->add_subcommand(
       "decode", "decode a raw byte stream: frames and samples, then a summary of the counters");
-  cmd->add_option("file", args->file, "raw capture (.bin)")->required();
-  cmd->add_option("--protocol", args->protocol, "mip | gx2 | xbus | xbus-legacy")->required();
+  cmd->add_option("file", args->file, "a .tcap capture, or a raw byte stream (.bin)")->required();
+  cmd->add_option("--protocol", args->protocol,
+                  "mip | gx2 | xbus | xbus-legacy (required for a raw stream; overrides a "
+                  "capture's header)");
   cmd->add_flag("--json", args->json, "one JSON object a line");
   cmd->add_option("--gx2-timer-rate", args->gx2_ticks_per_s,
                   "GX2 timer ticks per second (GX2 19660800, GX3-25 62500)")
