@@ -24,6 +24,8 @@ SensorClass IndustrialClass() {
   c.mag_hard_iron_sigma = 0.05;
   c.mag_soft_iron_sigma = 0.02;
   c.rate_hz = 500;
+  c.gyr_noise_density = 0.01 * kDeg;  // MTi-300: 0.01 deg/s/sqrt(Hz)
+  c.gyr_turn_on_bias = 0.2 * kDeg;    // 0.05-0.5 deg/s
   return c;
 }
 
@@ -40,6 +42,11 @@ SensorClass ConsumerClass() {
   c.mag_hard_iron_sigma = 0.1;
   c.mag_soft_iron_sigma = 0.03;
   c.rate_hz = 100;
+  c.gyr_noise_density = 0.05 * kDeg;  // 0.05-0.1 deg/s/sqrt(Hz)
+  c.gyr_turn_on_bias = 0.7 * kDeg;    // 0.5-1 deg/s
+  c.acc_quantum = 0.15e-3 * 9.80665;  // 16 bits over +-5 g (SENSORS.md)
+  c.gyr_quantum = 0.0092 * kDeg;      // 16 bits over +-300 deg/s
+  c.mag_quantum = 2.4 / 65536;        // 16 bits over +-1.2 G
   return c;
 }
 

@@ -29,6 +29,13 @@ struct SensorClass {
   double mag_hard_iron_sigma = 0.0;  // 1 sigma of b
   double mag_soft_iron_sigma = 0.0;  // 1 sigma of G's deviation from the mounting
   double rate_hz = 100.0;
+  // Gyroscope (for the byte-level simulator; not calibrated here), rad/s.
+  double gyr_noise_density = 0.0;  // per sqrt(Hz)
+  double gyr_turn_on_bias = 0.0;   // 1 sigma
+  // Quantisation steps of a 16-bit ADC (0 = floats on the wire, no quantisation).
+  double acc_quantum = 0.0;  // m/s^2
+  double gyr_quantum = 0.0;  // rad/s
+  double mag_quantum = 0.0;  // Gauss
 };
 
 // "industrial" (~3DM-GX5-25, MTi-300) and "consumer" (~3DM-GX2, MTi/MTx mark II).

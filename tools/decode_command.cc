@@ -20,8 +20,8 @@ struct Args {
   bool json = false;
   double gx2_ticks_per_s = 19'660'800.0;
   bool gx2_little_endian = false;
-  std::string legacy_mode = "0x0002";
-  std::string legacy_settings = "0x00000001";
+  std::string legacy_mode;      // empty: from the capture header, else 0x0002
+  std::string legacy_settings;  // empty: from the capture header, else 0x00000001
   std::size_t chunk = 4096;
 };
 
@@ -162,10 +162,11 @@ bool ParseHex(const std::string& text, std::uint32_t* out) {
 bool MakeOptions(const Args& args, drivers::DecoderOptions* options) {
   options->gx2.timer_ticks_per_s = args.gx2_ticks_per_s;
   options->gx2.little_endian_floats = args.gx2_little_endian;
-  std::uint32_t mode = 0, settings = 0;
-  if (!ParseHex(args.legacy_mode, &mode) || mode > 0xFFFF ||
-      !ParseHex(args.legacy_settings, &settings)) {
-    fmt::print(stderr, "turncal decode: --output-mode and --output-settings take numbers (0x...)\n");
+  std::uint32_t mode = 0x0002, settings = 0x00000001;
+  if ((!args.legacy_mode.empty() && (!ParseHex(args.legacy_mode, &mode) || mode > 0xFFFF)) ||
+      (!args.legacy_settings.empty() && !ParseHex(args.legacy_settings, &settings))) {
+    fmt::print(stderr,
+               "turncal decode: --output-mode and --output-settings take numbers (0x...)\n");
     return false;
   }
   options->xbus_legacy.output_mode = static_cast<std::uint16_t>(mode);
@@ -214,6 +215,10 @@ int RunCapture(const Args& args, const drivers::DecoderOptions& base) {
     const drivers::Protocol p = forced.value_or(d.protocol);
     drivers::DecoderOptions options = base;
     options.device = d.name;
+    if (d.output_mode && args.legacy_mode.empty()) options.xbus_legacy.output_mode = *d.output_mode;
+    if (d.output_settings && args.legacy_settings.empty()) {
+      options.xbus_legacy.output_settings = *d.output_settings;
+    }
     sinks.push_back(std::make_unique<PrintingSink>(p, args.json));
     decoders.push_back(drivers::MakeDecoder(p, options, sinks.back().get(), &error));
     if (!decoders.back()) {
@@ -229,7 +234,8 @@ int RunCapture(const Args& args, const drivers::DecoderOptions& base) {
       const std::string text(r.payload.begin(), r.payload.end());
       auto j = nlohmann::json::parse(text, nullptr, false);
       if (args.json) {
-        fmt::print("{}\n", nlohmann::json{{"class", "EVENT"}, {"t_ns", r.t_ns},
+        fmt::print("{}\n", nlohmann::json{{"class", "EVENT"},
+                                          {"t_ns", r.t_ns},
                                           {"event", j.is_discarded() ? nlohmann::json(text) : j}}
                                .dump());
       } else {
@@ -323,10 +329,10 @@ void AddDecodeCommand(CLI::App* app) {
       ->capture_default_str();
   cmd->add_flag("--gx2-little-endian", args->gx2_little_endian,
                 "GX3-25 with little-endian floats (0xDB flags bit 4)");
-  cmd->add_option("--output-mode", args->legacy_mode, "xbus-legacy OutputMode")
-      ->capture_default_str();
-  cmd->add_option("--output-settings", args->legacy_settings, "xbus-legacy OutputSettings")
-      ->capture_default_str();
+  cmd->add_option("--output-mode", args->legacy_mode,
+                  "xbus-legacy OutputMode (default: the capture header's, else 0x0002)");
+  cmd->add_option("--output-settings", args->legacy_settings,
+                  "xbus-legacy OutputSettings (default: the capture header's, else 0x00000001)");
   cmd->add_option("--chunk", args->chunk, "bytes read and pushed at a time")
       ->check(CLI::Range(1, 1 << 24))
       ->capture_default_str();

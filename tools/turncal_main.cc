@@ -6,6 +6,7 @@
 #include "tools/models_command.h"
 #include "tools/observability_command.h"
 #include "tools/plan_compare_command.h"
+#include "tools/sim_command.h"
 #include "tools/sim_fit_command.h"
 #include "turncal/version.h"
 
@@ -17,6 +18,7 @@ int main(int argc, char** argv) {
   turncal::tools::AddDecodeCommand(&app);
   turncal::tools::AddModelsCommand(&app);
   turncal::tools::AddSimFitCommands(&app);
+  turncal::tools::AddSimCommand(&app);
   turncal::tools::AddObservabilityCommands(&app);
   turncal::tools::AddPlanCompareCommand(&app);
   CLI11_PARSE(app, argc, argv);

@@ -28,9 +28,13 @@ std::uint64_t GetLe(const std::uint8_t* p, int bytes) {
 std::string EncodeCaptureHeader(const CaptureHeader& header) {
   nlohmann::json devices = nlohmann::json::array();
   for (const auto& d : header.devices) {
-    devices.push_back({{"name", d.name}, {"protocol", ToString(d.protocol)}, {"baud", d.baud}});
+    nlohmann::json dev = {{"name", d.name}, {"protocol", ToString(d.protocol)}, {"baud", d.baud}};
+    if (d.output_mode) dev["output_mode"] = *d.output_mode;
+    if (d.output_settings) dev["output_settings"] = *d.output_settings;
+    devices.push_back(dev);
   }
-  const nlohmann::json j = {{"devices", devices}, {"created", header.created}, {"note", header.note}};
+  const nlohmann::json j = {
+      {"devices", devices}, {"created", header.created}, {"note", header.note}};
   return "TCAP1 " + j.dump() + "\n";
 }
 
@@ -132,10 +136,12 @@ bool CaptureReader::Parse(std::vector<std::uint8_t> bytes, std::string* error) {
     if (error) *error = m;
     return false;
   };
-  if (!LooksLikeCapture(bytes_)) return fail("not a capture: the file does not start with 'TCAP1 '");
+  if (!LooksLikeCapture(bytes_))
+    return fail("not a capture: the file does not start with 'TCAP1 '");
   const auto limit = std::min(bytes_.size(), kCaptureMaxHeaderLine);
   const auto nl = std::find(bytes_.begin(), bytes_.begin() + static_cast<long>(limit), '\n');
-  if (nl == bytes_.begin() + static_cast<long>(limit)) return fail("capture header line has no end");
+  if (nl == bytes_.begin() + static_cast<long>(limit))
+    return fail("capture header line has no end");
   const std::string line(bytes_.begin() + 6, nl);
   const auto j = nlohmann::json::parse(line, nullptr, false);
   if (j.is_discarded() || !j.is_object()) return fail("capture header is not a JSON object");
@@ -149,6 +155,14 @@ bool CaptureReader::Parse(std::vector<std::uint8_t> bytes, std::string* error) {
         dev.protocol = *p;
       }
       if (d.contains("baud") && d["baud"].is_number_integer()) dev.baud = d["baud"];
+      if (d.contains("output_mode") && d["output_mode"].is_number_unsigned() &&
+          d["output_mode"].get<std::uint64_t>() <= 0xFFFF) {
+        dev.output_mode = static_cast<std::uint16_t>(d["output_mode"].get<std::uint64_t>());
+      }
+      if (d.contains("output_settings") && d["output_settings"].is_number_unsigned() &&
+          d["output_settings"].get<std::uint64_t>() <= 0xFFFFFFFF) {
+        dev.output_settings = static_cast<std::uint32_t>(d["output_settings"].get<std::uint64_t>());
+      }
       header_.devices.push_back(dev);
     }
   }

@@ -17,7 +17,7 @@
 
 namespace turncal::drivers {
 
-inline constexpr std::size_t kCaptureRecordHeader = 14;     // type, device, t_ns, length
+inline constexpr std::size_t kCaptureRecordHeader = 14;        // type, device, t_ns, length
 inline constexpr std::uint32_t kCaptureMaxPayload = 1u << 24;  // 16 MiB: larger is corruption
 inline constexpr std::size_t kCaptureMaxHeaderLine = 1u << 20;
 
@@ -25,6 +25,10 @@ struct CaptureDevice {
   std::string name;
   Protocol protocol = Protocol::kMip;
   int baud = 115200;
+  // xbus-legacy: the MTData layout the device was in (header keys "output_mode",
+  // "output_settings"), so the capture decodes without configuration.
+  std::optional<std::uint16_t> output_mode;
+  std::optional<std::uint32_t> output_settings;
 };
 
 struct CaptureHeader {
@@ -52,8 +56,8 @@ void AppendCaptureRecord(RecordType type, std::uint8_t device, std::uint64_t t_n
 class CaptureWriter {
  public:
   // nullptr with a message when the file cannot be created.
-  static std::unique_ptr<CaptureWriter> Create(const std::string& path,
-                                               const CaptureHeader& header, std::string* error);
+  static std::unique_ptr<CaptureWriter> Create(const std::string& path, const CaptureHeader& header,
+                                               std::string* error);
   ~CaptureWriter();
   CaptureWriter(const CaptureWriter&) = delete;
   CaptureWriter& operator=(const CaptureWriter&) = delete;

@@ -10,7 +10,8 @@ namespace {
 
 CaptureHeader Header() {
   CaptureHeader h;
-  h.devices = {{"imu", Protocol::kMip, 921600}, {"mti", Protocol::kXbus, 115200}};
+  CaptureDevice legacy{"mtx", Protocol::kXbusLegacy, 115200, 0x0003, 0x00000001};
+  h.devices = {{"imu", Protocol::kMip, 921600, std::nullopt, std::nullopt}, legacy};
   h.created = "2026-11-22T04:00:00Z";
   h.note = "test \"quoted\" note";
   return h;
@@ -34,13 +35,17 @@ TEST(Tcap, WriteThenReadPreservesEveryByteAndRecordInOrder) {
   std::string error;
   auto w = CaptureWriter::Create(path.string(), Header(), &error);
   ASSERT_NE(w, nullptr) << error;
-  for (const auto& r : Records()) ASSERT_TRUE(w->Append(r.type, r.device, r.t_ns, r.payload, &error));
+  for (const auto& r : Records())
+    ASSERT_TRUE(w->Append(r.type, r.device, r.t_ns, r.payload, &error));
   ASSERT_TRUE(w->Close(&error)) << error;
 
   CaptureReader reader;
   ASSERT_TRUE(reader.Open(path.string(), &error)) << error;
   EXPECT_EQ(reader.header().devices.size(), 2u);
-  EXPECT_EQ(reader.header().devices[1].protocol, Protocol::kXbus);
+  EXPECT_EQ(reader.header().devices[1].protocol, Protocol::kXbusLegacy);
+  EXPECT_EQ(reader.header().devices[1].output_mode, 0x0003);
+  EXPECT_EQ(reader.header().devices[1].output_settings, 0x00000001u);
+  EXPECT_FALSE(reader.header().devices[0].output_mode);
   EXPECT_EQ(reader.header().devices[0].baud, 921600);
   EXPECT_EQ(reader.header().note, Header().note);
   CaptureRecord r;
@@ -83,7 +88,8 @@ TEST(Tcap, ATruncatedCaptureIsReadableUpToItsLastWholeRecordAtEveryOffset) {
     std::size_t n = 0;
     while (reader.Next(&r)) ++n;
     EXPECT_EQ(n, whole) << cut;
-    const bool at_boundary = cut == header.size() || std::find(ends.begin(), ends.end(), cut) != ends.end();
+    const bool at_boundary =
+        cut == header.size() || std::find(ends.begin(), ends.end(), cut) != ends.end();
     EXPECT_EQ(reader.truncated(), !at_boundary) << cut;
     EXPECT_TRUE(reader.error().empty()) << cut;
   }

@@ -1,0 +1,77 @@
+#pragma once
+// A complete turntable session as timed samples, with known truth (the sample level of
+// `turncal sim`; the byte level lives in tools/). Pure computation with an explicit seed.
+//
+// Time line: the table rests at the home pose (0, 0, 0) for `start_s`; then for every pose it
+// moves there along a smooth S-curve in each angle (`move_s`), settles with a small decaying
+// oscillation (`settle_s`), and dwells (`dwell_s`). The controller's pose event is at the start of
+// the dwell. The sensor is at the table's centre of rotation: its specific force and field are
+// the measurement models' stationary predictions at the current table angles (no lever-arm
+// acceleration), its gyro sees the table's angular rate (Earth rate not included).
+//
+// Noise per sample: white noise (density x sqrt(rate / 2)), bias instability as a first-order
+// Gauss-Markov process (1 sigma = the class's bias instability, correlation time
+// `bias_time_constant_s`), quantisation for classes with a 16-bit ADC. The device clock runs
+// `clock_drift_ppm` fast and starts at `clock_offset_s`.
+
+#include <random>
+#include <vector>
+
+#include "core/measurement_model.h"
+#include "core/sample.h"
+#include "core/synthetic.h"
+
+namespace turncal {
+
+struct SessionSimOptions {
+  SensorClass sensor = IndustrialClass();
+  double rate_hz = 100.0;
+  double start_s = 1.0;
+  double move_s = 3.0;
+  double settle_s = 1.0;
+  double dwell_s = 5.0;
+  double bias_time_constant_s = 100.0;
+  double clock_drift_ppm = 20.0;
+  double clock_offset_s = 10.0;
+  double settle_amplitude_rad = 2e-4;  // of the decaying oscillation after a move
+  std::uint64_t seed = 1;
+
+  bool IsValid(std::string* error) const;
+};
+
+struct SessionPoseEvent {
+  double t_s = 0.0;  // host time of the announcement (start of the dwell)
+  int index = 0;
+  TablePose pose;
+  double dwell_end_s = 0.0;
+  // Mean of the bias-instability wander over this dwell (what a calibration sees as the bias at
+  // this pose, on top of the turn-on bias in the truth).
+  Eigen::Vector3d acc_wander_mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d mag_wander_mean = Eigen::Vector3d::Zero();
+};
+
+struct SimulatedSession {
+  std::vector<Sample> samples;  // t_host_ns = true time; t_device_s = device clock
+  std::vector<SessionPoseEvent> events;
+  Eigen::VectorXd accel_truth;
+  Eigen::VectorXd mag_truth;
+  Eigen::Vector3d gyro_bias_radps = Eigen::Vector3d::Zero();
+  double duration_s = 0.0;
+
+  // The bias a calibration over all the dwells should find: the turn-on bias plus the wander
+  // averaged over the dwells (the wander is slow, so it does not average out over one session).
+  Eigen::Vector3d EffectiveAccBiasOffset() const;
+  Eigen::Vector3d EffectiveMagBiasOffset() const;
+};
+
+// The session for `poses` with the truths drawn from the class (DrawTruth) from the seed.
+SimulatedSession SimulateSession(const MeasurementModel& accel_model,
+                                 const MeasurementModel& mag_model,
+                                 const std::vector<TablePose>& poses,
+                                 const SessionSimOptions& options);
+
+// The default plan: the 26 cube directions, then 10 rotations about intermediate axes (down along
+// directions between the cube's, psi varied), 36 poses in all.
+std::vector<TablePose> DefaultSessionPoses();
+
+}  // namespace turncal
