@@ -184,3 +184,35 @@ Eigen::Vector3d SimulatedSession::EffectiveMagBiasOffset() const {
 }
 
 }  // namespace turncal
+
+namespace turncal {
+
+PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& event,
+                       SensorKind sensor) {
+  const bool accel = sensor == SensorKind::kAccelerometer;
+  TriadStats stats;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d sum2 = Eigen::Matrix3d::Zero();
+  for (const auto& s : session.samples) {
+    const double t = static_cast<double>(s.t_host_ns) * 1e-9;
+    if (t < event.t_s || t >= event.dwell_end_s) continue;
+    const auto& v = accel ? s.acc_mps2 : s.mag;
+    if (!v) continue;
+    sum += *v;
+    sum2 += *v * v->transpose();
+    ++stats.count;
+  }
+  PoseRecord r;
+  r.pose = event.pose;
+  r.t_start_s = event.t_s;
+  r.t_end_s = event.dwell_end_s;
+  if (stats.count > 1) {
+    const double n = static_cast<double>(stats.count);
+    stats.mean = sum / n;
+    stats.covariance = (sum2 - n * stats.mean * stats.mean.transpose()) / (n - 1);
+    (accel ? r.acc : r.mag) = stats;
+  }
+  return r;
+}
+
+}  // namespace turncal

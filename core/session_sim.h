@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/measurement_model.h"
+#include "core/pose_record.h"
 #include "core/sample.h"
 #include "core/synthetic.h"
 
@@ -69,6 +70,12 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
                                  const MeasurementModel& mag_model,
                                  const std::vector<TablePose>& poses,
                                  const SessionSimOptions& options);
+
+// The statistics of the samples inside one pose's dwell (the ideal cut, with the simulator's
+// known times; the sequencer finds windows itself): mean, sample covariance and count of the
+// accelerometer or magnetometer triad.
+PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& event,
+                       SensorKind sensor);
 
 // The default plan: the 26 cube directions, then 10 rotations about intermediate axes (down along
 // directions between the cube's, psi varied), 36 poses in all.

@@ -8,6 +8,7 @@
 #include "core/accel_physical.h"
 #include "core/calibrator.h"
 #include "core/publish_gate.h"
+#include "core/session_sim.h"
 #include "core/synthetic.h"
 #include "protocol/observability_json.h"
 
@@ -24,6 +25,7 @@ struct SimArgs {
   std::uint64_t seed = 1;
   int runs = 200;
   bool json = false;
+  std::string noise = "white";  // montecarlo: white | session
 };
 
 void AddSimOptions(CLI::App* cmd, SimArgs* args) {
@@ -171,12 +173,33 @@ int RunMonteCarlo(const SimArgs& args) {
                   sum_z = Eigen::VectorXd::Zero(N), sum_z2 = Eigen::VectorXd::Zero(N);
   int ok = 0, failed = 0;
   double solve_time = 0;
+  // For --noise session the other sensor's model only feeds the simulator.
+  const bool accel = model->sensor() == SensorKind::kAccelerometer;
+  auto other = MakeModel(accel ? "mag13" : "accel13", ModelContext{}, &error);
   for (int run = 0; run < args.runs; ++run) {
     std::mt19937_64 rng(args.seed * 1000003 + static_cast<std::uint64_t>(run));
-    const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
+    Eigen::VectorXd truth;
     Calibrator calibrator(OptionsForClass(*model, sensor));
-    for (const auto& pose : poses) {
-      calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng), &error);
+    if (args.noise == "session") {
+      // The simulator's full noise model: Gauss-Markov bias wander sampled at the output rate,
+      // quantisation, settling; dwell windows cut at the known times.
+      SessionSimOptions o;
+      o.sensor = sensor;
+      o.rate_hz = 100;
+      o.dwell_s = args.dwell_s;
+      o.seed = args.seed * 1000003 + static_cast<std::uint64_t>(run);
+      const SimulatedSession session = accel ? SimulateSession(*model, *other, poses, o)
+                                             : SimulateSession(*other, *model, poses, o);
+      truth = accel ? session.accel_truth : session.mag_truth;
+      truth.tail<3>() += accel ? session.EffectiveAccBiasOffset() : session.EffectiveMagBiasOffset();
+      for (const auto& e : session.events) {
+        calibrator.add_pose(DwellRecord(session, e, model->sensor()), &error);
+      }
+    } else {
+      truth = DrawTruth(*model, sensor, &rng);
+      for (const auto& pose : poses) {
+        calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng), &error);
+      }
     }
     const Estimate e = calibrator.solve();
     if (!e.ok) {
@@ -195,9 +218,10 @@ int RunMonteCarlo(const SimArgs& args) {
   nlohmann::json rows = nlohmann::json::array();
   if (!args.json) {
     fmt::print(
-        "Monte Carlo: {} runs of {} ({} class, {} poses, {} design, {:.1f} s dwell, seed {}); "
-        "{} solved, {} failed; mean solve {:.2f} ms\n\n",
-        args.runs, args.model, sensor.name, poses.size(), args.design, args.dwell_s, args.seed, ok,
+        "Monte Carlo: {} runs of {} ({} class, {} poses, {} design, {:.1f} s dwell, {} noise, seed "
+        "{}); {} solved, {} failed; mean solve {:.2f} ms\n\n",
+        args.runs, args.model, sensor.name, poses.size(), args.design, args.dwell_s, args.noise,
+        args.seed, ok,
         failed, ok ? 1e3 * solve_time / ok : 0.0);
     fmt::print("| param | RMSE | mean CR sigma | RMSE / sigma | mean z | std z | verdict |\n");
     fmt::print("|---|---|---|---|---|---|---|\n");
@@ -255,6 +279,11 @@ void AddSimFitCommands(CLI::App* app) {
   auto* mc = app->add_subcommand(
       "montecarlo", "repeat simulated sessions and check the reported sigma against the errors");
   AddSimOptions(mc, mc_args.get());
+  mc->add_option("--noise", mc_args->noise,
+                 "white: pose means with white noise and independent pose offsets; session: the "
+                 "session simulator's full noise model (turncal sim), 100 Hz")
+      ->check(CLI::IsMember({"white", "session"}))
+      ->capture_default_str();
   mc->add_option("--runs", mc_args->runs, "number of sessions")
       ->check(CLI::Range(2, 1000000))
       ->capture_default_str();

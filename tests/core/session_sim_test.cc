@@ -26,30 +26,6 @@ SimRun Simulate(const SessionSimOptions& o, int n_poses = 36) {
   return r;
 }
 
-// The statistics of a dwell window, as the sequencer (issue 7) will compute them.
-PoseRecord Window(const SimulatedSession& s, const SessionPoseEvent& e, bool accel) {
-  TriadStats stats;
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d sum2 = Eigen::Matrix3d::Zero();
-  for (const auto& smp : s.samples) {
-    const double t = smp.t_host_ns * 1e-9;
-    if (t < e.t_s || t >= e.dwell_end_s) continue;
-    const Eigen::Vector3d v = accel ? *smp.acc_mps2 : *smp.mag;
-    sum += v;
-    sum2 += v * v.transpose();
-    ++stats.count;
-  }
-  const double n = static_cast<double>(stats.count);
-  stats.mean = sum / n;
-  stats.covariance = (sum2 - n * stats.mean * stats.mean.transpose()) / (n - 1);
-  PoseRecord r;
-  r.pose = e.pose;
-  r.t_start_s = e.t_s;
-  r.t_end_s = e.dwell_end_s;
-  (accel ? r.acc : r.mag) = stats;
-  return r;
-}
-
 TEST(SessionSim, TimelineEventsAndDeterminism) {
   SessionSimOptions o;
   o.rate_hz = 100;
@@ -111,7 +87,7 @@ TEST(SessionSim, DwellWindowsCalibrateToTheTruth) {
       Calibrator calibrator(options);
       std::string error;
       for (const auto& e : r.session.events) {
-        ASSERT_TRUE(calibrator.add_pose(Window(r.session, e, accel), &error)) << error;
+        ASSERT_TRUE(calibrator.add_pose(DwellRecord(r.session, e, model.sensor()), &error)) << error;
       }
       const Estimate est = calibrator.solve();
       ASSERT_TRUE(est.ok) << est.error;
