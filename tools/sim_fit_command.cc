@@ -191,14 +191,16 @@ int RunMonteCarlo(const SimArgs& args) {
       const SimulatedSession session = accel ? SimulateSession(*model, *other, poses, o)
                                              : SimulateSession(*other, *model, poses, o);
       truth = accel ? session.accel_truth : session.mag_truth;
-      truth.tail<3>() += accel ? session.EffectiveAccBiasOffset() : session.EffectiveMagBiasOffset();
+      truth.tail<3>() +=
+          accel ? session.EffectiveAccBiasOffset() : session.EffectiveMagBiasOffset();
       for (const auto& e : session.events) {
         calibrator.add_pose(DwellRecord(session, e, model->sensor()), &error);
       }
     } else {
       truth = DrawTruth(*model, sensor, &rng);
       for (const auto& pose : poses) {
-        calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng), &error);
+        calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng),
+                            &error);
       }
     }
     const Estimate e = calibrator.solve();
@@ -221,8 +223,7 @@ int RunMonteCarlo(const SimArgs& args) {
         "Monte Carlo: {} runs of {} ({} class, {} poses, {} design, {:.1f} s dwell, {} noise, seed "
         "{}); {} solved, {} failed; mean solve {:.2f} ms\n\n",
         args.runs, args.model, sensor.name, poses.size(), args.design, args.dwell_s, args.noise,
-        args.seed, ok,
-        failed, ok ? 1e3 * solve_time / ok : 0.0);
+        args.seed, ok, failed, ok ? 1e3 * solve_time / ok : 0.0);
     fmt::print("| param | RMSE | mean CR sigma | RMSE / sigma | mean z | std z | verdict |\n");
     fmt::print("|---|---|---|---|---|---|---|\n");
   }

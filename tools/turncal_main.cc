@@ -2,6 +2,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "tools/capture_command.h"
 #include "tools/decode_command.h"
 #include "tools/models_command.h"
 #include "tools/observability_command.h"
@@ -15,6 +16,7 @@ int main(int argc, char** argv) {
                "turncal"};
   app.set_version_flag("--version", std::string("turncal ") + turncal::kVersion);
   app.require_subcommand(1);
+  turncal::tools::AddCaptureCommands(&app);
   turncal::tools::AddDecodeCommand(&app);
   turncal::tools::AddModelsCommand(&app);
   turncal::tools::AddSimFitCommands(&app);

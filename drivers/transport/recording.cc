@@ -1,0 +1,51 @@
+#include "drivers/transport/recording.h"
+
+namespace turncal::drivers {
+
+RecordingTransport::RecordingTransport(std::unique_ptr<Transport> inner, CaptureWriter* writer,
+                                       std::uint8_t device)
+    : inner_(std::move(inner)), writer_(writer), device_(device), start_ns_(MonotonicNowNs()) {}
+
+std::uint64_t RecordingTransport::Since() const {
+  return static_cast<std::uint64_t>(std::max<std::int64_t>(0, MonotonicNowNs() - start_ns_));
+}
+
+void RecordingTransport::Append(RecordType type, std::span<const std::uint8_t> payload) {
+  std::string error;
+  if (!writer_->Append(type, device_, Since(), payload, &error)) {
+    if (failures_++ == 0 && on_status_) {
+      on_status_(TransportStatus::kOpened, Describe() + ": recording failed: " + error);
+    }
+  }
+}
+
+void RecordingTransport::Start(DataHandler on_data, StatusHandler on_status) {
+  on_status_ = on_status;
+  inner_->Start(
+      [this, on_data = std::move(on_data)](std::span<const std::uint8_t> bytes, std::int64_t t) {
+        Append(RecordType::kReceived, bytes);
+        on_data(bytes, t);
+      },
+      std::move(on_status));
+}
+
+void RecordingTransport::SetEventHandler(EventHandler on_event) {
+  inner_->SetEventHandler(
+      [this, on_event = std::move(on_event)](const std::string& json, std::int64_t t) {
+        RecordEvent(json);
+        if (on_event) on_event(json, t);
+      });
+}
+
+bool RecordingTransport::Write(std::span<const std::uint8_t> bytes, std::string* error) {
+  const bool ok = inner_->Write(bytes, error);
+  if (ok) Append(RecordType::kSent, bytes);
+  return ok;
+}
+
+void RecordingTransport::RecordEvent(const std::string& json) {
+  Append(RecordType::kEvent, std::span<const std::uint8_t>(
+                                 reinterpret_cast<const std::uint8_t*>(json.data()), json.size()));
+}
+
+}  // namespace turncal::drivers

@@ -1,0 +1,43 @@
+#pragma once
+// A recording decorator on any transport (issue "Transports"): the bytes received and sent, and
+// events, are appended to a capture as they pass, with host times since the recording began.
+// Recording failures (a full disk) are reported once through the status handler and counted;
+// the stream itself goes on.
+
+#include <memory>
+
+#include "drivers/capture/tcap.h"
+#include "drivers/transport/transport.h"
+
+namespace turncal::drivers {
+
+class RecordingTransport final : public Transport {
+ public:
+  // `device` is the record's device index in the capture's header.
+  RecordingTransport(std::unique_ptr<Transport> inner, CaptureWriter* writer, std::uint8_t device);
+
+  void Start(DataHandler on_data, StatusHandler on_status) override;
+  void SetEventHandler(EventHandler on_event) override;
+  bool Write(std::span<const std::uint8_t> bytes, std::string* error) override;
+  void Stop() override { inner_->Stop(); }
+  bool is_open() const override { return inner_->is_open(); }
+  std::string Describe() const override { return inner_->Describe() + " (recording)"; }
+  const TransportCounters& counters() const override { return inner_->counters(); }
+
+  // An event (JSON) into the capture, e.g. a pose command.
+  void RecordEvent(const std::string& json);
+  std::uint64_t record_failures() const { return failures_; }
+
+ private:
+  std::uint64_t Since() const;
+  void Append(RecordType type, std::span<const std::uint8_t> payload);
+
+  std::unique_ptr<Transport> inner_;
+  CaptureWriter* writer_;
+  std::uint8_t device_;
+  std::int64_t start_ns_;
+  StatusHandler on_status_;
+  std::uint64_t failures_ = 0;
+};
+
+}  // namespace turncal::drivers
