@@ -2,11 +2,19 @@
 
 #include <fmt/format.h>
 
+#include <fcntl.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <thread>
 
 #include "core/session_sim.h"
 #include "drivers/capture/tcap.h"
@@ -34,6 +42,9 @@ struct Args {
   std::string truth_out;
   std::string output;
   double burst_ms = 16.0;
+  bool faults = false;
+  std::string live;  // a pty (or any writable tty/file) to stream to at real time
+  double live_speed = 1.0;
 };
 
 struct ProtocolDefaults {
@@ -158,6 +169,49 @@ bool WriteAtomically(const std::string& path, const std::string& text, std::stri
   return true;
 }
 
+// Writes the received bytes of `records` to `path` at their times (divided by `speed`), as a
+// device would; pose events go to standard output as JSON lines at their times.
+bool StreamLive(const std::string& path, const std::vector<drivers::CaptureRecord>& records,
+                double speed, std::string* error) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_NOCTTY | O_CLOEXEC);
+  if (fd < 0) {
+    *error = fmt::format("cannot open '{}' for the live stream: {}", path, std::strerror(errno));
+    return false;
+  }
+  termios t{};
+  if (::tcgetattr(fd, &t) == 0) {
+    ::cfmakeraw(&t);
+    ::tcsetattr(fd, TCSANOW, &t);
+  }
+  const auto start = std::chrono::steady_clock::now();
+  bool ok = true;
+  for (const auto& r : records) {
+    if (r.type == drivers::RecordType::kSent) continue;  // the host's side
+    std::this_thread::sleep_until(start + std::chrono::nanoseconds(static_cast<std::int64_t>(
+                                              static_cast<double>(r.t_ns) / speed)));
+    if (r.type == drivers::RecordType::kEvent) {
+      std::fwrite(r.payload.data(), 1, r.payload.size(), stdout);
+      std::fputc('\n', stdout);
+      std::fflush(stdout);
+      continue;
+    }
+    std::size_t done = 0;
+    while (done < r.payload.size()) {
+      const ssize_t n = ::write(fd, r.payload.data() + done, r.payload.size() - done);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        *error = fmt::format("writing to '{}': {}", path, std::strerror(errno));
+        ok = false;
+        break;
+      }
+      done += static_cast<std::size_t>(n);
+    }
+    if (!ok) break;
+  }
+  ::close(fd);
+  return ok;
+}
+
 nlohmann::json TruthJson(const MeasurementModel& m, const Eigen::VectorXd& theta) {
   nlohmann::json j = nlohmann::json::object();
   for (int i = 0; i < m.num_parameters(); ++i) j[m.parameters()[i].name] = theta[i];
@@ -238,17 +292,24 @@ int Run(const Args& args) {
       "turncal sim --protocol {} --model {} --model {} --class {} --seed {} "
       "--rate {} --dwell {}",
       args.protocol, accel_name, mag_name, args.sensor_class, args.seed, o.rate_hz, o.dwell_s);
-  auto writer = drivers::CaptureWriter::Create(args.output, header, &error);
-  if (!writer) {
-    fmt::print(stderr, "turncal sim: {}\n", error);
-    return 2;
-  }
+  std::vector<drivers::CaptureRecord> records;
+  auto append = [&](drivers::RecordType type, std::uint64_t at,
+                    std::span<const std::uint8_t> payload) {
+    records.push_back({type, 0, at, Bytes(payload.begin(), payload.end())});
+    return true;
+  };
   bool ok = true;
+  // Faults on request: a bit flip about every 500th frame, a dropped byte about every 700th, one
+  // saturated sample, and one pose announced half a second before the table settled.
+  std::mt19937_64 fault_rng(args.seed ^ 0x5eedfa17ull);
+  std::uniform_int_distribution<int> one_in(0, 999999);
+  const std::size_t saturated_index = session.samples.size() / 3;
+  int faults_flips = 0, faults_drops = 0;
   std::uint64_t t_ns = 0;
   for (const auto& [sent, reply] : StartUp(*protocol, args.seed, o.rate_hz, 1000.0)) {
-    ok = ok && writer->Append(drivers::RecordType::kSent, 0, t_ns, sent, &error);
+    ok = ok && append(drivers::RecordType::kSent, t_ns, sent);
     t_ns += 2'000'000;
-    ok = ok && writer->Append(drivers::RecordType::kReceived, 0, t_ns, reply, &error);
+    ok = ok && append(drivers::RecordType::kReceived, t_ns, reply);
     t_ns += 2'000'000;
   }
   const auto offset_ns = static_cast<std::int64_t>(t_ns);
@@ -258,8 +319,7 @@ int Run(const Args& args) {
   std::size_t next_event = 0;
   auto flush = [&](std::int64_t at) {
     if (!burst.empty()) {
-      ok = ok && writer->Append(drivers::RecordType::kReceived, 0, static_cast<std::uint64_t>(at),
-                                burst, &error);
+      ok = ok && append(drivers::RecordType::kReceived, static_cast<std::uint64_t>(at), burst);
       burst.clear();
     }
     burst_start = -1;
@@ -270,7 +330,9 @@ int Run(const Args& args) {
                    static_cast<std::int64_t>(std::llround(session.events[next_event].t_s * 1e9)) <=
                at) {
       const auto& e = session.events[next_event++];
-      const auto te = offset_ns + static_cast<std::int64_t>(std::llround(e.t_s * 1e9));
+      // --faults: the second pose is announced half a second before the table has settled.
+      const double early = args.faults && e.index == 1 ? 0.5 : 0.0;
+      const auto te = offset_ns + static_cast<std::int64_t>(std::llround((e.t_s - early) * 1e9));
       flush(te);
       const std::string event = nlohmann::json{
           {"event", "pose"},
@@ -279,16 +341,32 @@ int Run(const Args& args) {
           {"gamma_deg", e.pose.gamma_rad * kRadToDeg},
           {"psi_deg", e.pose.psi_rad * kRadToDeg},
           {"dwell_s", o.dwell_s}}.dump();
-      ok = ok && writer->Append(drivers::RecordType::kEvent, 0, static_cast<std::uint64_t>(te),
-                                Bytes(event.begin(), event.end()), &error);
+      ok = ok && append(drivers::RecordType::kEvent, static_cast<std::uint64_t>(te),
+                        Bytes(event.begin(), event.end()));
     }
   };
-  for (const auto& s : session.samples) {
+  for (std::size_t k = 0; k < session.samples.size(); ++k) {
+    Sample s = session.samples[k];
     const std::int64_t at = offset_ns + s.t_host_ns;
     emit_events_until(at);
     if (burst_start >= 0 && at - burst_start >= burst_ns) flush(at);
     if (burst_start < 0) burst_start = at;
-    const Bytes frame = Encode(*protocol, s);
+    if (args.faults && k == saturated_index) {
+      // A saturated sample: the accelerometer clips at its range on x.
+      s.acc_mps2->x() = 16 * 9.80665;
+      s.flags |= kAccSaturated;
+    }
+    Bytes frame = Encode(*protocol, s);
+    if (args.faults && one_in(fault_rng) < 2000) {
+      const auto byte = static_cast<std::size_t>(one_in(fault_rng)) % frame.size();
+      frame[byte] ^= static_cast<std::uint8_t>(1u << (one_in(fault_rng) % 8));
+      ++faults_flips;
+    }
+    if (args.faults && one_in(fault_rng) < 1430) {
+      frame.erase(frame.begin() +
+                  static_cast<long>(static_cast<std::size_t>(one_in(fault_rng)) % frame.size()));
+      ++faults_drops;
+    }
     burst.insert(burst.end(), frame.begin(), frame.end());
     if (!ok) break;
   }
@@ -296,9 +374,21 @@ int Run(const Args& args) {
   flush(end_ns);
   emit_events_until(end_ns);
   const std::string end_event = R"({"event":"end"})";
-  ok = ok && writer->Append(drivers::RecordType::kEvent, 0, static_cast<std::uint64_t>(end_ns),
-                            Bytes(end_event.begin(), end_event.end()), &error);
-  if (!ok || !writer->Close(&error)) {
+  ok = ok && append(drivers::RecordType::kEvent, static_cast<std::uint64_t>(end_ns),
+                    Bytes(end_event.begin(), end_event.end()));
+  if (!args.output.empty()) {
+    auto writer = drivers::CaptureWriter::Create(args.output, header, &error);
+    ok = writer != nullptr;
+    for (std::size_t i = 0; ok && i < records.size(); ++i) {
+      const auto& r = records[i];
+      ok = writer->Append(r.type, r.device, r.t_ns, r.payload, &error);
+    }
+    if (!ok || !writer->Close(&error)) {
+      fmt::print(stderr, "turncal sim: {}\n", error);
+      return 1;
+    }
+  }
+  if (!args.live.empty() && !StreamLive(args.live, records, args.live_speed, &error)) {
     fmt::print(stderr, "turncal sim: {}\n", error);
     return 1;
   }
@@ -336,8 +426,14 @@ int Run(const Args& args) {
       return 1;
     }
   }
+  if (args.faults) {
+    fmt::print(stderr,
+               "turncal sim: faults: {} bit flips, {} dropped bytes, sample {} saturated, pose 1 "
+               "announced 0.5 s early\n",
+               faults_flips, faults_drops, saturated_index);
+  }
   fmt::print(stderr, "turncal sim: {} poses, {} samples at {} Hz, {:.1f} s, {} records -> {}\n",
-             poses.size(), session.samples.size(), o.rate_hz, session.duration_s, writer->records(),
+             poses.size(), session.samples.size(), o.rate_hz, session.duration_s, records.size(),
              args.output);
   return 0;
 }
@@ -368,8 +464,22 @@ void AddSimCommand(CLI::App* app) {
       ->check(CLI::IsMember({"industrial", "consumer"}))
       ->capture_default_str();
   cmd->add_option("--truth-out", args->truth_out, "JSON file of the true parameters");
-  cmd->add_option("-o,--output", args->output, "the capture to write (.tcap)")->required();
-  cmd->callback([args] { throw CLI::RuntimeError(Run(*args)); });
+  cmd->add_option("-o,--output", args->output, "the capture to write (.tcap)");
+  cmd->add_flag("--faults", args->faults,
+                "inject faults: bit flips (~1 frame in 500), dropped bytes (~1 in 700), one "
+                "saturated sample, pose 1 announced 0.5 s before the table settled");
+  cmd->add_option("--live", args->live,
+                  "also stream the device's bytes to this pty at real time (pose events on "
+                  "standard output)");
+  cmd->add_option("--live-speed", args->live_speed, "time scale of --live (2 = twice as fast)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->callback([args] {
+    if (args->output.empty() && args->live.empty()) {
+      throw CLI::ValidationError("sim", "give -o FILE.tcap and/or --live PATH");
+    }
+    throw CLI::RuntimeError(Run(*args));
+  });
 }
 
 }  // namespace turncal::tools
