@@ -51,10 +51,13 @@ class Reconnecting : public Transport {
   Reconnecting(boost::asio::io_context& io, TransportOptions options)
       : io_(io), options_(options), timer_(io) {}
 
-  // Opens the device into a new stream; false with a message. `how` names the backend.
-  virtual bool OpenStream(std::unique_ptr<Stream>* stream, std::string* how,
-                          std::string* error) = 0;
   virtual void CloseExtra() {}
+
+  using OpenDone = std::function<void(std::unique_ptr<Stream> stream, const std::string& how,
+                                      const std::string& error)>;
+  // Starts opening the device; calls `done` with a stream and the backend's name, or with nullptr
+  // and a message (possibly later, from the io_context).
+  virtual void BeginOpen(OpenDone done) = 0;
 
   boost::asio::io_context& io_;
   TransportOptions options_;
@@ -62,22 +65,25 @@ class Reconnecting : public Transport {
  private:
   void TryOpen() {
     if (stopped_) return;
-    std::string how, error;
-    std::unique_ptr<Stream> stream;
-    if (OpenStream(&stream, &how, &error)) {
-      stream_ = std::move(stream);
-      ++counters_.opens;
-      delay_ = options_.reconnect_initial;
-      if (on_status_) on_status_(TransportStatus::kOpened, Describe() + " opened (" + how + ")");
-      Read();
-      return;
-    }
-    ++counters_.open_failures;
-    if (on_status_) {
-      on_status_(TransportStatus::kOpenFailed,
-                 fmt::format("{}: {}; retrying in {} ms", Describe(), error, delay_.count()));
-    }
-    Retry();
+    BeginOpen(
+        [this](std::unique_ptr<Stream> stream, const std::string& how, const std::string& error) {
+          if (stopped_) return;
+          if (stream) {
+            stream_ = std::move(stream);
+            ++counters_.opens;
+            delay_ = options_.reconnect_initial;
+            if (on_status_)
+              on_status_(TransportStatus::kOpened, Describe() + " opened (" + how + ")");
+            Read();
+            return;
+          }
+          ++counters_.open_failures;
+          if (on_status_) {
+            on_status_(TransportStatus::kOpenFailed,
+                       fmt::format("{}: {}; retrying in {} ms", Describe(), error, delay_.count()));
+          }
+          Retry();
+        });
   }
 
   void Retry() {

@@ -53,8 +53,15 @@ class SerialTransport final : public Reconnecting<Descriptor> {
   std::string Describe() const override { return fmt::format("serial {}@{}", path_, baud_); }
 
  protected:
-  bool OpenStream(std::unique_ptr<Descriptor>* stream, std::string* how,
-                  std::string* error) override {
+  // Device files open at once: synchronously.
+  void BeginOpen(OpenDone done) override {
+    std::unique_ptr<Descriptor> stream;
+    std::string how, error;
+    if (!OpenStream(&stream, &how, &error)) stream.reset();
+    done(std::move(stream), how, error);
+  }
+
+  bool OpenStream(std::unique_ptr<Descriptor>* stream, std::string* how, std::string* error) {
     int fd = -1;
     std::string sp_error;
     if (OpenWithLibserialport(&fd, &sp_error)) {

@@ -16,33 +16,53 @@ class TcpTransport final : public Reconnecting<Socket> {
  public:
   TcpTransport(boost::asio::io_context& io, std::string host, std::string port,
                TransportOptions options)
-      : Reconnecting(io, options), host_(std::move(host)), port_(std::move(port)) {}
+      : Reconnecting(io, options), host_(std::move(host)), port_(std::move(port)), resolver_(io) {}
 
   std::string Describe() const override { return "tcp://" + host_ + ":" + port_; }
 
+  void Stop() override {
+    resolver_.cancel();
+    if (connecting_) {
+      boost::system::error_code ignored;
+      connecting_->close(ignored);
+    }
+    Reconnecting::Stop();
+  }
+
  protected:
-  bool OpenStream(std::unique_ptr<Socket>* stream, std::string* how, std::string* error) override {
-    boost::system::error_code ec;
-    boost::asio::ip::tcp::resolver resolver(io_);
-    const auto endpoints = resolver.resolve(host_, port_, ec);
-    if (ec) {
-      *error = "cannot resolve " + host_ + ": " + ec.message();
-      return false;
-    }
-    auto socket = std::make_unique<Socket>(io_);
-    boost::asio::connect(*socket, endpoints, ec);
-    if (ec) {
-      *error = "cannot connect: " + ec.message();
-      return false;
-    }
-    socket->set_option(boost::asio::ip::tcp::no_delay(true), ec);
-    *stream = std::move(socket);
-    *how = "TCP";
-    return true;
+  // Resolving and connecting are asynchronous: an unreachable server never blocks the io_context.
+  void BeginOpen(OpenDone done) override {
+    resolver_.async_resolve(host_, port_,
+                            [this, done](const boost::system::error_code& ec,
+                                         boost::asio::ip::tcp::resolver::results_type endpoints) {
+                              if (ec == boost::asio::error::operation_aborted) return;
+                              if (ec) {
+                                done(nullptr, "", "cannot resolve " + host_ + ": " + ec.message());
+                                return;
+                              }
+                              connecting_ = std::make_unique<Socket>(io_);
+                              boost::asio::async_connect(
+                                  *connecting_, endpoints,
+                                  [this, done](const boost::system::error_code& ec2,
+                                               const boost::asio::ip::tcp::endpoint&) {
+                                    if (ec2 == boost::asio::error::operation_aborted) return;
+                                    if (ec2) {
+                                      connecting_.reset();
+                                      done(nullptr, "", "cannot connect: " + ec2.message());
+                                      return;
+                                    }
+                                    boost::system::error_code ignored;
+                                    connecting_->set_option(boost::asio::ip::tcp::no_delay(true),
+                                                            ignored);
+                                    done(std::move(connecting_), "TCP", "");
+                                  });
+                            });
   }
 
  private:
   std::string host_, port_;
+  boost::asio::ip::tcp::resolver resolver_;
+  std::unique_ptr<Socket> connecting_;
 };
 
 }  // namespace

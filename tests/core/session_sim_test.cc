@@ -87,7 +87,8 @@ TEST(SessionSim, DwellWindowsCalibrateToTheTruth) {
       Calibrator calibrator(options);
       std::string error;
       for (const auto& e : r.session.events) {
-        ASSERT_TRUE(calibrator.add_pose(DwellRecord(r.session, e, model.sensor()), &error)) << error;
+        ASSERT_TRUE(calibrator.add_pose(DwellRecord(r.session, e, model.sensor()), &error))
+            << error;
       }
       const Estimate est = calibrator.solve();
       ASSERT_TRUE(est.ok) << est.error;

@@ -193,6 +193,30 @@ TEST(TcpTransport, ReceivesFromAServerAndReconnectsWhenItCloses) {
   transport->Stop();
 }
 
+TEST(TcpTransport, ARefusedConnectionIsRetriedWithoutBlocking) {
+  boost::asio::io_context io;
+  int port = 0;
+  {
+    boost::asio::ip::tcp::acceptor probe(io, {boost::asio::ip::address_v4::loopback(), 0});
+    port = probe.local_endpoint().port();
+  }  // closed again: nothing listens there
+  std::string error;
+  TransportOptions options;
+  options.reconnect_initial = std::chrono::milliseconds(10);
+  auto transport = MakeTransport(io, "tcp://127.0.0.1:" + std::to_string(port), 0, options, &error);
+  ASSERT_NE(transport, nullptr) << error;
+  std::vector<std::string> failures;
+  transport->Start([](std::span<const std::uint8_t>, std::int64_t) {},
+                   [&](TransportStatus s, const std::string& m) {
+                     if (s == TransportStatus::kOpenFailed) failures.push_back(m);
+                   });
+  io.run_for(std::chrono::milliseconds(200));
+  ASSERT_GE(failures.size(), 2u);
+  EXPECT_NE(failures[0].find("cannot connect"), std::string::npos) << failures[0];
+  EXPECT_FALSE(transport->is_open());
+  transport->Stop();
+}
+
 TEST(ReplayTransport, DeliversEveryByteAndEventInOrderAtFullSpeed) {
   const auto path = fs::temp_directory_path() / "turncal_replay_test.tcap";
   std::string error;
