@@ -43,6 +43,10 @@ struct Args {
   std::string output;
   double burst_ms = 16.0;
   bool faults = false;
+  // Overrides of the class's noise (negative: the class's value).
+  double acc_noise = -1, acc_bias_instability = -1, gyr_noise = -1, mag_noise = -1,
+         mag_bias_instability = -1;
+  bool no_quantisation = false;
   std::string live;  // a pty (or any writable tty/file) to stream to at real time
   double live_speed = 1.0;
 };
@@ -254,6 +258,12 @@ int Run(const Args& args) {
   const ProtocolDefaults d = Defaults(*protocol);
   SessionSimOptions o;
   SensorClassByName(args.sensor_class, &o.sensor);
+  if (args.acc_noise >= 0) o.sensor.acc_noise_density = args.acc_noise;
+  if (args.acc_bias_instability >= 0) o.sensor.acc_bias_instability = args.acc_bias_instability;
+  if (args.gyr_noise >= 0) o.sensor.gyr_noise_density = args.gyr_noise;
+  if (args.mag_noise >= 0) o.sensor.mag_noise_rms = args.mag_noise;
+  if (args.mag_bias_instability >= 0) o.sensor.mag_bias_instability = args.mag_bias_instability;
+  if (args.no_quantisation) o.sensor.acc_quantum = o.sensor.gyr_quantum = o.sensor.mag_quantum = 0;
   o.rate_hz = args.rate_hz > 0 ? args.rate_hz : d.rate_hz;
   o.dwell_s = args.dwell_s;
   o.seed = args.seed;
@@ -289,9 +299,13 @@ int Run(const Args& args) {
   header.devices.push_back(device);
   header.created = "simulated";
   header.note = fmt::format(
-      "turncal sim --protocol {} --model {} --model {} --class {} --seed {} "
-      "--rate {} --dwell {}",
-      args.protocol, accel_name, mag_name, args.sensor_class, args.seed, o.rate_hz, o.dwell_s);
+      "turncal sim --protocol {} --model {} --model {} --class {} --seed {} --rate {} --dwell {} "
+      "(acc noise {} m/s^2/sqrt(Hz), acc bias instability {} m/s^2, gyr noise {} rad/s/sqrt(Hz), "
+      "mag noise {} G, mag bias instability {} G, quantisation {}{})",
+      args.protocol, accel_name, mag_name, args.sensor_class, args.seed, o.rate_hz, o.dwell_s,
+      o.sensor.acc_noise_density, o.sensor.acc_bias_instability, o.sensor.gyr_noise_density,
+      o.sensor.mag_noise_rms, o.sensor.mag_bias_instability,
+      o.sensor.acc_quantum > 0 ? "16-bit" : "none", args.faults ? ", faults" : "");
   std::vector<drivers::CaptureRecord> records;
   auto append = [&](drivers::RecordType type, std::uint64_t at,
                     std::span<const std::uint8_t> payload) {
@@ -465,6 +479,20 @@ void AddSimCommand(CLI::App* app) {
       ->capture_default_str();
   cmd->add_option("--truth-out", args->truth_out, "JSON file of the true parameters");
   cmd->add_option("-o,--output", args->output, "the capture to write (.tcap)");
+  cmd->add_option("--acc-noise", args->acc_noise,
+                  "accelerometer white noise density, m/s^2/sqrt(Hz) (default: the class's)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--acc-bias-instability", args->acc_bias_instability,
+                  "accelerometer bias instability (Gauss-Markov 1 sigma), m/s^2")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--gyr-noise", args->gyr_noise, "gyro white noise density, rad/s/sqrt(Hz)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--mag-noise", args->mag_noise, "magnetometer white noise, Gauss RMS per sample")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--mag-bias-instability", args->mag_bias_instability,
+                  "magnetometer bias instability (Gauss-Markov 1 sigma), Gauss")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_flag("--no-quantisation", args->no_quantisation, "floats without ADC steps");
   cmd->add_flag("--faults", args->faults,
                 "inject faults: bit flips (~1 frame in 500), dropped bytes (~1 in 700), one "
                 "saturated sample, pose 1 announced 0.5 s before the table settled");
