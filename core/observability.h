@@ -88,7 +88,6 @@ struct PoseDiversity {
   int regressor_rank = 0;               // of N x 10 [m'^T 1], columns scaled to unit norm
   double regressor_min_singular = 0.0;  // relative to the largest
   int distinct_down = 0;                // distinct directions of down in q (to 1e-6)
-  int distinct_heading = 0;             // distinct psi (mod 2 pi, to 1e-6 rad)
   Eigen::Vector3d down_scatter = Eigen::Vector3d::Zero();  // eigenvalues of mean d d^T, desc
   std::vector<std::string> findings;  // plain-language diagnosis; empty when diverse
 };

@@ -84,8 +84,20 @@ double LogDetGain(const Eigen::MatrixXd& J, const Eigen::LDLT<Eigen::MatrixXd>& 
 }  // namespace
 
 bool PoseGrid::IsValid(std::string* error) const {
-  return AxisValid(phi, "phi", error) && AxisValid(gamma, "gamma", error) &&
-         AxisValid(psi, "psi", error);
+  if (!AxisValid(phi, "phi", error) || !AxisValid(gamma, "gamma", error) ||
+      !AxisValid(psi, "psi", error)) {
+    return false;
+  }
+  const double n = static_cast<double>(AxisValues(phi).size()) * AxisValues(gamma).size() *
+                   AxisValues(psi).size();
+  if (n > kMaxCandidates) {
+    if (error) {
+      *error = fmt::format("the grid has {:.0f} candidate poses; at most {} (use coarser steps)", n,
+                           kMaxCandidates);
+    }
+    return false;
+  }
+  return true;
 }
 
 std::vector<TablePose> PoseGrid::Candidates() const {

@@ -26,6 +26,9 @@ struct AxisRange {
   double step_deg = 0.0;  // 0: only min_deg
 };
 
+// Each candidate costs a 3 x N Jacobian per model and one solve per planning step.
+inline constexpr int kMaxCandidates = 100000;
+
 struct PoseGrid {
   AxisRange phi{-180.0, 150.0, 30.0};  // inner axis
   AxisRange gamma{-90.0, 90.0, 30.0};  // middle axis
@@ -78,8 +81,8 @@ struct NextPoseAdvice {
   std::vector<CandidateScore> top;  // best first
   std::vector<ModelOutlook> models;
   // Poses still needed for the predicted gate, counting the recommended one; 0 when the captured
-  // poses already meet it; -1 when the horizon is not enough or a gauge blocks the gate (then the
-  // continuation is empty).
+  // poses already meet it; -1 when the horizon is not enough (the continuation then holds the
+  // `horizon` poses tried) or a gauge blocks the gate (the continuation is then empty).
   int poses_to_gate = -1;
   std::vector<TablePose> continuation;  // the greedy plan those poses form, recommended first
 };

@@ -3,7 +3,7 @@
 // drivers"): push received bytes with their host receive time; frames and samples come out
 // through a sink; counters account for every byte.
 //
-// A decoder keeps at most one maximal frame of unconsumed bytes, in a buffer it allocates once,
+// A decoder keeps at most two maximal frames of unconsumed bytes, in a buffer it allocates once,
 // so the steady state allocates nothing. Bytes are in exactly one of: an accepted frame
 // (bytes_in_frames), skipped (bytes_skipped: noise, bad checksums, bad structure, timeouts), or
 // still pending (pending_bytes(), waiting for the rest of a frame).

@@ -1,7 +1,7 @@
 #pragma once
-// The byte-level machinery every protocol shares: a buffer allocated once, a scan loop that asks
-// the protocol to examine the bytes at the current position, and the counters. A protocol derives
-// from ScanningDecoder<Derived> and provides
+// The byte-level machinery every protocol shares: a buffer (two maximal frames) allocated once, a
+// scan loop that asks the protocol to examine the bytes at the current position, and the counters.
+// A protocol derives from ScanningDecoder<Derived> and provides
 //   Examination Examine(const std::uint8_t* p, std::size_t n);   // n >= 1
 //   bool Accept(std::span<const std::uint8_t> frame, std::int64_t t_host_ns);  // false: malformed
 //   void Release();  // emit a sample still waiting for parts (timeout, end of input)
@@ -29,14 +29,28 @@ class ScanningDecoder : public Decoder {
     while (!bytes.empty()) {
       if (size_ == 0) {
         const std::size_t used = ScanRange(bytes.data(), bytes.size(), t_host_ns);
-        const std::size_t rest = bytes.size() - used;  // < max_frame_: an incomplete candidate
+        const std::size_t rest = bytes.size() - used;  // an incomplete candidate's bytes
+        if (rest > capacity_) {
+          // A candidate cannot need more than the buffer holds (Examine's contract); if one
+          // does, its first byte is dropped rather than overflow anything.
+          ++counters_.bad_structure;
+          ++counters_.bytes_skipped;
+          bytes = bytes.subspan(used + 1);
+          continue;
+        }
         std::memcpy(buffer_.get(), bytes.data() + used, rest);
         size_ = rest;
         pending_since_ns_ = t_host_ns;
         return;
       }
-      // Complete the pending frame with at most one frame's worth of new bytes.
-      const std::size_t k = std::min(bytes.size(), max_frame_);
+      // Complete the pending candidate with as many new bytes as the buffer takes.
+      const std::size_t k = std::min(bytes.size(), capacity_ - size_);
+      if (k == 0) {  // full and still incomplete: same as above
+        ++counters_.bad_structure;
+        Skip(1);
+        ScanBuffer(t_host_ns);
+        continue;
+      }
       std::memcpy(buffer_.get() + size_, bytes.data(), k);
       size_ += k;
       const std::size_t used = ScanRange(buffer_.get(), size_, t_host_ns);
@@ -80,7 +94,7 @@ class ScanningDecoder : public Decoder {
  protected:
   ScanningDecoder(std::size_t max_frame, std::int64_t timeout_ns, DecoderSink* sink)
       : sink_(sink),
-        max_frame_(max_frame),
+        capacity_(2 * max_frame),
         buffer_(new std::uint8_t[2 * max_frame]),
         timeout_ns_(timeout_ns) {}
 
@@ -132,7 +146,9 @@ class ScanningDecoder : public Decoder {
     return pos;
   }
 
-  std::size_t max_frame_;
+  // Examine may ask for more than one frame (Xbus looks at a message starting inside a candidate),
+  // never for more than two: the buffer holds two maximal frames.
+  std::size_t capacity_;
   std::unique_ptr<std::uint8_t[]> buffer_;
   std::size_t size_ = 0;
   std::int64_t timeout_ns_;

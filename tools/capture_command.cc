@@ -83,7 +83,11 @@ int RunCapture(const std::string& spec_text, const std::string& output, const st
       if (ec) return;
       const auto& c = decoder->counters();
       std::string flush_error;
-      writer->Flush(&flush_error);
+      if (!writer->Flush(&flush_error)) {
+        fmt::print(stderr, "\nturncal capture: {}; stopping\n", flush_error);
+        io.stop();
+        return;
+      }
       fmt::print(stderr, "\rturncal capture: {} bytes, {} frames, {} samples, {} bad checksums   ",
                  c.bytes_in, c.frames, c.samples, c.bad_checksums);
       tick();

@@ -74,6 +74,10 @@ bool CaptureWriter::Append(RecordType type, std::uint8_t device, std::uint64_t t
     if (error) *error = "the capture is closed";
     return false;
   }
+  if (!failed_.empty()) {
+    if (error) *error = failed_;
+    return false;
+  }
   if (payload.size() > kCaptureMaxPayload) {
     if (error) *error = "a record payload is limited to 16 MiB";
     return false;
@@ -81,7 +85,8 @@ bool CaptureWriter::Append(RecordType type, std::uint8_t device, std::uint64_t t
   scratch_.clear();
   AppendCaptureRecord(type, device, t_ns, payload, &scratch_);
   if (std::fwrite(scratch_.data(), 1, scratch_.size(), file_) != scratch_.size()) {
-    if (error) *error = "cannot write '" + path_ + "': " + std::strerror(errno);
+    failed_ = "cannot write '" + path_ + "': " + std::strerror(errno);
+    if (error) *error = failed_;
     return false;
   }
   ++records_;
@@ -90,7 +95,8 @@ bool CaptureWriter::Append(RecordType type, std::uint8_t device, std::uint64_t t
 
 bool CaptureWriter::Flush(std::string* error) {
   if (file_ && std::fflush(file_) != 0) {
-    if (error) *error = "cannot write '" + path_ + "': " + std::strerror(errno);
+    failed_ = "cannot write '" + path_ + "': " + std::strerror(errno);
+    if (error) *error = failed_;
     return false;
   }
   return true;

@@ -52,7 +52,8 @@ void AppendCaptureRecord(RecordType type, std::uint8_t device, std::uint64_t t_n
                          std::span<const std::uint8_t> payload, std::vector<std::uint8_t>* out);
 
 // Writes a capture: the header at creation, then appended records. Buffered; Flush() hands
-// everything to the kernel, Close() also fsyncs.
+// everything to the kernel, Close() also fsyncs. After the first failed write every later Append
+// fails with that error (the file stays readable up to its last whole record).
 class CaptureWriter {
  public:
   // nullptr with a message when the file cannot be created.
@@ -74,6 +75,9 @@ class CaptureWriter {
   std::string path_;
   std::vector<std::uint8_t> scratch_;
   std::uint64_t records_ = 0;
+  // After a failed write the file may end inside a record: nothing more is appended, so a reader
+  // still finds every whole record before it.
+  std::string failed_;
 };
 
 // Reads a capture from memory or a file. A truncated last record ends the records cleanly

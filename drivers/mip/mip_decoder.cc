@@ -55,7 +55,6 @@ bool MipDecoder::Accept(std::span<const std::uint8_t> frame, std::int64_t t_host
   }
 
   Sample s;
-  bool has_time = false;
   int time_rank = 0;  // 3: 0xD5, 2: 0x0E, 1: GPS
   for (std::size_t at = 4; at < 4 + len;) {
     const std::size_t flen = frame[at];
@@ -120,7 +119,7 @@ bool MipDecoder::Accept(std::span<const std::uint8_t> frame, std::int64_t t_host
         break;
     }
   }
-  has_time = time_rank > 0;
+  const bool has_time = time_rank > 0;
   const bool has_data = s.acc_mps2 || s.gyr_radps || s.mag || s.temp_c || s.flags;
   view.carries_sample = has_data;
   sink_->OnFrame(view);

@@ -101,6 +101,7 @@ class Reconnecting : public Transport {
           if (n > 0) {
             counters_.bytes_read += n;
             on_data_(std::span<const std::uint8_t>(buffer_.data(), n), MonotonicNowNs());
+            if (stopped_ || !stream_) return;  // the handler stopped us
           }
           if (ec) {
             ++counters_.disconnects;

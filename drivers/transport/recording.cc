@@ -14,7 +14,7 @@ void RecordingTransport::Append(RecordType type, std::span<const std::uint8_t> p
   std::string error;
   if (!writer_->Append(type, device_, Since(), payload, &error)) {
     if (failures_++ == 0 && on_status_) {
-      on_status_(TransportStatus::kOpened, Describe() + ": recording failed: " + error);
+      on_status_(TransportStatus::kRecordingFailed, Describe() + ": " + error);
     }
   }
 }

@@ -114,7 +114,8 @@ class SerialTransport final : public Reconnecting<Descriptor> {
       sp_free_port(port);
       return false;
     }
-    const int dup = ::dup(handle);  // Asio owns this one; libserialport keeps its own
+    const int dup =
+        ::fcntl(handle, F_DUPFD_CLOEXEC, 0);  // Asio owns this one; libserialport keeps its own
     if (dup < 0) return fail("dup");
     ::fcntl(dup, F_SETFL, ::fcntl(dup, F_GETFL) | O_NONBLOCK);
     port_ = port;
@@ -143,10 +144,13 @@ class SerialTransport final : public Reconnecting<Descriptor> {
     t.c_cflag |= CLOCAL | CREAD;
     if (options_.two_stop_bits) t.c_cflag |= CSTOPB;
     const speed_t speed = TermiosSpeed(baud_);
-    if (speed != B0) {
-      ::cfsetispeed(&t, speed);
-      ::cfsetospeed(&t, speed);
+    if (speed == B0) {
+      *error = fmt::format("{} baud is not a termios speed (9600 ... 921600)", baud_);
+      ::close(fd);
+      return false;
     }
+    ::cfsetispeed(&t, speed);
+    ::cfsetospeed(&t, speed);
     if (::tcsetattr(fd, TCSANOW, &t) != 0) {
       *error = fmt::format("cannot configure {}: {}", path_, std::strerror(errno));
       ::close(fd);

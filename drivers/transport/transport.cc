@@ -19,6 +19,8 @@ const char* ToString(TransportStatus s) {
       return "stopped";
     case TransportStatus::kFinished:
       return "finished";
+    case TransportStatus::kRecordingFailed:
+      return "recording failed";
   }
   return "?";
 }

@@ -22,7 +22,8 @@ enum class TransportStatus {
   kOpenFailed,    // will retry
   kDisconnected,  // the device went away (EOF/EIO/reset); will reopen
   kStopped,
-  kFinished,  // a replay reached its end
+  kFinished,         // a replay reached its end
+  kRecordingFailed,  // a recording decorator could not write its capture (the stream goes on)
 };
 const char* ToString(TransportStatus status);
 

@@ -228,6 +228,12 @@ TEST(Planner, GridAndOptionsAreChecked) {
   o.grid.psi = AxisRange{30, 30, 0};
   EXPECT_TRUE(o.IsValid(&error));
   EXPECT_EQ(o.grid.Candidates().size(), 12u * 7u);
+  o = PlannerOptions{};
+  o.grid.phi = AxisRange{-180, 179, 1};  // 360 x 181 x 360: too many candidates
+  o.grid.gamma = AxisRange{-90, 90, 1};
+  o.grid.psi = AxisRange{-180, 179, 1};
+  EXPECT_FALSE(o.IsValid(&error));
+  EXPECT_NE(error.find("candidate poses"), std::string::npos) << error;
   EXPECT_FALSE(PlanNextPose({}, PlannerOptions{}).ok);
 }
 

@@ -114,5 +114,12 @@ TEST(Tcap, CorruptRecordsAndHeadersAreClearErrors) {
   EXPECT_NE(reader.error().find("corrupt record"), std::string::npos);
 }
 
+TEST(Tcap, AFullDiskIsAClearError) {
+  if (!std::filesystem::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  std::string error;
+  EXPECT_EQ(CaptureWriter::Create("/dev/full", Header(), &error), nullptr);
+  EXPECT_NE(error.find("No space"), std::string::npos) << error;
+}
+
 }  // namespace
 }  // namespace turncal::drivers

@@ -193,6 +193,31 @@ TEST(TcpTransport, ReceivesFromAServerAndReconnectsWhenItCloses) {
   transport->Stop();
 }
 
+// Stopping from inside the data handler (a client that has seen enough) must not touch the closed
+// stream (found by review: it dereferenced it).
+TEST(TcpTransport, StopFromTheDataHandlerIsSafe) {
+  boost::asio::io_context io;
+  boost::asio::ip::tcp::acceptor acceptor(io, {boost::asio::ip::address_v4::loopback(), 0});
+  boost::asio::ip::tcp::socket peer(io);
+  acceptor.async_accept(peer, [&](const boost::system::error_code& ec) {
+    if (!ec) boost::asio::write(peer, boost::asio::buffer("hello", 5));
+  });
+  std::string error;
+  auto transport = MakeTransport(
+      io, "tcp://127.0.0.1:" + std::to_string(acceptor.local_endpoint().port()), 0, {}, &error);
+  ASSERT_NE(transport, nullptr) << error;
+  int chunks = 0;
+  transport->Start(
+      [&](std::span<const std::uint8_t>, std::int64_t) {
+        ++chunks;
+        transport->Stop();
+      },
+      [](TransportStatus, const std::string&) {});
+  io.run_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(chunks, 1);
+  EXPECT_FALSE(transport->is_open());
+}
+
 TEST(TcpTransport, ARefusedConnectionIsRetriedWithoutBlocking) {
   boost::asio::io_context io;
   int port = 0;

@@ -75,6 +75,37 @@ TEST(Xbus, ItemsThatDoNotFillThePayloadAreRejected) {
   EXPECT_EQ(d.counters().bad_structure, 1u);
 }
 
+// A maximal message that contains the header of another maximal message near its end: the
+// decoder looks ahead into the second one, so almost two frames are pending. Fed in chunks of
+// several sizes this must neither overflow the buffer (it did, found by review) nor lose count of
+// a byte.
+TEST(Xbus, LookAheadIntoASecondMaximalMessageStaysInsideTheBuffer) {
+  std::vector<std::uint8_t> a(16191, 0);
+  auto header = [&](std::size_t at) {
+    const std::uint8_t h[6] = {0xFA, 0xFF, 0x36, 0xFF, 0x1F, 0xF9};  // 8185 data bytes
+    std::copy(h, h + 6, a.begin() + static_cast<long>(at));
+  };
+  header(0);
+  header(8000);
+  unsigned sum = 0;
+  for (std::size_t i = 1; i < 8191; ++i) sum += a[i];
+  a[8191] = static_cast<std::uint8_t>(-sum);
+  for (std::size_t chunk :
+       {std::size_t{1000}, std::size_t{4096}, std::size_t{16191}, std::size_t{7}}) {
+    CollectingSink sink;
+    XbusDecoder d("mti", &sink);
+    for (std::size_t at = 0; at < a.size(); at += chunk) {
+      d.Push(std::span<const std::uint8_t>(a.data() + at, std::min(chunk, a.size() - at)), 0);
+      EXPECT_TRUE(testing::BytesAccountedFor(d)) << chunk;
+    }
+    const std::vector<std::uint8_t> more(3000, 0);
+    d.Push(more, 1);
+    d.Finish();
+    EXPECT_TRUE(testing::BytesAccountedFor(d)) << chunk;
+    EXPECT_EQ(d.pending_bytes(), 0u);
+  }
+}
+
 TEST(Xbus, LegacyLayoutSizes) {
   XbusLegacyLayout l;
   l.output_mode = 0x0003;
