@@ -5,7 +5,7 @@
 // most the protocol's maximum length.
 //
 // Build (clang): cmake -S . -B build-fuzz -DCMAKE_CXX_COMPILER=clang++ -DTURNCAL_FUZZ=ON
-// Run: build-fuzz/tests/mip_fuzz -max_total_time=600 tests/fuzz/corpus/mip
+// Run: build-fuzz/tests/fuzz/mip_fuzz -max_total_time=600 -max_len=40000 tests/fuzz/corpus/mip
 #include <cstddef>
 #include <cstdint>
 
@@ -38,7 +38,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   std::int64_t t = 0;
   std::size_t at = 0;
   while (at < size) {
-    const std::size_t n = std::min<std::size_t>(size - at, 1 + data[at] % 97);
+    // Pushes from 1 byte to 16 KiB: small ones exercise the buffered path, large ones the
+    // in-place scan and the look-ahead past one frame.
+    const std::size_t n = std::min<std::size_t>(
+        size - at, data[at] < 200 ? 1 + data[at] % 97 : 1 + (data[at] - 200) * 300);
     decoder->Push({data + at, n}, t);
     at += n;
     t += 5'000'000;  // 5 ms a push
