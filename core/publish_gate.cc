@@ -80,9 +80,11 @@ double ToleranceFor(const ParameterInfo& parameter, const GateOptions& options) 
 
 std::vector<std::string> PrecisionShortfalls(const MeasurementModel& model,
                                              const Eigen::VectorXd& sigma,
-                                             const GateOptions& options) {
+                                             const GateOptions& options,
+                                             const std::vector<bool>* skip) {
   std::vector<std::string> out;
   for (int i : GatedParameters(model)) {
+    if (skip && (*skip)[static_cast<std::size_t>(i)]) continue;
     const ParameterInfo& p = model.parameters()[i];
     const double tolerance = ToleranceFor(p, options);
     if (!(sigma[i] <= tolerance)) {
@@ -154,15 +156,10 @@ GateResult EvaluateGate(const MeasurementModel& model, const Estimate& estimate,
     }
   }
 
-  // 2. Precision of the gated parameters (the estimate's sigma, inflated when chi^2 says so).
-  for (int j : gated) {
-    if (missing[j]) continue;  // already reported
-    const double tolerance = ToleranceFor(params[j], options);
-    if (!(estimate.sigma[j] <= tolerance)) {
-      reasons.push_back(fmt::format("{}: sigma {} exceeds the tolerance {}", params[j].name,
-                                    FormatSigma(params[j], estimate.sigma[j]),
-                                    FormatSigma(params[j], tolerance)));
-    }
+  // 2. Precision of the gated parameters (the estimate's sigma, inflated when chi^2 says so); the
+  // undetermined ones are already reported.
+  for (auto& r : PrecisionShortfalls(model, estimate.sigma, options, &missing)) {
+    reasons.push_back(std::move(r));
   }
 
   // 3. chi^2 consistent with the noise.

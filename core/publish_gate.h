@@ -64,10 +64,11 @@ struct GateResult {
 GateResult EvaluateGate(const MeasurementModel& model, const Estimate& estimate,
                         const DataReport& data, const GateOptions& options);
 
-// The precision part alone, on predicted sigmas (pose planning): one reason per gated parameter
-// whose sigma exceeds its tolerance.
+// The precision part alone (also on predicted sigmas, for pose planning): one reason per gated
+// parameter whose sigma exceeds its tolerance; parameters with `skip[j]` set are left out.
 std::vector<std::string> PrecisionShortfalls(const MeasurementModel& model,
                                              const Eigen::VectorXd& sigma,
-                                             const GateOptions& options);
+                                             const GateOptions& options,
+                                             const std::vector<bool>* skip = nullptr);
 
 }  // namespace turncal

@@ -16,6 +16,7 @@
 #include <sstream>
 #include <thread>
 
+#include "core/reference.h"
 #include "core/session_sim.h"
 #include "drivers/capture/tcap.h"
 #include "drivers/gx2/gx2_encoder.h"
@@ -367,7 +368,7 @@ int Run(const Args& args) {
     if (burst_start < 0) burst_start = at;
     if (args.faults && k == saturated_index) {
       // A saturated sample: the accelerometer clips at its range on x.
-      s.acc_mps2->x() = 16 * 9.80665;
+      s.acc_mps2->x() = 16 * kStandardGravity_mps2;
       s.flags |= kAccSaturated;
     }
     Bytes frame = Encode(*protocol, s);

@@ -1,8 +1,8 @@
 #include "drivers/gx2/gx2_decoder.h"
 
+#include "core/reference.h"
 #include "drivers/bytes.h"
 #include "drivers/checksum.h"
-#include "drivers/mip/mip_decoder.h"
 
 namespace turncal::drivers {
 
@@ -55,7 +55,7 @@ bool Gx2Decoder::Accept(std::span<const std::uint8_t> frame, std::int64_t t_host
   Sample s;
   s.device = device_;
   s.t_host_ns = t_host_ns;
-  s.acc_mps2 = vec(1, kStandardGravity);
+  s.acc_mps2 = vec(1, kStandardGravity_mps2);
   s.gyr_radps = vec(13, 1.0);
   std::size_t timer_at = 25;
   if (echo == 0xCB) {

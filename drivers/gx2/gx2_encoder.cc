@@ -2,9 +2,9 @@
 
 #include <cmath>
 
+#include "core/reference.h"
 #include "drivers/bytes.h"
 #include "drivers/checksum.h"
-#include "drivers/mip/mip_decoder.h"
 
 namespace turncal::drivers::gx2 {
 
@@ -36,7 +36,7 @@ std::vector<std::uint8_t> Reply(std::uint8_t echo, const Sample& s, const Gx2Opt
     const Eigen::Vector3d x = v.value_or(Eigen::Vector3d::Zero()) * scale;
     for (int i = 0; i < 3; ++i) f32(x[i]);
   };
-  vec(s.acc_mps2, 1.0 / kStandardGravity);
+  vec(s.acc_mps2, 1.0 / kStandardGravity_mps2);
   vec(s.gyr_radps, 1.0);
   if (echo == 0xCB) vec(s.mag, 1.0);
   const double ticks = s.t_device_s.value_or(0.0) * options.timer_ticks_per_s;

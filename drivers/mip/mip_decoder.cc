@@ -64,7 +64,7 @@ bool MipDecoder::Accept(std::span<const std::uint8_t> frame, std::int64_t t_host
     at += flen;
     switch (desc) {
       case 0x04:
-        if (dlen >= 12) s.acc_mps2 = Vector3(d, kStandardGravity);
+        if (dlen >= 12) s.acc_mps2 = Vector3(d, kStandardGravity_mps2);
         break;
       case 0x05:
         if (dlen >= 12) s.gyr_radps = Vector3(d, 1.0);

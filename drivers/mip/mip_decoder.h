@@ -12,12 +12,12 @@
 #include <memory>
 #include <optional>
 
+#include "core/reference.h"
 #include "drivers/scanning_decoder.h"
 
 namespace turncal::drivers {
 
 inline constexpr std::size_t kMipMaxFrame = 261;
-inline constexpr double kStandardGravity = 9.80665;
 
 class MipDecoder final : public ScanningDecoder<MipDecoder> {
  public:

@@ -78,7 +78,7 @@ std::vector<std::uint8_t> SensorPacket(const Sample& s) {
     PutU64(&f.data, static_cast<std::uint64_t>(std::llround(*s.t_device_s * 1e9)));
     fields.push_back(std::move(f));
   }
-  if (s.acc_mps2) fields.push_back({0x04, Floats(*s.acc_mps2 / kStandardGravity)});
+  if (s.acc_mps2) fields.push_back({0x04, Floats(*s.acc_mps2 / kStandardGravity_mps2)});
   if (s.gyr_radps) fields.push_back({0x05, Floats(*s.gyr_radps)});
   if (s.mag) fields.push_back({0x06, Floats(*s.mag)});
   if (s.temp_c) {

@@ -80,7 +80,7 @@ void CheckMipFixture(std::size_t max_chunk, std::uint64_t seed) {
   ASSERT_FALSE(sink.samples.empty());
   const Sample& first = sink.samples.front();
   ASSERT_TRUE(first.acc_mps2 && first.gyr_radps);
-  const Eigen::Vector3d acc_g = *first.acc_mps2 / kStandardGravity;
+  const Eigen::Vector3d acc_g = *first.acc_mps2 / kStandardGravity_mps2;
   EXPECT_NEAR(acc_g.x(), 0.01741764, 1e-8);
   EXPECT_NEAR(acc_g.y(), -0.00666524, 1e-8);
   EXPECT_NEAR(acc_g.z(), -0.98564005, 1e-8);
