@@ -1,0 +1,300 @@
+#include "tools/sim_capture.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <span>
+#include <utility>
+
+#include "core/measurement_model.h"
+#include "core/reference.h"
+#include "drivers/gx2/gx2_encoder.h"
+#include "drivers/mip/mip_encoder.h"
+#include "drivers/xbus/xbus_encoder.h"
+
+namespace turncal::tools {
+
+namespace {
+
+using Bytes = std::vector<std::uint8_t>;
+constexpr double kRadToDeg = 180.0 / M_PI;
+
+struct ProtocolDefaults {
+  double rate_hz;
+  int baud;
+  int bits_per_byte;  // 10 for 8N1, 11 for 8N2
+};
+
+ProtocolDefaults Defaults(drivers::Protocol p) {
+  switch (p) {
+    case drivers::Protocol::kMip:
+      return {500.0, 921600, 10};
+    case drivers::Protocol::kGx2:
+      return {100.0, 115200, 10};
+    case drivers::Protocol::kXbus:
+      return {100.0, 115200, 10};
+    case drivers::Protocol::kXbusLegacy:
+      return {100.0, 115200, 11};
+  }
+  return {100.0, 115200, 10};
+}
+
+const drivers::XbusLegacyLayout kLegacyLayout{0x0003, 0x00000001};  // temp, calibrated, counter
+
+Bytes Encode(drivers::Protocol p, const Sample& s) {
+  switch (p) {
+    case drivers::Protocol::kMip: {
+      Sample m = s;
+      m.counter.reset();
+      return drivers::mip::SensorPacket(m);
+    }
+    case drivers::Protocol::kGx2:
+      return drivers::gx2::Reply(0xCB, s, {});
+    case drivers::Protocol::kXbus:
+      return drivers::xbus::MtData2(s);
+    case drivers::Protocol::kXbusLegacy:
+      return drivers::xbus::MtData(s, kLegacyLayout);
+  }
+  return {};
+}
+
+// What the host sends and the device answers before the stream starts.
+std::vector<std::pair<Bytes, Bytes>> StartUp(drivers::Protocol p, std::uint64_t seed, double rate,
+                                             double base_rate) {
+  namespace mip = drivers::mip;
+  namespace xbus = drivers::xbus;
+  std::vector<std::pair<Bytes, Bytes>> out;
+  switch (p) {
+    case drivers::Protocol::kMip: {
+      out.push_back({mip::SetToIdle(), mip::Reply(0x01, 0x02, 0)});
+      Bytes info;
+      info.push_back(0x04);
+      info.push_back(0xD2);
+      for (std::string s : {std::string("3DM-GX5-25 sim"), std::string("6251-4220"),
+                            fmt::format("SIM.{}", seed), std::string("sim"), std::string("")}) {
+        s.resize(16, ' ');
+        info.insert(info.end(), s.begin(), s.end());
+      }
+      const mip::Field info_field{0x81, info};
+      out.push_back({mip::GetDeviceInfo(), mip::Reply(0x01, 0x03, 0, {&info_field, 1})});
+      const auto base = static_cast<std::uint16_t>(base_rate);
+      const mip::Field rate_field{
+          0x83, {static_cast<std::uint8_t>(base >> 8), static_cast<std::uint8_t>(base)}};
+      out.push_back({mip::GetImuBaseRate(), mip::Reply(0x0C, 0x06, 0, {&rate_field, 1})});
+      const auto dec = static_cast<std::uint16_t>(std::lround(base_rate / rate));
+      const std::pair<std::uint8_t, std::uint16_t> format[] = {
+          {0x04, dec}, {0x05, dec}, {0x06, dec}};
+      out.push_back({mip::ImuMessageFormat(format), mip::Reply(0x0C, 0x08, 0)});
+      out.push_back({mip::EnableStream(0x80, true), mip::Reply(0x0C, 0x11, 0)});
+      out.push_back({mip::Resume(), mip::Reply(0x01, 0x06, 0)});
+      break;
+    }
+    case drivers::Protocol::kXbus: {
+      out.push_back({xbus::Message(xbus::kGoToConfig), xbus::Message(xbus::kGoToConfigAck)});
+      out.push_back({xbus::Message(xbus::kReqDid),
+                     xbus::Message(xbus::kDeviceId, Bytes{0x03, 0x78, 0x00, 0x01})});
+      const auto r = static_cast<std::uint16_t>(rate);
+      const std::pair<std::uint16_t, std::uint16_t> outputs[] = {
+          {xbus::kPacketCounter, 0xFFFF}, {xbus::kSampleTimeFine, 0xFFFF},
+          {xbus::kTemperature, r},        {xbus::kAcceleration, r},
+          {xbus::kRateOfTurn, r},         {xbus::kMagneticField, r}};
+      const Bytes set = xbus::SetOutputConfiguration(outputs);
+      out.push_back(
+          {set, xbus::Message(xbus::kOutputConfiguration,
+                              std::span<const std::uint8_t>(set).subspan(4, set.size() - 5))});
+      out.push_back(
+          {xbus::Message(xbus::kGoToMeasurement), xbus::Message(xbus::kGoToMeasurementAck)});
+      break;
+    }
+    case drivers::Protocol::kXbusLegacy: {
+      out.push_back({xbus::Message(xbus::kGoToConfig), xbus::Message(xbus::kGoToConfigAck)});
+      out.push_back({xbus::Message(xbus::kReqOutputMode),
+                     xbus::Message(xbus::kReqOutputMode + 1, Bytes{0x00, 0x03})});
+      out.push_back({xbus::Message(xbus::kReqOutputSettings),
+                     xbus::Message(xbus::kReqOutputSettings + 1, Bytes{0x00, 0x00, 0x00, 0x01})});
+      out.push_back(
+          {xbus::Message(xbus::kGoToMeasurement), xbus::Message(xbus::kGoToMeasurementAck)});
+      break;
+    }
+    case drivers::Protocol::kGx2:
+      out.push_back({drivers::gx2::StartContinuous(0xCB), drivers::gx2::ContinuousAck(0xCB, 0)});
+      break;
+  }
+  return out;
+}
+
+// The model `name`, which must measure `kind`; nullptr with a message otherwise.
+std::unique_ptr<MeasurementModel> CheckedModel(const std::string& name, SensorKind kind,
+                                               std::string* error) {
+  auto model = MakeModel(name, ModelContext{}, error);
+  if (!model) return nullptr;
+  if (name == "mag-physical") {
+    *error = "mag-physical is for the observability demonstration only";
+    return nullptr;
+  }
+  if (model->sensor() != kind) {
+    *error =
+        fmt::format("'{}' is not {} model", name,
+                    kind == SensorKind::kAccelerometer ? "an accelerometer" : "a magnetometer");
+    return nullptr;
+  }
+  return model;
+}
+
+}  // namespace
+
+bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::string* error) {
+  const drivers::Protocol protocol = options.protocol;
+  const char* protocol_name = drivers::ToString(protocol);
+  auto accel = CheckedModel(options.accel_model, SensorKind::kAccelerometer, error);
+  if (!accel) return false;
+  auto mag = CheckedModel(options.mag_model, SensorKind::kMagnetometer, error);
+  if (!mag) return false;
+
+  const ProtocolDefaults d = Defaults(protocol);
+  SessionSimOptions o = options.session;
+  if (!(o.rate_hz > 0)) o.rate_hz = d.rate_hz;
+  if (!o.IsValid(error)) return false;
+  const int baud = options.baud > 0 ? options.baud : d.baud;
+  // The link budget (SENSORS.md): rate x frame size must fit in baud / bits-per-byte.
+  Sample probe;
+  probe.t_device_s = 1.0;
+  probe.counter = 1;
+  probe.acc_mps2 = probe.gyr_radps = probe.mag = Eigen::Vector3d::Zero();
+  probe.temp_c = 25.0;
+  const double frame_bytes = static_cast<double>(Encode(protocol, probe).size());
+  const double capacity = static_cast<double>(baud) / d.bits_per_byte;
+  if (frame_bytes * o.rate_hz > capacity) {
+    *error = fmt::format(
+        "{} frames of {} bytes at {} Hz need {:.0f} bytes/s, more than {} baud carries ({:.0f} "
+        "bytes/s): lower --rate or raise --baud",
+        protocol_name, frame_bytes, o.rate_hz, frame_bytes * o.rate_hz, baud, capacity);
+    return false;
+  }
+
+  SimCapture& c = *out;
+  c = SimCapture{};
+  c.session = SimulateSession(*accel, *mag, options.poses, o);
+  c.session_options = o;
+  c.baud = baud;
+  c.accel_model = options.accel_model;
+  c.mag_model = options.mag_model;
+  const SimulatedSession& session = c.session;
+
+  drivers::CaptureDevice device{"imu", protocol, baud, std::nullopt, std::nullopt};
+  if (protocol == drivers::Protocol::kXbusLegacy) {
+    device.output_mode = kLegacyLayout.output_mode;
+    device.output_settings = kLegacyLayout.output_settings;
+  }
+  c.header.devices.push_back(device);
+  c.header.created = "simulated";
+  c.header.note = fmt::format(
+      "turncal sim --protocol {} --model {} --model {} --class {} --seed {} --rate {} --dwell {} "
+      "(acc noise {} m/s^2/sqrt(Hz), acc bias instability {} m/s^2, gyr noise {} rad/s/sqrt(Hz), "
+      "mag noise {} G, mag bias instability {} G, quantisation {}{})",
+      protocol_name, options.accel_model, options.mag_model, o.sensor.name, o.seed, o.rate_hz,
+      o.dwell_s, o.sensor.acc_noise_density, o.sensor.acc_bias_instability,
+      o.sensor.gyr_noise_density, o.sensor.mag_noise_rms, o.sensor.mag_bias_instability,
+      o.sensor.acc_quantum > 0 ? "16-bit" : "none", options.faults ? ", faults" : "");
+
+  std::vector<drivers::CaptureRecord>& records = c.records;
+  auto append = [&](drivers::RecordType type, std::int64_t at,
+                    std::span<const std::uint8_t> payload) {
+    records.push_back(
+        {type, 0, static_cast<std::uint64_t>(at), Bytes(payload.begin(), payload.end())});
+  };
+  std::int64_t t_ns = 0;
+  for (const auto& [sent, reply] : StartUp(protocol, o.seed, o.rate_hz, 1000.0)) {
+    append(drivers::RecordType::kSent, t_ns, sent);
+    t_ns += 2'000'000;
+    append(drivers::RecordType::kReceived, t_ns, reply);
+    t_ns += 2'000'000;
+  }
+  const std::int64_t offset_ns = t_ns;
+  c.offset_ns = offset_ns;
+
+  // Faults on request: a bit flip about every 500th frame, a dropped byte about every 700th, one
+  // saturated sample, and pose 1 announced while the table is still moving into it.
+  SimFaultReport& faults = c.faults;
+  std::mt19937_64 fault_rng(o.seed ^ 0x5eedfa17ull);
+  std::uniform_int_distribution<int> one_in(0, 999999);
+  if (options.faults) {
+    faults.saturated_index = session.samples.size() / 3;
+    if (session.events.size() > 1) {
+      faults.early_pose_index = 1;
+      // Not before the previous announcement, so the events stay in order.
+      faults.early_s = std::min(o.settle_s + kSimEarlyBeforeMoveEnd_s,
+                                session.events[1].t_s - session.events[0].t_s);
+    }
+  }
+  // An event's announcement time in the capture.
+  auto event_ns = [&](const SessionPoseEvent& e) {
+    const double early = e.index == faults.early_pose_index ? faults.early_s : 0.0;
+    return offset_ns + static_cast<std::int64_t>(std::llround((e.t_s - early) * 1e9));
+  };
+
+  Bytes burst;
+  std::int64_t burst_start = -1;
+  const auto burst_ns = static_cast<std::int64_t>(options.burst_ms * 1e6);
+  std::size_t next_event = 0;
+  auto flush = [&](std::int64_t at) {
+    if (!burst.empty()) {
+      append(drivers::RecordType::kReceived, at, burst);
+      burst.clear();
+    }
+    burst_start = -1;
+  };
+  // The events announced by `at`, each after the bytes received before it.
+  auto emit_events_until = [&](std::int64_t at) {
+    while (next_event < session.events.size() && event_ns(session.events[next_event]) <= at) {
+      const auto& e = session.events[next_event++];
+      const std::int64_t te = event_ns(e);
+      const double early = e.index == faults.early_pose_index ? faults.early_s : 0.0;
+      flush(te);
+      const std::string event = nlohmann::json{
+          {"event", "pose"},
+          {"index", e.index},
+          {"phi_deg", e.pose.phi_rad * kRadToDeg},
+          {"gamma_deg", e.pose.gamma_rad * kRadToDeg},
+          {"psi_deg", e.pose.psi_rad * kRadToDeg},
+          {"hold_s",
+           o.dwell_s + early}}.dump();
+      append(drivers::RecordType::kEvent, te, Bytes(event.begin(), event.end()));
+    }
+  };
+  for (std::size_t k = 0; k < session.samples.size(); ++k) {
+    Sample s = session.samples[k];
+    const std::int64_t at = offset_ns + s.t_host_ns;
+    emit_events_until(at);
+    if (burst_start >= 0 && at - burst_start >= burst_ns) flush(at);
+    if (burst_start < 0) burst_start = at;
+    if (options.faults && k == faults.saturated_index) {
+      // A saturated sample: the accelerometer clips at its range on x.
+      s.acc_mps2->x() = 16 * kStandardGravity_mps2;
+      s.flags |= kAccSaturated;
+    }
+    Bytes frame = Encode(protocol, s);
+    if (options.faults && one_in(fault_rng) < 2000) {
+      const auto byte = static_cast<std::size_t>(one_in(fault_rng)) % frame.size();
+      frame[byte] ^= static_cast<std::uint8_t>(1u << (one_in(fault_rng) % 8));
+      ++faults.bit_flips;
+    }
+    if (options.faults && one_in(fault_rng) < 1430) {
+      frame.erase(frame.begin() +
+                  static_cast<long>(static_cast<std::size_t>(one_in(fault_rng)) % frame.size()));
+      ++faults.dropped_bytes;
+    }
+    burst.insert(burst.end(), frame.begin(), frame.end());
+  }
+  const auto end_ns = offset_ns + static_cast<std::int64_t>(std::llround(session.duration_s * 1e9));
+  flush(end_ns);
+  emit_events_until(end_ns);
+  const std::string end_event = R"({"event":"end"})";
+  append(drivers::RecordType::kEvent, end_ns, Bytes(end_event.begin(), end_event.end()));
+  return true;
+}
+
+}  // namespace turncal::tools
