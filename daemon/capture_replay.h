@@ -1,0 +1,48 @@
+#pragma once
+// A capture through the station's front half: each device's bytes through its decoder into its
+// own Sequencer, the capture's pose events (or a schedule) into every device's sequencer, in
+// record order and at record times -- the same path live data takes (DESIGN.md "Pose sources":
+// capture events go through the same code as announcements).
+
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/sequencer.h"
+#include "drivers/capture/tcap.h"
+#include "drivers/decoder.h"
+
+namespace turncal::daemon {
+
+struct ReplayOptions {
+  SequencerOptions sequencer;
+  // Schedule mode: poses in order, assigned to still segments; the capture's pose events are
+  // then ignored (and counted). Absent: announced mode from the capture's pose events.
+  std::optional<std::vector<TablePose>> schedule;
+  PosePredictor predictor;  // per pose and triad; may be empty
+};
+
+struct DeviceReplay {
+  std::string name;
+  drivers::DecoderCounters decoder;
+  SampleCounts totals;  // the sequencer's: used, flagged, outliers, lost
+  std::vector<SequencerEvent> events;
+  std::vector<PoseRecord> records;  // captured, in order
+  std::optional<NoiseProfile> noise;
+};
+
+struct ReplayResult {
+  std::vector<DeviceReplay> devices;
+  std::uint64_t pose_commands = 0;    // pose events in the capture
+  std::uint64_t ignored_events = 0;   // not pose events (e.g. "end"), or ignored in schedule mode
+  std::vector<std::string> warnings;  // malformed events, bad device indices, truncation
+};
+
+// Replays the records `reader` has left. `on_event` (optional) sees every sequencer event as it
+// happens, with the device's index. False with *error for options that cannot work.
+bool ReplayCapture(drivers::CaptureReader* reader, const ReplayOptions& options,
+                   ReplayResult* result, std::string* error,
+                   const std::function<void(int, const SequencerEvent&)>& on_event = {});
+
+}  // namespace turncal::daemon

@@ -1,0 +1,27 @@
+#pragma once
+// The sequencer's words on the wire: a pose command/event as the controller sends it (and as
+// captures record it), and the sequencer's events as the daemon publishes them.
+//
+// Pose command/event: {"event":"pose"|"cmd":"pose", "phi_deg":..., "gamma_deg":...,
+// "psi_deg":..., optional "index", "dwell_s" (the dwell to collect), "hold_s" (how long the table
+// holds; informational)}.
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/sequencer.h"
+
+namespace turncal::protocol {
+
+// True for a JSON object that is a pose command or event. False with a message when it is one
+// but malformed (missing or non-finite angles, bad dwell); *is_pose says whether it was one.
+bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcement* out,
+                      bool* is_pose, std::string* error);
+
+// {"class":"POSE_CAPTURED", "t":..., "index":..., "pose":{"phi_deg",...}, "collected", "needed",
+//  "counts":{...}, "reason":..., "record":{...}} -- the record with each triad's mean, covariance
+// and count, the window and the temperature.
+nlohmann::json ToJson(const SequencerEvent& event);
+nlohmann::json ToJson(const PoseRecord& record);
+
+}  // namespace turncal::protocol

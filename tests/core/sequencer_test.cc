@@ -1,0 +1,607 @@
+// The position sequencer on simulated sessions (core/session_sim.h): records per pose, their
+// accuracy against the simulator's truth, windows clear of motion, early announcements, bit
+// flips, lost samples, wrong announcements, schedule mode.
+
+#include "core/sequencer.h"
+
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <random>
+
+#include "core/session_sim.h"
+#include "core/synthetic.h"
+#include "core/triad_accumulator.h"
+
+namespace turncal {
+namespace {
+
+struct Session {
+  std::unique_ptr<MeasurementModel> accel, mag;
+  std::vector<TablePose> poses;
+  SessionSimOptions options;
+  SimulatedSession sim;
+};
+
+// The 26-pose cube session at 100 Hz; without bias wander unless asked, so the true mean of a
+// window is the model's prediction exactly.
+Session Simulate(bool wander = false, std::uint64_t seed = 7, double rate_hz = 100.0) {
+  Session s;
+  std::string error;
+  s.accel = MakeModel("accel13", ModelContext{}, &error);
+  s.mag = MakeModel("mag13", ModelContext{}, &error);
+  s.poses = CubePoses26();
+  s.options.rate_hz = rate_hz;
+  s.options.seed = seed;
+  if (!wander) s.options.sensor.acc_bias_instability = s.options.sensor.mag_bias_instability = 0;
+  s.sim = SimulateSession(*s.accel, *s.mag, s.poses, s.options);
+  return s;
+}
+
+struct Collected {
+  std::vector<SequencerEvent> events;
+  std::vector<SequencerEvent> captured, rejected, skipped;
+};
+
+Sequencer::Sink Collect(Collected* c) {
+  return [c](const SequencerEvent& e) {
+    c->events.push_back(e);
+    if (e.kind == SequencerEventKind::kCaptured) c->captured.push_back(e);
+    if (e.kind == SequencerEventKind::kRejected) c->rejected.push_back(e);
+    if (e.kind == SequencerEventKind::kSegmentSkipped) c->skipped.push_back(e);
+  };
+}
+
+std::int64_t Ns(double t_s) { return static_cast<std::int64_t>(std::llround(t_s * 1e9)); }
+
+// Feeds the session with its pose events as announcements (optionally `early` seconds early for
+// one pose), through `transform` for each sample.
+template <typename Transform>
+void Replay(const Session& s, Sequencer* seq, Transform transform, int early_index = -1,
+            double early_s = 0.0) {
+  std::size_t next = 0;
+  auto announce_time = [&](std::size_t i) {
+    return s.sim.events[i].t_s - (static_cast<int>(i) == early_index ? early_s : 0.0);
+  };
+  for (const Sample& raw : s.sim.samples) {
+    while (next < s.sim.events.size() && Ns(announce_time(next)) <= raw.t_host_ns) {
+      Announcement a;
+      a.index = s.sim.events[next].index;
+      a.pose = s.sim.events[next].pose;
+      a.t_host_ns = Ns(announce_time(next));
+      std::string error;
+      EXPECT_TRUE(seq->Announce(a, &error)) << error;
+      ++next;
+    }
+    Sample x = raw;
+    if (transform(&x)) seq->Push(x);
+  }
+  seq->Finish(s.sim.samples.back().t_host_ns);
+}
+
+void Replay(const Session& s, Sequencer* seq) {
+  Replay(s, seq, [](Sample*) { return true; });
+}
+
+// The per-sample noise sigma of the accelerometer in this session.
+double AccSigma(const Session& s) {
+  return s.options.sensor.acc_noise_density * std::sqrt(s.options.rate_hz / 2.0);
+}
+
+TEST(TriadAccumulator, MatchesTwoPassStatisticsFarFromZero) {
+  std::mt19937_64 rng(1);
+  std::normal_distribution<double> n(0, 1e-3);
+  std::vector<Eigen::Vector3d> xs;
+  TriadAccumulator acc;
+  for (int i = 0; i < 100000; ++i) {
+    xs.emplace_back(0.01 + n(rng), -0.02 + n(rng) + 0.5 * n(rng), 9.80665 + n(rng));
+    acc.Add(xs.back());
+  }
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& x : xs) mean += x;
+  mean /= static_cast<double>(xs.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto& x : xs) cov += (x - mean) * (x - mean).transpose();
+  cov /= static_cast<double>(xs.size() - 1);
+  EXPECT_LT((acc.mean() - mean).norm(), 1e-12);
+  EXPECT_LT((acc.covariance() - cov).norm(), 1e-12 * cov.norm());
+  EXPECT_EQ(acc.count(), 100000);
+}
+
+TEST(NoiseMeter, MeasuresTheNoiseOfAStillSensorWithinItsSamplingError) {
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> n(0, 1);
+  const Eigen::Vector3d sigma_acc(2e-3, 3e-3, 4e-3);
+  const Eigen::Vector3d bias(0.01, -0.02, 0.005);
+  const double sigma_gyr = 1e-3;
+  NoiseMeterOptions o;
+  o.duration_s = 2.0;
+  NoiseMeter meter(o);
+  NoiseMeter::Status status = NoiseMeter::Status::kCollecting;
+  for (int k = 0; status == NoiseMeter::Status::kCollecting; ++k) {
+    StillSample s;
+    s.t_host_ns = k * 5'000'000;  // 200 Hz
+    s.t_device_s = 100.0 + k * 0.005;
+    s.v[kTriadAcc] = Eigen::Vector3d(0.1, 0.2, -9.8) +
+                     sigma_acc.cwiseProduct(Eigen::Vector3d(n(rng), n(rng), n(rng)));
+    s.v[kTriadGyr] = bias + sigma_gyr * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    s.present = 0b011;
+    status = meter.Add(s);
+  }
+  ASSERT_EQ(status, NoiseMeter::Status::kMeasured) << meter.failure();
+  const NoiseProfile& p = meter.profile();
+  const double rel = 4.0 / std::sqrt(2.0 * p.sigma_dof);  // 4 sigma of a sigma estimate
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_NEAR((*p.sigma[kTriadAcc])[a] / sigma_acc[a], 1.0, rel);
+    EXPECT_NEAR((*p.sigma[kTriadGyr])[a] / sigma_gyr, 1.0, rel);
+    EXPECT_NEAR(p.gyr_bias_radps[a], bias[a], 4 * sigma_gyr / std::sqrt(400.0));
+  }
+  EXPECT_FALSE(p.sigma[kTriadMag]);
+  EXPECT_NEAR(p.rate_hz, 200.0, 1e-6);
+  ASSERT_TRUE(p.device_period_s);
+  EXPECT_NEAR(*p.device_period_s, 0.005, 1e-9);
+}
+
+TEST(NoiseMeter, RefusesAStartUpWhileTheTableTurns) {
+  std::mt19937_64 rng(4);
+  std::normal_distribution<double> n(0, 1e-3);
+  NoiseMeter meter(NoiseMeterOptions{});
+  NoiseMeter::Status status = NoiseMeter::Status::kCollecting;
+  for (int k = 0; status == NoiseMeter::Status::kCollecting; ++k) {
+    const double t = k * 0.01;
+    const double angle = 0.2 * t;  // 0.2 rad/s about x: gravity turns in y-z
+    StillSample s;
+    s.t_host_ns = Ns(t);
+    s.v[kTriadAcc] =
+        Eigen::Vector3d(n(rng), 9.8 * std::sin(angle) + n(rng), -9.8 * std::cos(angle) + n(rng));
+    s.v[kTriadGyr] = Eigen::Vector3d(0.2 + n(rng), n(rng), n(rng));
+    s.present = 0b011;
+    status = meter.Add(s);
+  }
+  ASSERT_EQ(status, NoiseMeter::Status::kRejected);
+  EXPECT_NE(meter.failure().find("not still"), std::string::npos) << meter.failure();
+}
+
+NoiseProfile WhiteProfile(double rate_hz) {
+  NoiseProfile p;
+  p.sigma[kTriadAcc] = Eigen::Vector3d::Constant(4e-3);
+  p.sigma[kTriadGyr] = Eigen::Vector3d::Constant(1e-3);
+  p.gyr_bias_sigma_radps = 1e-4;
+  p.rate_hz = rate_hz;
+  p.source = "test";
+  return p;
+}
+
+TEST(StillnessDetector, NoFalseAlarmOverTenMinutesOfStillNoise) {
+  // 60000 evaluations x 21 tests at 1e-8 each: expected false alarms 0.013.
+  const NoiseProfile p = WhiteProfile(100);
+  StillnessDetector d(p, StillnessOptions{});
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> n(0, 1);
+  int moving = 0, outliers = 0;
+  StillSample ev;
+  bool has = false;
+  for (int k = 0; k < 60000; ++k) {
+    StillSample s;
+    s.t_host_ns = Ns(k * 0.01);
+    s.v[kTriadAcc] =
+        Eigen::Vector3d(0, 0, -9.80665) + 4e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    s.v[kTriadGyr] = 1e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    s.present = 0b011;
+    if (d.IsOutlier(s)) ++outliers;
+    if (!d.Push(s, &ev, &has) && k >= d.window()) ++moving;
+  }
+  EXPECT_EQ(moving, 0);
+  // 5 robust sigmas on 6 axes: about 6 x 5.7e-7 x 60000 = 0.2 expected, a few at most.
+  EXPECT_LE(outliers, 3);
+}
+
+// A slow turn about the vertical at `rate` rad/s, or a tilt: detected, with the reason naming it.
+TEST(StillnessDetector, SeesSlowTurnsTiltsAndVibration) {
+  const NoiseProfile p = WhiteProfile(100);
+  std::mt19937_64 rng(6);
+  std::normal_distribution<double> n(0, 1);
+  auto run = [&](auto motion) {
+    StillnessDetector d(p, StillnessOptions{});
+    StillSample ev;
+    bool has = false;
+    for (int k = 0; k < 300; ++k) {
+      const double t = k * 0.01;
+      StillSample s;
+      s.t_host_ns = Ns(t);
+      s.v[kTriadAcc] =
+          Eigen::Vector3d(0, 0, -9.80665) + 4e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+      s.v[kTriadGyr] = 1e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+      s.present = 0b011;
+      motion(t, &s);
+      if (!d.Push(s, &ev, &has) && k >= d.window() && t > 1.5) return d.finding();
+    }
+    return StillFinding{};
+  };
+  // 0.3 deg/s about z: only the gyro sees it (the rate limit is 5.7 sigma of the window mean
+  // plus the 2e-3 rad/s = 0.11 deg/s of bias drift allowed).
+  const StillFinding turn = run([](double t, StillSample* s) {
+    if (t > 1.0) s->v[kTriadGyr].z() += 0.3 * M_PI / 180;
+  });
+  EXPECT_EQ(turn.kind, StillFinding::kRate) << turn.Describe();
+  EXPECT_EQ(turn.axis, 2);
+  // A tilt creeping at 0.5 deg/s about x (gyro shows it too, but the drift is decisive).
+  const StillFinding tilt = run([](double t, StillSample* s) {
+    if (t > 1.0) {
+      const double a = 0.5 * M_PI / 180 * (t - 1.0);
+      s->v[kTriadAcc].y() += 9.80665 * std::sin(a);
+      s->v[kTriadGyr].x() += 0.5 * M_PI / 180;
+    }
+  });
+  EXPECT_NE(tilt.kind, StillFinding::kNone);
+  // Vibration: 20 Hz, 0.02 m/s^2 on z.
+  const StillFinding vib = run([](double t, StillSample* s) {
+    if (t > 1.0) s->v[kTriadAcc].z() += 0.02 * std::sin(2 * M_PI * 20 * t);
+  });
+  EXPECT_EQ(vib.kind, StillFinding::kVariance) << vib.Describe();
+  EXPECT_NE(vib.Describe().find("acc z"), std::string::npos) << vib.Describe();
+}
+
+// Acceptance: a 26-pose session replayed gives exactly 26 records, each within 4 sigma of the
+// simulator's true mean for its pose, each window clear of the table's motion.
+TEST(Sequencer, AnnouncedSessionGivesOneAccurateRecordPerPose) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  Replay(s, &seq);
+  ASSERT_EQ(c.rejected.size(), 0u) << c.rejected[0].reason;
+  ASSERT_EQ(c.captured.size(), 26u);
+  const double sigma = AccSigma(s);
+  const double mag_sigma = s.options.sensor.mag_noise_rms;
+  double chi2 = 0;
+  for (std::size_t i = 0; i < 26; ++i) {
+    const auto& e = c.captured[i];
+    const auto& ev = s.sim.events[i];
+    ASSERT_EQ(e.index, ev.index);
+    const PoseRecord& r = *e.record;
+    ASSERT_TRUE(r.acc && r.gyr && r.mag && r.temp_c);
+    // The window lies inside the dwell: after the table settled, before it moves again.
+    EXPECT_GE(r.t_start_s, ev.t_s - 1e-9) << "pose " << i;
+    EXPECT_LE(r.t_end_s, ev.dwell_end_s + 1e-9) << "pose " << i;
+    EXPECT_EQ(r.acc->count, static_cast<std::int64_t>(std::ceil(3.0 * s.options.rate_hz)));
+    const Eigen::Vector3d truth = s.accel->Predict(s.sim.accel_truth, ev.pose);
+    const Eigen::Vector3d mag_truth = s.mag->Predict(s.sim.mag_truth, ev.pose);
+    const double se = sigma / std::sqrt(static_cast<double>(r.acc->count));
+    const double mag_se = mag_sigma / std::sqrt(static_cast<double>(r.mag->count));
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_NEAR(r.acc->mean[a], truth[a], 4 * se) << "pose " << i << " axis " << a;
+      EXPECT_NEAR(r.mag->mean[a], mag_truth[a], 4 * mag_se) << "pose " << i << " axis " << a;
+      chi2 += std::pow((r.acc->mean[a] - truth[a]) / se, 2);
+    }
+    // The sample covariance estimates the white noise (4 sigma of a variance from n - 1 dof).
+    const double n1 = static_cast<double>(r.acc->count - 1);
+    EXPECT_NEAR(r.acc->covariance(0, 0) / (sigma * sigma), 1.0, 4 * std::sqrt(2 / n1));
+  }
+  // 78 standardised errors: chi^2 within 78 +- 4 sqrt(156).
+  EXPECT_NEAR(chi2, 78, 4 * std::sqrt(156.0));
+}
+
+TEST(Sequencer, EarlyAnnouncementWaitsUntilTheTableIsStill) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const double early = s.options.settle_s + 0.5;  // while the table still moves
+  Replay(
+      s, &seq, [](Sample*) { return true; }, 1, early);
+  ASSERT_EQ(c.captured.size(), 26u);
+  const auto& ev = s.sim.events[1];
+  const PoseRecord& r = *c.captured[1].record;
+  const double move_end = ev.t_s - s.options.settle_s;
+  // Not one sample from the move; and none from the settling while its oscillation exceeded
+  // the noise of one sample (amplitude x g below sigma from 0.3 s after the move for 2e-4 rad).
+  EXPECT_GT(r.t_start_s, move_end + 0.3)
+      << "window starts " << r.t_start_s - move_end << " s after the move";
+  EXPECT_LE(r.t_end_s, ev.dwell_end_s + 1e-9);
+  const Eigen::Vector3d truth = s.accel->Predict(s.sim.accel_truth, ev.pose);
+  const double se = AccSigma(s) / std::sqrt(static_cast<double>(r.acc->count));
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(r.acc->mean[a], truth[a], 4 * se);
+}
+
+TEST(Sequencer, AnnouncementThatNeverSettlesIsRejectedWithTheReason) {
+  const Session s = Simulate();
+  Collected c;
+  SequencerOptions o;
+  o.still_timeout_s = 2.0;
+  Sequencer seq(o, Collect(&c));
+  // Pose 3 is announced 4 s early: during its whole move plus the end of pose 2's dwell, so the
+  // table is never still for 2 s after it.
+  const double early = s.options.move_s + s.options.settle_s;
+  Replay(
+      s, &seq, [](Sample*) { return true; }, 3, early);
+  bool found = false;
+  for (const auto& e : c.rejected) {
+    if (e.index == 3) {
+      found = true;
+      EXPECT_NE(e.reason.find("not still within 2.0 s"), std::string::npos) << e.reason;
+      EXPECT_NE(e.reason.find("last not-still window at t = "), std::string::npos) << e.reason;
+    }
+  }
+  EXPECT_TRUE(found);
+  EXPECT_EQ(c.captured.size(), 25u);
+}
+
+// Flips one random bit of a float32 copy of one axis value in about one sample in 80.
+struct BitFlipper {
+  std::mt19937_64 rng{11};
+  int flips = 0;
+  void operator()(Sample* s) {
+    if (std::uniform_int_distribution<int>(0, 79)(rng) != 0) return;
+    Eigen::Vector3d* v = &*s->acc_mps2;
+    const int which = std::uniform_int_distribution<int>(0, 2)(rng);
+    if (which == 1) v = &*s->gyr_radps;
+    if (which == 2) v = &*s->mag;
+    const int axis = std::uniform_int_distribution<int>(0, 2)(rng);
+    const int bit = std::uniform_int_distribution<int>(0, 31)(rng);
+    auto f = std::bit_cast<std::uint32_t>(static_cast<float>((*v)[axis]));
+    f ^= 1u << bit;
+    (*v)[axis] = static_cast<double>(std::bit_cast<float>(f));
+    ++flips;
+  }
+};
+
+// Bit flips that got past a checksum (on the wire, checksums catch every single-bit flip:
+// tests/daemon/sequencer_replay_test.cc). A flip that moves a value beyond the outlier limit
+// (5 robust sigmas) must be excluded; one inside it is indistinguishable from noise and may move
+// a mean by at most its own size / n. The test checks both against the exact comparison: the
+// clean stream without the samples the sequencer excluded and with the original values of the
+// flipped samples it used.
+TEST(Sequencer, BitFlipsBeyondTheNoiseAreExcludedAndTheRestAreBounded) {
+  const Session s = Simulate();
+  auto round = [](Sample* x) {
+    for (auto* v : {&*x->acc_mps2, &*x->gyr_radps, &*x->mag}) {
+      for (int a = 0; a < 3; ++a) (*v)[a] = static_cast<double>(static_cast<float>((*v)[a]));
+    }
+  };
+  std::vector<Sample> clean_samples = s.sim.samples, dirty_samples;
+  for (auto& x : clean_samples) round(&x);
+  dirty_samples = clean_samples;
+  std::vector<char> flipped(dirty_samples.size(), 0);
+  BitFlipper flipper;
+  for (std::size_t i = 0; i < dirty_samples.size(); ++i) {
+    const int before = flipper.flips;
+    flipper(&dirty_samples[i]);
+    flipped[i] = flipper.flips != before;
+  }
+  std::map<std::int64_t, std::string> excluded;
+  Collected dirty;
+  Session with = Simulate();
+  with.sim.samples = dirty_samples;
+  Sequencer seq(SequencerOptions{}, Collect(&dirty));
+  seq.SetExclusionObserver(
+      [&](const StillSample& x, const char* why) { excluded[x.t_host_ns] = why; });
+  Replay(with, &seq);
+  ASSERT_EQ(dirty.captured.size(), 26u);
+  EXPECT_GT(flipper.flips, 250);
+
+  Session without = Simulate();
+  without.sim.samples.clear();
+  for (const auto& x : clean_samples) {
+    if (!excluded.count(x.t_host_ns)) without.sim.samples.push_back(x);
+  }
+  Collected clean;
+  {
+    Sequencer seq2(SequencerOptions{}, Collect(&clean));
+    Replay(without, &seq2);
+  }
+  ASSERT_EQ(clean.captured.size(), 26u);
+  const std::array<double, 3> sigma = {
+      AccSigma(s), s.options.sensor.gyr_noise_density * std::sqrt(s.options.rate_hz / 2.0),
+      s.options.sensor.mag_noise_rms};
+  int gross_in_windows = 0, small_in_windows = 0;
+  double worst = 0;
+  for (std::size_t p = 0; p < 26; ++p) {
+    const PoseRecord& a = *clean.captured[p].record;
+    const PoseRecord& b = *dirty.captured[p].record;
+    ASSERT_EQ(a.t_start_s, b.t_start_s) << "pose " << p;
+    // The leverage of the flips the sequencer used, per triad and axis.
+    std::array<Eigen::Vector3d, 3> allowed{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
+                                           Eigen::Vector3d::Zero()};
+    for (std::size_t i = 0; i < dirty_samples.size(); ++i) {
+      const double t = dirty_samples[i].t_host_ns * 1e-9;
+      if (!flipped[i] || t < a.t_start_s || t >= a.t_end_s) continue;
+      const auto& d = dirty_samples[i];
+      const auto& c = clean_samples[i];
+      const std::array<Eigen::Vector3d, 3> delta = {*d.acc_mps2 - *c.acc_mps2,
+                                                    *d.gyr_radps - *c.gyr_radps, *d.mag - *c.mag};
+      double size = 0;  // in noise sigmas
+      for (int t3 = 0; t3 < 3; ++t3) {
+        size = std::max(size, delta[t3].array().abs().maxCoeff() / sigma[t3]);
+      }
+      if (size > 6) {
+        ++gross_in_windows;
+        EXPECT_TRUE(excluded.count(d.t_host_ns)) << "a flip of " << size << " sigma was used";
+      } else if (!excluded.count(d.t_host_ns)) {
+        ++small_in_windows;
+        EXPECT_LT(size, 5.5) << "used flip beyond the outlier limit";
+        for (int t3 = 0; t3 < 3; ++t3) {
+          allowed[t3] += delta[t3].cwiseAbs() / static_cast<double>(b.acc->count);
+        }
+      }
+    }
+    for (int t3 : {0, 2}) {
+      const TriadStats& ta = t3 == 0 ? *a.acc : *a.mag;
+      const TriadStats& tb = t3 == 0 ? *b.acc : *b.mag;
+      EXPECT_EQ(ta.count, tb.count);
+      for (int k = 0; k < 3; ++k) {
+        const double shift = std::abs(ta.mean[k] - tb.mean[k]);
+        EXPECT_LE(shift, allowed[t3][k] + 1e-12) << "pose " << p << " triad " << t3;
+        const double se = std::sqrt(ta.covariance(k, k) / static_cast<double>(ta.count));
+        worst = std::max(worst, shift / se);
+      }
+    }
+  }
+  EXPECT_GT(gross_in_windows, 10);
+  RecordProperty("worst_shift_sigma", std::to_string(worst));
+  std::printf(
+      "bit flips: %d; in windows: %d gross (all excluded), %d within the noise (used); largest "
+      "shift of a mean %.3f sigma\n",
+      flipper.flips, gross_in_windows, small_in_windows, worst);
+}
+
+TEST(Sequencer, TooManyLostSamplesRejectThePose) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  // During pose 5's dwell, every 10th sample is lost (its counter skips).
+  const auto& ev = s.sim.events[5];
+  Replay(s, &seq, [&](Sample* x) {
+    const double t = x->t_host_ns * 1e-9;
+    return !(t > ev.t_s && t < ev.dwell_end_s && *x->counter % 10 == 0);
+  });
+  ASSERT_EQ(c.captured.size(), 25u);
+  ASSERT_EQ(c.rejected.size(), 1u);
+  EXPECT_EQ(c.rejected[0].index, 5);
+  EXPECT_NE(c.rejected[0].reason.find("too many bad samples"), std::string::npos)
+      << c.rejected[0].reason;
+  EXPECT_NEAR(
+      static_cast<double>(c.rejected[0].counts.lost) / static_cast<double>(c.rejected[0].needed),
+      0.1, 0.02);
+}
+
+TEST(Sequencer, SaturatedSamplesAreExcludedAndCounted) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const auto& ev = s.sim.events[2];
+  int saturated = 0;
+  Replay(s, &seq, [&](Sample* x) {
+    const double t = x->t_host_ns * 1e-9;
+    if (t > ev.t_s + 1.0 && t < ev.t_s + 1.03) {
+      x->acc_mps2->x() = 16 * 9.80665;
+      x->flags |= kAccSaturated;
+      ++saturated;
+    }
+    return true;
+  });
+  ASSERT_EQ(c.captured.size(), 26u);
+  EXPECT_EQ(c.captured[2].counts.flagged, saturated);
+  const Eigen::Vector3d truth = s.accel->Predict(s.sim.accel_truth, ev.pose);
+  const auto& r = *c.captured[2].record;
+  EXPECT_NEAR(r.acc->mean.x(), truth.x(), 4 * AccSigma(s) / std::sqrt(r.acc->count));
+}
+
+TEST(Sequencer, WrongAnnouncementIsRejected) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const MeasurementModel& accel = *s.accel;
+  seq.SetPredictor([&](const TablePose& pose, int triad) -> std::optional<TriadPrediction> {
+    if (triad != kTriadAcc) return std::nullopt;
+    return NominalPrediction(accel, pose, 5 * M_PI / 180, 1e-6);
+  });
+  // Pose 4 is announced as pose 0's angles (the controller sent the wrong pose).
+  std::size_t next = 0;
+  for (const Sample& x : s.sim.samples) {
+    while (next < s.sim.events.size() && Ns(s.sim.events[next].t_s) <= x.t_host_ns) {
+      Announcement a;
+      a.index = s.sim.events[next].index;
+      a.pose = next == 4 ? s.sim.events[0].pose : s.sim.events[next].pose;
+      a.t_host_ns = Ns(s.sim.events[next].t_s);
+      std::string error;
+      seq.Announce(a, &error);
+      ++next;
+    }
+    seq.Push(x);
+  }
+  seq.Finish(s.sim.samples.back().t_host_ns);
+  ASSERT_EQ(c.rejected.size(), 1u);
+  EXPECT_EQ(c.rejected[0].index, 4);
+  EXPECT_NE(c.rejected[0].reason.find("wrong announcement"), std::string::npos)
+      << c.rejected[0].reason;
+  EXPECT_EQ(c.captured.size(), 25u);
+}
+
+// Schedule mode on the same session without announcements gives the same records: same poses
+// in the same order, means equal within what the two windows' non-shared samples allow.
+TEST(Sequencer, ScheduleModeGivesTheSameRecords) {
+  const Session s = Simulate();
+  Collected announced, scheduled;
+  {
+    Sequencer seq(SequencerOptions{}, Collect(&announced));
+    Replay(s, &seq);
+  }
+  Sequencer seq(SequencerOptions{}, Collect(&scheduled));
+  std::string error;
+  ASSERT_TRUE(seq.SetSchedule(s.poses, &error)) << error;
+  for (const Sample& x : s.sim.samples) seq.Push(x);
+  seq.Finish(s.sim.samples.back().t_host_ns);
+  ASSERT_EQ(scheduled.captured.size(), 26u);
+  ASSERT_EQ(announced.captured.size(), 26u);
+  const double sigma = AccSigma(s);
+  for (std::size_t i = 0; i < 26; ++i) {
+    const PoseRecord& a = *announced.captured[i].record;
+    const PoseRecord& b = *scheduled.captured[i].record;
+    EXPECT_EQ(a.pose.phi_rad, b.pose.phi_rad);
+    EXPECT_EQ(a.pose.psi_rad, b.pose.psi_rad);
+    // Inside the same dwell.
+    const auto& ev = s.sim.events[i];
+    EXPECT_GE(b.t_start_s, ev.t_s - s.options.settle_s + 0.3);
+    EXPECT_LE(b.t_end_s, ev.dwell_end_s + 1e-9);
+    // Samples in one window only: m; difference of the means has sigma sqrt(2 m) sigma / n.
+    const double n = static_cast<double>(a.acc->count);
+    const double m = std::min(n, std::abs(a.t_start_s - b.t_start_s) * s.options.rate_hz + 1);
+    const double sd = std::sqrt(2 * m) * sigma / n;
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(a.acc->mean[k], b.acc->mean[k], 4 * sd + 1e-12);
+  }
+  ASSERT_FALSE(scheduled.events.empty());
+  EXPECT_EQ(scheduled.events.back().kind, SequencerEventKind::kScheduleEnd);
+  EXPECT_NE(scheduled.events.back().reason.find("all 26 scheduled poses captured"),
+            std::string::npos)
+      << scheduled.events.back().reason;
+}
+
+TEST(Sequencer, ScheduleWithTheWrongOrderSaysSo) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const MeasurementModel& accel = *s.accel;
+  seq.SetPredictor([&](const TablePose& pose, int triad) -> std::optional<TriadPrediction> {
+    if (triad != kTriadAcc) return std::nullopt;
+    return NominalPrediction(accel, pose, 5 * M_PI / 180, 1e-6);
+  });
+  std::vector<TablePose> poses = s.poses;
+  std::swap(poses[1], poses[2]);
+  std::string error;
+  ASSERT_TRUE(seq.SetSchedule(poses, &error));
+  for (const Sample& x : s.sim.samples) seq.Push(x);
+  seq.Finish(s.sim.samples.back().t_host_ns);
+  ASSERT_FALSE(c.skipped.empty());
+  EXPECT_NE(c.skipped[0].reason.find("is the schedule's order wrong?"), std::string::npos)
+      << c.skipped[0].reason;
+  EXPECT_EQ(c.events.back().kind, SequencerEventKind::kScheduleEnd);
+  EXPECT_NE(c.events.back().reason.find("fewer usable still segments"), std::string::npos)
+      << c.events.back().reason;
+}
+
+TEST(Sequencer, ProgressEventsCountUpToTheDwell) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  Replay(s, &seq);
+  int progress = 0;
+  std::int64_t last = 0;
+  for (const auto& e : c.events) {
+    if (e.index != 0) continue;
+    if (e.kind == SequencerEventKind::kProgress) {
+      ++progress;
+      EXPECT_GT(e.collected, last);
+      EXPECT_LT(e.collected, e.needed);
+      last = e.collected;
+    }
+  }
+  EXPECT_GE(progress, 8);
+  EXPECT_LE(progress, 10);
+  EXPECT_EQ(c.events.front().kind, SequencerEventKind::kNoiseMeasured);
+}
+
+}  // namespace
+}  // namespace turncal
