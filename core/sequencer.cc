@@ -122,8 +122,7 @@ bool Sequencer::Announce(const Announcement& a, std::string* error) {
   counts_ = SampleCounts{};
   needed_ = 0;
   state_ = State::kWaiting;
-  Emit(SequencerEventKind::kPoseStarted, t_s,
-       fmt::format("{}, dwell {:.2f} s", PoseText(pose_), dwell_s_));
+  Emit(SequencerEventKind::kPoseStarted, t_s, fmt::format("dwell {:.2f} s", dwell_s_));
   return true;
 }
 
@@ -151,8 +150,7 @@ void Sequencer::NextScheduled(double t_s) {
   dwell_s_ = options_.dwell_s;
   state_ = State::kWaiting;
   Emit(SequencerEventKind::kPoseStarted, t_s,
-       fmt::format("{} (scheduled {} of {}), dwell {:.2f} s", PoseText(pose_), index_ + 1,
-                   schedule_.size(), dwell_s_));
+       fmt::format("scheduled {} of {}, dwell {:.2f} s", index_ + 1, schedule_.size(), dwell_s_));
 }
 
 void Sequencer::Push(const Sample& sample) { Push(ToStillSample(sample)); }
@@ -293,7 +291,7 @@ void Sequencer::Feed(const StillSample& in) {
       break;
     case State::kWaiting:
       if (still && has_evicted && detector_->still_run() >= required_run_ &&
-          evicted.t_host_ns >= t_announce_ns_) {
+          evicted.t_host_ns > t_announce_ns_) {
         StartCollecting(evicted);
       }
       break;

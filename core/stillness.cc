@@ -272,6 +272,9 @@ NoiseMeter::Status NoiseMeter::Finish() {
   prof.rate_hz = (nd - 1) / span;
   if (t_dev_first && n_dev > 1 && *t_dev_last > *t_dev_first) {
     prof.device_period_s = (*t_dev_last - *t_dev_first) / static_cast<double>(n_dev - 1);
+    // The device clock ticks evenly; host receive times come in bursts. Its rate is the
+    // sample rate (to its drift, ppm).
+    if (n_dev == n) prof.rate_hz = 1.0 / *prof.device_period_s;
   }
   prof.sigma_dof = dof;
   prof.source =

@@ -13,12 +13,19 @@ namespace {
 
 class SequencerSink : public drivers::DecoderSink {
  public:
-  explicit SequencerSink(Sequencer* sequencer) : sequencer_(sequencer) {}
+  SequencerSink(Sequencer* sequencer, int device,
+                const std::function<bool(int, const Sample&)>* filter)
+      : sequencer_(sequencer), device_(device), filter_(filter) {}
   void OnFrame(const drivers::FrameView&) override {}
-  void OnSample(const Sample& sample) override { sequencer_->Push(sample); }
+  void OnSample(const Sample& sample) override {
+    if (*filter_ && !(*filter_)(device_, sample)) return;
+    sequencer_->Push(sample);
+  }
 
  private:
   Sequencer* sequencer_;
+  int device_;
+  const std::function<bool(int, const Sample&)>* filter_;
 };
 
 }  // namespace
@@ -54,7 +61,8 @@ bool ReplayCapture(drivers::CaptureReader* reader, const ReplayOptions& options,
     d.device = devices[i].name;
     if (devices[i].output_mode) d.xbus_legacy.output_mode = *devices[i].output_mode;
     if (devices[i].output_settings) d.xbus_legacy.output_settings = *devices[i].output_settings;
-    sinks.push_back(std::make_unique<SequencerSink>(sequencers.back().get()));
+    sinks.push_back(std::make_unique<SequencerSink>(sequencers.back().get(), device_index,
+                                                    &options.sample_filter));
     std::string why;
     decoders.push_back(drivers::MakeDecoder(devices[i].protocol, d, sinks.back().get(), &why));
     if (!decoders.back()) {

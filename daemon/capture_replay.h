@@ -21,6 +21,9 @@ struct ReplayOptions {
   // then ignored (and counted). Absent: announced mode from the capture's pose events.
   std::optional<std::vector<TablePose>> schedule;
   PosePredictor predictor;  // per pose and triad; may be empty
+  // What-if replays and tests: a decoded sample for which this returns false never reaches the
+  // sequencer (as if lost on the way). Empty: every sample goes on.
+  std::function<bool(int device, const Sample&)> sample_filter;
 };
 
 struct DeviceReplay {

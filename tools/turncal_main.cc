@@ -7,6 +7,7 @@
 #include "tools/models_command.h"
 #include "tools/observability_command.h"
 #include "tools/plan_compare_command.h"
+#include "tools/sequence_command.h"
 #include "tools/sim_command.h"
 #include "tools/sim_fit_command.h"
 #include "turncal/version.h"
@@ -23,6 +24,7 @@ int main(int argc, char** argv) {
   turncal::tools::AddSimCommand(&app);
   turncal::tools::AddObservabilityCommands(&app);
   turncal::tools::AddPlanCompareCommand(&app);
+  turncal::tools::AddSequenceCommand(&app);
   CLI11_PARSE(app, argc, argv);
   return 0;
 }
