@@ -11,58 +11,67 @@
 namespace turncal::daemon {
 namespace {
 
-class SequencerSink : public drivers::DecoderSink {
+class TargetSink : public drivers::DecoderSink {
  public:
-  SequencerSink(Sequencer* sequencer, int device,
-                const std::function<bool(int, const Sample&)>* filter)
-      : sequencer_(sequencer), device_(device), filter_(filter) {}
+  TargetSink(ReplayTarget* target, int device,
+             const std::function<bool(int, const Sample&)>* filter)
+      : target_(target), device_(device), filter_(filter) {}
   void OnFrame(const drivers::FrameView&) override {}
   void OnSample(const Sample& sample) override {
     if (*filter_ && !(*filter_)(device_, sample)) return;
-    sequencer_->Push(sample);
+    target_->OnSample(device_, sample);
   }
 
  private:
-  Sequencer* sequencer_;
+  ReplayTarget* target_;
   int device_;
   const std::function<bool(int, const Sample&)>* filter_;
 };
 
+// One sequencer per device.
+class SequencerTarget : public ReplayTarget {
+ public:
+  explicit SequencerTarget(std::vector<std::unique_ptr<Sequencer>> sequencers)
+      : sequencers_(std::move(sequencers)) {}
+  void OnSample(int device, const Sample& sample) override {
+    sequencers_[static_cast<std::size_t>(device)]->Push(sample);
+  }
+  bool OnAnnounce(const Announcement& a, std::string* error) override {
+    bool ok = true;
+    for (auto& s : sequencers_) ok = s->Announce(a, error) && ok;
+    return ok;
+  }
+  void OnTick(std::int64_t now_ns) override {
+    for (auto& s : sequencers_) s->Tick(now_ns);
+  }
+  void OnFinish(std::int64_t now_ns) override {
+    for (auto& s : sequencers_) s->Finish(now_ns);
+  }
+  const Sequencer& sequencer(std::size_t i) const { return *sequencers_[i]; }
+
+ private:
+  std::vector<std::unique_ptr<Sequencer>> sequencers_;
+};
+
 }  // namespace
 
-bool ReplayCapture(drivers::CaptureReader* reader, const ReplayOptions& options,
-                   ReplayResult* result, std::string* error,
-                   const std::function<void(int, const SequencerEvent&)>& on_event) {
-  if (!options.sequencer.IsValid(error)) return false;
+bool ReplayInto(drivers::CaptureReader* reader, ReplayTarget* target, bool announce,
+                const std::function<bool(int device, const Sample&)>& sample_filter,
+                ReplayStats* stats, std::string* error) {
   const auto& devices = reader->header().devices;
   if (devices.empty()) {
     if (error) *error = "the capture's header names no device";
     return false;
   }
-  *result = ReplayResult{};
-  result->devices.resize(devices.size());
-  std::vector<std::unique_ptr<Sequencer>> sequencers;
-  std::vector<std::unique_ptr<SequencerSink>> sinks;
+  *stats = ReplayStats{};
+  std::vector<std::unique_ptr<TargetSink>> sinks;
   std::vector<std::unique_ptr<drivers::Decoder>> decoders;
   for (std::size_t i = 0; i < devices.size(); ++i) {
-    DeviceReplay* out = &result->devices[i];
-    out->name = devices[i].name;
-    const int device_index = static_cast<int>(i);
-    sequencers.push_back(std::make_unique<Sequencer>(
-        options.sequencer, [out, device_index, &on_event](const SequencerEvent& e) {
-          out->events.push_back(e);
-          if (e.kind == SequencerEventKind::kCaptured && e.record)
-            out->records.push_back(*e.record);
-          if (on_event) on_event(device_index, e);
-        }));
-    if (options.predictor) sequencers.back()->SetPredictor(options.predictor);
-    if (options.schedule && !sequencers.back()->SetSchedule(*options.schedule, error)) return false;
     drivers::DecoderOptions d;
     d.device = devices[i].name;
     if (devices[i].output_mode) d.xbus_legacy.output_mode = *devices[i].output_mode;
     if (devices[i].output_settings) d.xbus_legacy.output_settings = *devices[i].output_settings;
-    sinks.push_back(std::make_unique<SequencerSink>(sequencers.back().get(), device_index,
-                                                    &options.sample_filter));
+    sinks.push_back(std::make_unique<TargetSink>(target, static_cast<int>(i), &sample_filter));
     std::string why;
     decoders.push_back(drivers::MakeDecoder(devices[i].protocol, d, sinks.back().get(), &why));
     if (!decoders.back()) {
@@ -82,44 +91,74 @@ bool ReplayCapture(drivers::CaptureReader* reader, const ReplayOptions& options,
       std::string why;
       const bool ok = protocol::ParsePoseCommand(j, t_ns, &a, &is_pose, &why);
       if (!is_pose) {
-        ++result->ignored_events;
+        ++stats->ignored_events;
         continue;
       }
-      ++result->pose_commands;
+      ++stats->pose_commands;
       if (!ok) {
-        result->warnings.push_back(fmt::format("event at {:.3f} s: {}", t_ns * 1e-9, why));
-        continue;
-      }
-      if (options.schedule) {
-        ++result->ignored_events;
-        continue;
-      }
-      for (auto& s : sequencers) {
-        if (!s->Announce(a, &why)) {
-          result->warnings.push_back(fmt::format("event at {:.3f} s: {}", t_ns * 1e-9, why));
-        }
+        stats->warnings.push_back(fmt::format("event at {:.3f} s: {}", t_ns * 1e-9, why));
+      } else if (!announce) {
+        ++stats->ignored_events;
+      } else if (!target->OnAnnounce(a, &why)) {
+        stats->warnings.push_back(fmt::format("event at {:.3f} s: {}", t_ns * 1e-9, why));
       }
       continue;
     }
     if (r.device >= decoders.size()) {
-      result->warnings.push_back(
+      stats->warnings.push_back(
           fmt::format("a record names device {} of {}; skipped", r.device, decoders.size()));
       continue;
     }
-    for (auto& s : sequencers) s->Tick(t_ns);
+    target->OnTick(t_ns);
     if (r.type == drivers::RecordType::kReceived) decoders[r.device]->Push(r.payload, t_ns);
   }
-  if (!reader->error().empty()) result->warnings.push_back(reader->error());
+  if (!reader->error().empty()) stats->warnings.push_back(reader->error());
   if (reader->truncated()) {
-    result->warnings.push_back(fmt::format("the capture ends inside a record ({} bytes ignored)",
-                                           reader->trailing_bytes()));
+    stats->warnings.push_back(fmt::format("the capture ends inside a record ({} bytes ignored)",
+                                          reader->trailing_bytes()));
   }
+  for (auto& d : decoders) {
+    d->Finish();
+    stats->decoders.push_back(d->counters());
+  }
+  target->OnFinish(last_ns);
+  return true;
+}
+
+bool ReplayCapture(drivers::CaptureReader* reader, const ReplayOptions& options,
+                   ReplayResult* result, std::string* error,
+                   const std::function<void(int, const SequencerEvent&)>& on_event) {
+  if (!options.sequencer.IsValid(error)) return false;
+  const auto& devices = reader->header().devices;
+  *result = ReplayResult{};
+  result->devices.resize(devices.size());
+  std::vector<std::unique_ptr<Sequencer>> sequencers;
   for (std::size_t i = 0; i < devices.size(); ++i) {
-    decoders[i]->Finish();
-    sequencers[i]->Finish(last_ns);
-    result->devices[i].decoder = decoders[i]->counters();
-    result->devices[i].totals = sequencers[i]->totals();
-    if (sequencers[i]->noise()) result->devices[i].noise = *sequencers[i]->noise();
+    DeviceReplay* out = &result->devices[i];
+    out->name = devices[i].name;
+    const int device_index = static_cast<int>(i);
+    sequencers.push_back(std::make_unique<Sequencer>(
+        options.sequencer, [out, device_index, &on_event](const SequencerEvent& e) {
+          out->events.push_back(e);
+          if (e.kind == SequencerEventKind::kCaptured && e.record)
+            out->records.push_back(*e.record);
+          if (on_event) on_event(device_index, e);
+        }));
+    if (options.predictor) sequencers.back()->SetPredictor(options.predictor);
+    if (options.schedule && !sequencers.back()->SetSchedule(*options.schedule, error)) return false;
+  }
+  SequencerTarget target(std::move(sequencers));
+  ReplayStats stats;
+  if (!ReplayInto(reader, &target, !options.schedule, options.sample_filter, &stats, error)) {
+    return false;
+  }
+  result->pose_commands = stats.pose_commands;
+  result->ignored_events = stats.ignored_events;
+  result->warnings = stats.warnings;
+  for (std::size_t i = 0; i < devices.size(); ++i) {
+    result->devices[i].decoder = stats.decoders[i];
+    result->devices[i].totals = target.sequencer(i).totals();
+    if (target.sequencer(i).noise()) result->devices[i].noise = *target.sequencer(i).noise();
   }
   return true;
 }

@@ -1,8 +1,9 @@
 #pragma once
-// A capture through the station's front half: each device's bytes through its decoder into its
-// own Sequencer, the capture's pose events (or a schedule) into every device's sequencer, in
-// record order and at record times -- the same path live data takes (DESIGN.md "Pose sources":
-// capture events go through the same code as announcements).
+// A capture through the station's front half: each device's bytes through its decoder, the
+// capture's pose events as announcements, in record order and at record times -- the same path
+// live data takes (DESIGN.md "Pose sources": capture events go through the same code as
+// announcements). ReplayInto feeds any ReplayTarget (the Station; one Sequencer per device for
+// `turncal sequence`).
 
 #include <functional>
 #include <optional>
@@ -14,6 +15,31 @@
 #include "drivers/decoder.h"
 
 namespace turncal::daemon {
+
+class ReplayTarget {
+ public:
+  virtual ~ReplayTarget() = default;
+  virtual void OnSample(int device, const Sample& sample) = 0;
+  // False with *error when the announcement is refused (schedule mode, bad dwell).
+  virtual bool OnAnnounce(const Announcement& announcement, std::string* error) = 0;
+  virtual void OnTick(std::int64_t now_ns) = 0;
+  virtual void OnFinish(std::int64_t now_ns) = 0;
+};
+
+struct ReplayStats {
+  std::vector<drivers::DecoderCounters> decoders;  // per device of the header
+  std::uint64_t pose_commands = 0;                 // pose events in the capture
+  std::uint64_t ignored_events = 0;                // not pose events (e.g. "end"), or not announced
+  std::vector<std::string> warnings;  // malformed events, bad device indices, truncation
+};
+
+// Replays the records `reader` has left into `target`. With `announce` false the pose events are
+// counted as ignored (schedule mode). `sample_filter` (may be empty): a decoded sample for which
+// it returns false never reaches the target (what-if replays, tests). False with *error when a
+// device of the header cannot be decoded.
+bool ReplayInto(drivers::CaptureReader* reader, ReplayTarget* target, bool announce,
+                const std::function<bool(int device, const Sample&)>& sample_filter,
+                ReplayStats* stats, std::string* error);
 
 struct ReplayOptions {
   SequencerOptions sequencer;
@@ -37,13 +63,13 @@ struct DeviceReplay {
 
 struct ReplayResult {
   std::vector<DeviceReplay> devices;
-  std::uint64_t pose_commands = 0;    // pose events in the capture
-  std::uint64_t ignored_events = 0;   // not pose events (e.g. "end"), or ignored in schedule mode
-  std::vector<std::string> warnings;  // malformed events, bad device indices, truncation
+  std::uint64_t pose_commands = 0;
+  std::uint64_t ignored_events = 0;
+  std::vector<std::string> warnings;
 };
 
-// Replays the records `reader` has left. `on_event` (optional) sees every sequencer event as it
-// happens, with the device's index. False with *error for options that cannot work.
+// One Sequencer per device of the capture. `on_event` (optional) sees every sequencer event as
+// it happens, with the device's index. False with *error for options that cannot work.
 bool ReplayCapture(drivers::CaptureReader* reader, const ReplayOptions& options,
                    ReplayResult* result, std::string* error,
                    const std::function<void(int, const SequencerEvent&)>& on_event = {});

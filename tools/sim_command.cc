@@ -18,6 +18,7 @@
 
 #include "core/measurement_model.h"
 #include "core/session_sim.h"
+#include "drivers/atomic_file.h"
 #include "drivers/capture/tcap.h"
 #include "protocol/pose_file.h"
 #include "tools/sim_capture.h"
@@ -48,24 +49,6 @@ struct Args {
   std::string live;  // a pty (or any writable tty/file) to stream to at real time
   double live_speed = 1.0;
 };
-
-bool WriteAtomically(const std::string& path, const std::string& text, std::string* error) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out || !(out << text) || !out.flush()) {
-      *error = "cannot write '" + tmp + "'";
-      return false;
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    *error = "cannot rename '" + tmp + "' to '" + path + "': " + ec.message();
-    return false;
-  }
-  return true;
-}
 
 // Writes the received bytes of `records` to `path` at their times (divided by `speed`), as a
 // device would; pose events go to standard output as JSON lines at their times.
@@ -218,7 +201,7 @@ int Run(const Args& args) {
         {"dwell_s", capture.session_options.dwell_s},
         {"samples", session.samples.size()},
         {"poses", pose_list}};
-    if (!WriteAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
+    if (!drivers::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
       fmt::print(stderr, "turncal sim: {}\n", error);
       return 1;
     }

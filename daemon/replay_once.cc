@@ -1,0 +1,45 @@
+#include "daemon/replay_once.h"
+
+#include <fmt/format.h>
+
+#include "drivers/atomic_file.h"
+#include "drivers/capture/tcap.h"
+
+namespace turncal::daemon {
+
+bool ReplayOnce(const std::string& path, const StationOptions& options,
+                const std::string& result_out,
+                const std::function<void(const nlohmann::json&)>& on_event,
+                ReplayOnceOutcome* outcome, std::string* error) {
+  if (!options.IsValid(error)) return false;
+  drivers::CaptureReader reader;
+  if (!reader.Open(path, error)) return false;
+  std::vector<std::string> names;
+  for (const auto& d : reader.header().devices) names.push_back(d.name);
+  *outcome = ReplayOnceOutcome{};
+  Station station(names, options, [&](const nlohmann::json& j) {
+    ++outcome->events;
+    if (on_event) on_event(j);
+  });
+  ReplayStats stats;
+  if (!ReplayInto(&reader, &station, true, {}, &stats, error)) return false;
+  outcome->result = station.Result();
+  outcome->result["source"] = path;
+  outcome->result["pose_commands"] = stats.pose_commands;
+  outcome->result["warnings"] = stats.warnings;
+  for (std::size_t i = 0; i < names.size() && i < stats.decoders.size(); ++i) {
+    const auto& c = stats.decoders[i];
+    outcome->result["devices"][names[i]]["decoder"] = {{"frames", c.frames},
+                                                       {"samples", c.samples},
+                                                       {"bad_checksums", c.bad_checksums},
+                                                       {"bytes_skipped", c.bytes_skipped},
+                                                       {"lost_samples", c.lost_samples}};
+  }
+  if (!result_out.empty() &&
+      !drivers::WriteFileAtomically(result_out, outcome->result.dump(2) + "\n", error)) {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace turncal::daemon

@@ -1,0 +1,185 @@
+#include "daemon/station.h"
+
+#include <fmt/format.h>
+
+#include "protocol/observability_json.h"
+#include "protocol/sequencer_json.h"
+
+namespace turncal::daemon {
+
+struct Station::ModelState {
+  std::unique_ptr<MeasurementModel> model;
+  std::unique_ptr<Calibrator> calibrator;
+  Estimate estimate;
+  GateResult gate;
+  int rank = 0;
+  int active_version = 0;  // 0: no active calibration
+  Estimate active;
+};
+
+struct Station::DeviceState {
+  std::string name;
+  std::unique_ptr<Sequencer> sequencer;
+  std::vector<ModelState> models;
+  int poses = 0;
+};
+
+bool StationOptions::IsValid(std::string* error) const {
+  if (!sequencer.IsValid(error) || !gate.IsValid(error)) return false;
+  SensorClass c;
+  if (!SensorClassByName(sensor_class, &c)) {
+    if (error) *error = "unknown sensor class '" + sensor_class + "' (industrial, consumer)";
+    return false;
+  }
+  if (models.empty()) {
+    if (error) *error = "no model to estimate";
+    return false;
+  }
+  for (const auto& m : models) {
+    if (!MakeModel(m, context, error)) return false;
+  }
+  return true;
+}
+
+Station::Station(std::vector<std::string> device_names, const StationOptions& options,
+                 EventSink sink)
+    : options_(options), sink_(std::move(sink)) {
+  SensorClassByName(options_.sensor_class, &sensor_);
+  if (!options_.gate_tolerances_set) {
+    GateTolerancesForClass(options_.sensor_class, &options_.gate.tolerances);
+  }
+  for (std::size_t i = 0; i < device_names.size(); ++i) {
+    auto d = std::make_unique<DeviceState>();
+    d->name = device_names[i];
+    d->sequencer = std::make_unique<Sequencer>(
+        options_.sequencer, [this, i](const SequencerEvent& e) { OnSequencerEvent(i, e); });
+    for (const auto& name : options_.models) {
+      ModelState m;
+      std::string error;
+      m.model = MakeModel(name, options_.context, &error);
+      m.calibrator = std::make_unique<Calibrator>(OptionsForClass(*m.model, sensor_));
+      d->models.push_back(std::move(m));
+    }
+    devices_.push_back(std::move(d));
+  }
+}
+
+Station::~Station() = default;
+
+void Station::OnSample(int device, const Sample& sample) {
+  devices_[static_cast<std::size_t>(device)]->sequencer->Push(sample);
+}
+
+bool Station::OnAnnounce(const Announcement& a, std::string* error) {
+  bool ok = true;
+  for (auto& d : devices_) ok = d->sequencer->Announce(a, error) && ok;
+  return ok;
+}
+
+void Station::OnTick(std::int64_t now_ns) {
+  for (auto& d : devices_) d->sequencer->Tick(now_ns);
+}
+
+void Station::OnFinish(std::int64_t now_ns) {
+  for (auto& d : devices_) d->sequencer->Finish(now_ns);
+}
+
+void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
+  if (sink_) {
+    nlohmann::json j = protocol::ToJson(e);
+    j["device"] = devices_[device]->name;
+    sink_(j);
+  }
+  if (e.kind == SequencerEventKind::kCaptured && e.record) Update(device, *e.record, e.t_s);
+}
+
+void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
+  DeviceState& d = *devices_[device];
+  ++d.poses;
+  for (ModelState& m : d.models) {
+    const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
+    if (accel ? !record.acc : !record.mag) continue;
+    std::string error;
+    if (!m.calibrator->add_pose(record, &error)) {
+      if (sink_) {
+        sink_({{"class", "ERROR"},
+               {"device", d.name},
+               {"model", m.model->name()},
+               {"message", "pose not used: " + error}});
+      }
+      continue;
+    }
+    m.estimate = m.calibrator->solve();
+    m.gate = GateResult{};
+    if (m.estimate.ok) {
+      const DataReport data = AnalyzeData(*m.model, m.estimate.theta,
+                                          m.calibrator->weighted_poses(), ObservabilityOptions{});
+      m.rank = data.analysis.rank;
+      m.gate = EvaluateGate(*m.model, m.estimate, data, options_.gate);
+    } else {
+      m.gate.reasons.push_back("no estimate: " + m.estimate.error);
+    }
+    if (sink_) {
+      sink_({{"class", "ESTIMATE"},
+             {"t", t_s},
+             {"device", d.name},
+             {"model", m.model->name()},
+             {"poses", m.estimate.poses},
+             {"summary", m.estimate.BriefReport()},
+             {"gate", ToJson(m.gate)}});
+    }
+    if (m.gate.pass) {
+      ++m.active_version;
+      m.active = m.estimate;
+      if (sink_) {
+        sink_({{"class", "CALIBRATION_ACTIVE"},
+               {"t", t_s},
+               {"device", d.name},
+               {"model", m.model->name()},
+               {"version", m.active_version},
+               {"poses", m.estimate.poses}});
+      }
+    }
+  }
+}
+
+nlohmann::json Station::Result() const {
+  nlohmann::json devices = nlohmann::json::object();
+  for (const auto& d : devices_) {
+    nlohmann::json models = nlohmann::json::object();
+    for (const ModelState& m : d->models) {
+      const Estimate& e = m.estimate;
+      nlohmann::json params = nlohmann::json::object();
+      for (std::size_t i = 0; i < e.parameters.size(); ++i) {
+        const auto k = static_cast<Eigen::Index>(i);
+        const double sigma = e.sigma[k];
+        params[e.parameters[i].name] = {
+            {"value", e.theta[k]},
+            {"sigma", std::isfinite(sigma) ? nlohmann::json(sigma) : nlohmann::json(nullptr)}};
+      }
+      models[m.model->name()] = {{"ok", e.ok},
+                                 {"poses", e.poses},
+                                 {"params", params},
+                                 {"rank", m.rank},
+                                 {"chi2", e.chi2},
+                                 {"dof", e.dof},
+                                 {"p_value", e.p_value},
+                                 {"gauge", e.gauge},
+                                 {"warnings", e.warnings},
+                                 {"gate", ToJson(m.gate)},
+                                 {"active_version", m.active_version}};
+    }
+    devices[d->name] = {{"poses", d->poses},
+                        {"samples",
+                         {{"used", d->sequencer->totals().used},
+                          {"flagged", d->sequencer->totals().flagged},
+                          {"outliers", d->sequencer->totals().outliers},
+                          {"lost", d->sequencer->totals().lost}}},
+                        {"captured", d->sequencer->captured()},
+                        {"rejected", d->sequencer->rejected()},
+                        {"models", models}};
+  }
+  return {{"class", "RESULT"}, {"devices", devices}};
+}
+
+}  // namespace turncal::daemon
