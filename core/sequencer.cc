@@ -10,7 +10,6 @@ namespace {
 
 constexpr std::uint32_t kBadFlags =
     kAccSaturated | kGyrSaturated | kMagSaturated | kStatusError | kClipping;
-constexpr std::int64_t kNoAnnouncement = std::numeric_limits<std::int64_t>::min();
 
 std::string PoseText(const TablePose& p) {
   return fmt::format("phi {:.3f} gamma {:.3f} psi {:.3f} deg", p.phi_rad * 180 / M_PI,
@@ -24,8 +23,11 @@ bool SequencerOptions::IsValid(std::string* error) const {
     if (error) *error = m;
     return false;
   };
-  if (!(dwell_s > 0) || !(settle_guard_s >= 0) || !(still_timeout_s > 0)) {
-    return fail("dwell must be > 0 s, settle guard >= 0 s, still timeout > 0 s");
+  if (!(dwell_s > 0 && dwell_s <= 3600) || !(settle_guard_s >= 0 && settle_guard_s <= 60) ||
+      !(still_timeout_s > 0 && still_timeout_s <= 86400)) {
+    return fail(
+        "dwell must be in (0, 3600] s, settle guard in [0, 60] s, still timeout in (0, "
+        "86400] s");
   }
   if (!(max_bad_fraction >= 0 && max_bad_fraction < 1)) {
     return fail("the bad-sample fraction must be in [0, 1)");
@@ -64,9 +66,7 @@ const char* ToString(SequencerEventKind kind) {
 }
 
 Sequencer::Sequencer(const SequencerOptions& options, Sink sink)
-    : options_(options), sink_(std::move(sink)), meter_(options.noise_meter) {
-  if (options_.noise) StartDetector(*options_.noise, 0.0);
-}
+    : options_(options), sink_(std::move(sink)), meter_(options.noise_meter) {}
 
 void Sequencer::Emit(SequencerEventKind kind, double t_s, std::string reason) {
   if (!sink_) return;
@@ -111,6 +111,7 @@ bool Sequencer::Announce(const Announcement& a, std::string* error) {
     return false;
   }
   const double t_s = static_cast<double>(a.t_host_ns) * 1e-9;
+  CheckTimeout(a.t_host_ns);
   if (busy()) {
     Reject(t_s,
            fmt::format("superseded: pose {} was announced before this one completed", a.index));
@@ -118,6 +119,7 @@ bool Sequencer::Announce(const Announcement& a, std::string* error) {
   index_ = a.index;
   pose_ = a.pose;
   t_announce_ns_ = a.t_host_ns;
+  announced_ = true;
   dwell_s_ = dwell;
   counts_ = SampleCounts{};
   needed_ = 0;
@@ -146,7 +148,8 @@ void Sequencer::NextScheduled(double t_s) {
   }
   index_ = static_cast<int>(next_scheduled_);
   pose_ = schedule_[next_scheduled_];
-  t_announce_ns_ = kNoAnnouncement;
+  t_announce_ns_ = std::numeric_limits<std::int64_t>::min();
+  announced_ = false;
   dwell_s_ = options_.dwell_s;
   state_ = State::kWaiting;
   Emit(SequencerEventKind::kPoseStarted, t_s,
@@ -181,69 +184,74 @@ void Sequencer::Push(StillSample s) {
   const std::optional<std::int64_t> previous_host = last_host_ns_;
   last_host_ns_ = s.t_host_ns;
   totals_.lost += lost;
-  if (s.flags & kBadFlags) {
-    pending_lost_ += lost;
+  // An interruption: many samples lost, or none received for longer than a window. The window
+  // cannot vouch for what happened in between. Checked before anything may drop this sample.
+  if (detector_) {
+    const double host_gap_s =
+        previous_host ? static_cast<double>(s.t_host_ns - *previous_host) * 1e-9 : 0.0;
+    const auto half = static_cast<std::uint32_t>(detector_->window() / 2);
+    if (lost > half || host_gap_s > options_.stillness.window_s) {
+      Interrupt(t_s, lost > half
+                         ? fmt::format("the stream was interrupted ({} samples lost)", lost)
+                         : fmt::format("the stream was interrupted (no sample for {:.2f} s)",
+                                       host_gap_s));
+    } else {
+      pending_lost_ += lost;
+    }
+  }
+  bool finite = true;
+  for (int t = 0; t < 3; ++t) {
+    if (s.has(t) && !s.v[t].allFinite()) finite = false;
+  }
+  if ((s.flags & kBadFlags) || !finite) {
     ++pending_flagged_;
     ++totals_.flagged;
-    if (excluded_) excluded_(s, "flagged");
+    if (excluded_) excluded_(s, finite ? "flagged" : "non-finite");
     return;
   }
   if (!detector_) {
-    switch (meter_.Add(s)) {
-      case NoiseMeter::Status::kCollecting:
-        break;
-      case NoiseMeter::Status::kMeasured:
-        StartDetector(meter_.profile(), t_s);
-        break;
-      case NoiseMeter::Status::kRejected: {
-        last_noise_failure_ = meter_.failure();
-        const int keep = index_;
-        index_ = -1;
-        Emit(SequencerEventKind::kNoiseRetry, t_s, meter_.failure());
-        index_ = keep;
-        meter_.Restart();
-        meter_.Add(s);
-        break;
+    if (options_.noise) {
+      // A configured profile: the triads this device sends (a datasheet class names mag too).
+      NoiseProfile profile = *options_.noise;
+      for (int t = 0; t < 3; ++t) {
+        if (!s.has(t)) profile.sigma[t].reset();
+      }
+      std::string error;
+      if (!profile.IsValid(&error)) {
+        ++pending_flagged_;
+        ++totals_.flagged;
+        if (excluded_) excluded_(s, "incomplete");
+        return;
+      }
+      StartDetector(profile, t_s);
+    } else {
+      switch (meter_.Add(s)) {
+        case NoiseMeter::Status::kCollecting:
+          return;
+        case NoiseMeter::Status::kMeasured:
+          StartDetector(meter_.profile(), t_s);
+          return;
+        case NoiseMeter::Status::kRejected: {
+          last_noise_failure_ = meter_.failure();
+          const int keep = index_;
+          index_ = -1;
+          Emit(SequencerEventKind::kNoiseRetry, t_s, meter_.failure());
+          index_ = keep;
+          meter_.Restart();
+          meter_.Add(s);
+          return;
+        }
       }
     }
-    return;
   }
   for (int t = 0; t < 3; ++t) {
     if (detector_->profile().sigma[t] && !s.has(t)) {
-      pending_lost_ += lost;
       ++pending_flagged_;
       ++totals_.flagged;
       if (excluded_) excluded_(s, "incomplete");
       return;
     }
   }
-  // An interruption: many samples lost, or none received for longer than a window. The window
-  // cannot vouch for what happened in between.
-  const double host_gap_s =
-      previous_host ? static_cast<double>(s.t_host_ns - *previous_host) * 1e-9 : 0.0;
-  if (lost > static_cast<std::uint32_t>(detector_->window() / 2) ||
-      host_gap_s > options_.stillness.window_s) {
-    const std::string why =
-        lost > static_cast<std::uint32_t>(detector_->window() / 2)
-            ? fmt::format("the stream was interrupted ({} samples lost)", lost)
-            : fmt::format("the stream was interrupted (no sample for {:.2f} s)", host_gap_s);
-    detector_->Clear();
-    held_.reset();
-    if (state_ == State::kCollecting) {
-      if (scheduled()) {
-        SkipSegment(t_s, why);
-      } else {
-        Reject(t_s, why);
-      }
-    } else if (state_ == State::kSegmentDone) {
-      state_ = State::kWaiting;
-    }
-    last_motion_ = StillFinding{};
-    last_motion_.kind = StillFinding::kFilling;
-    last_motion_t_s_ = t_s;
-    return;
-  }
-  pending_lost_ += lost;
   // Isolated outliers: a sample far from the window's median is held; if the next one is far
   // too, both are real (the table moves) and go in; otherwise the held one is dropped.
   if (held_) {
@@ -265,6 +273,25 @@ void Sequencer::Push(StillSample s) {
   }
 }
 
+void Sequencer::Interrupt(double t_s, const std::string& why) {
+  detector_->Clear();
+  held_.reset();
+  pending_lost_ = pending_flagged_ = pending_outliers_ = 0;
+  if (state_ == State::kCollecting) {
+    if (scheduled()) {
+      SkipSegment(t_s, why);
+      // The segment may go on after the gap: only real motion ends it, so the rest of this
+      // segment is never taken for the next pose.
+      state_ = State::kSegmentDone;
+    } else {
+      Reject(t_s, why);
+    }
+  }
+  last_motion_ = StillFinding{};
+  last_motion_.kind = StillFinding::kFilling;
+  last_motion_t_s_ = t_s;
+}
+
 void Sequencer::Feed(const StillSample& in) {
   StillSample s = in;
   s.lost_before = pending_lost_;
@@ -279,10 +306,14 @@ void Sequencer::Feed(const StillSample& in) {
     last_motion_ = detector_->finding();
     last_motion_t_s_ = t_s;
   }
+  const bool moving = !still && detector_->finding().kind != StillFinding::kFilling;
   switch (state_) {
     case State::kIdle:
+      break;
     case State::kScheduleDone:
-      if (state_ == State::kScheduleDone && still &&
+      // A further still segment long enough for a pose, after the last pose's segment ended.
+      if (moving) seen_motion_after_schedule_ = true;
+      if (seen_motion_after_schedule_ && still &&
           detector_->still_run() ==
               required_run_ + static_cast<std::int64_t>(
                                   std::ceil(options_.dwell_s * detector_->profile().rate_hz))) {
@@ -312,13 +343,14 @@ void Sequencer::Feed(const StillSample& in) {
       }
       break;
     case State::kSegmentDone:
-      if (!still) state_ = State::kWaiting;
+      if (moving) state_ = State::kWaiting;
       break;
   }
 }
 
 void Sequencer::StartCollecting(const StillSample& first) {
   for (auto& a : acc_) a.Reset();
+  for (auto& a : first_half_) a.Reset();
   temp_sum_ = 0;
   temp_n_ = 0;
   counts_ = SampleCounts{};
@@ -329,7 +361,10 @@ void Sequencer::StartCollecting(const StillSample& first) {
   state_ = State::kCollecting;
   Emit(SequencerEventKind::kCollecting, first.t_s(),
        fmt::format("still; collecting {} samples", needed_));
-  Commit(first);
+  // What was lost or left out before the first sample belongs to before the window.
+  StillSample head = first;
+  head.lost_before = head.flagged_before = head.outliers_before = 0;
+  Commit(head);
 }
 
 void Sequencer::Commit(const StillSample& s) {
@@ -339,7 +374,11 @@ void Sequencer::Commit(const StillSample& s) {
   counts_.flagged += s.flagged_before;
   counts_.outliers += s.outliers_before;
   for (int t = 0; t < 3; ++t) {
-    if (s.has(t)) acc_[t].Add(s.v[t]);
+    // Only triads the detector checks: an unchecked one could carry a spike into the record.
+    if (s.has(t) && detector_->profile().sigma[t]) {
+      acc_[t].Add(s.v[t]);
+      if (2 * (counts_.used + counts_.bad()) <= needed_) first_half_[t].Add(s.v[t]);
+    }
   }
   if (std::isfinite(s.temp_c)) {
     temp_sum_ += s.temp_c;
@@ -367,6 +406,33 @@ void Sequencer::Complete(double t_s) {
       Reject(t_s, why);
     }
     return;
+  }
+  // The dwell's two halves must agree: a table creeping too slowly for one window to see
+  // (0.1 deg/s moves gravity's projection by 2e-3 m/s^2 per second) shows between them.
+  for (int t = 0; t < 3; ++t) {
+    const NoiseProfile& prof = detector_->profile();
+    if (!prof.sigma[t] || acc_[t].count() < 4 || first_half_[t].count() < 2) continue;
+    const auto n = static_cast<double>(acc_[t].count());
+    const auto n1 = static_cast<double>(first_half_[t].count());
+    const Eigen::Vector3d m1 = first_half_[t].mean();
+    const Eigen::Vector3d m2 = (acc_[t].mean() * n - m1 * n1) / (n - n1);
+    for (int a = 0; a < 3; ++a) {
+      const double limit =
+          detector_->drift_z() * (*prof.sigma[t])[a] * std::sqrt(1 / n1 + 1 / (n - n1));
+      const double drift = std::abs(m2[a] - m1[a]);
+      if (!(drift <= limit)) {
+        const std::string why = fmt::format(
+            "the {} {} mean drifted {:.3g} {} between the halves of the dwell (still limit "
+            "{:.3g}): the table crept",
+            TriadName(t), "xyz"[a], drift, TriadUnit(t), limit);
+        if (scheduled()) {
+          SkipSegment(t_s, why);
+        } else {
+          Reject(t_s, why);
+        }
+        return;
+      }
+    }
   }
   PoseRecord record;
   record.pose = pose_;
@@ -444,8 +510,18 @@ void Sequencer::SkipSegment(double t_s, std::string reason) {
 }
 
 void Sequencer::CheckTimeout(std::int64_t now_ns) {
-  if (state_ != State::kWaiting || t_announce_ns_ == kNoAnnouncement) return;
-  const double waited = static_cast<double>(now_ns - t_announce_ns_) * 1e-9;
+  // A stream that stops during the dwell: nothing will complete the pose.
+  if (state_ == State::kCollecting && last_host_ns_ &&
+      static_cast<double>(now_ns) * 1e-9 - static_cast<double>(*last_host_ns_) * 1e-9 >
+          options_.stillness.window_s) {
+    Interrupt(
+        static_cast<double>(now_ns) * 1e-9,
+        fmt::format("the stream stopped during the dwell (no sample for {:.2f} s)",
+                    (static_cast<double>(now_ns) - static_cast<double>(*last_host_ns_)) * 1e-9));
+    return;
+  }
+  if (state_ != State::kWaiting || !announced_) return;
+  const double waited = (static_cast<double>(now_ns) - static_cast<double>(t_announce_ns_)) * 1e-9;
   if (waited <= options_.still_timeout_s) return;
   std::string why;
   const double t_announce_s = static_cast<double>(t_announce_ns_) * 1e-9;
@@ -502,9 +578,12 @@ void Sequencer::Finish(std::int64_t now_ns) {
         next_scheduled_, total, skipped_segments_);
   }
   const int keep = index_;
-  index_ = static_cast<int>(next_scheduled_);
+  const TablePose keep_pose = pose_;
+  index_ = -1;
+  pose_ = TablePose{};
   Emit(SequencerEventKind::kScheduleEnd, t_s, why);
   index_ = keep;
+  pose_ = keep_pose;
   state_ = State::kScheduleDone;
 }
 

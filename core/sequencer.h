@@ -144,6 +144,7 @@ class Sequencer {
   void NextScheduled(double t_s);
   std::uint32_t CountLost(const StillSample& s);
   void CheckTimeout(std::int64_t now_ns);
+  void Interrupt(double t_s, const std::string& why);
   bool scheduled() const { return !schedule_.empty(); }
 
   SequencerOptions options_;
@@ -161,11 +162,14 @@ class Sequencer {
   int index_ = -1;
   TablePose pose_;
   std::int64_t t_announce_ns_ = 0;
+  bool announced_ = false;  // announced mode (t_announce_ns_ meaningful, timeouts apply)
+  bool seen_motion_after_schedule_ = false;
   double dwell_s_ = 0.0;
   std::int64_t needed_ = 0;
   SampleCounts counts_;
   std::int64_t next_progress_ = 0;
   std::array<TriadAccumulator, 3> acc_;
+  std::array<TriadAccumulator, 3> first_half_;  // of the dwell, for the creep check
   double temp_sum_ = 0.0;
   std::int64_t temp_n_ = 0;
   std::int64_t t_first_ns_ = 0, t_last_ns_ = 0;

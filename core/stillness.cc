@@ -16,6 +16,8 @@ constexpr double kMadToSigma = 1.4826;  // sigma / MAD of a normal distribution
 // A measured sigma below the float32 resolution of the value is the sensor's quantisation, not
 // its noise; the floor keeps limits finite for a sensor that repeats the same value.
 constexpr double kFloat32Resolution = 1.2e-7;
+// One start-up attempt keeps at most this many samples (60 s at 10 kHz).
+constexpr std::size_t kMaxMeterSamples = 600000;
 
 // Two-sided normal (or Student's t with `dof`) quantile for a tail probability `alpha`.
 double TwoSidedZ(double alpha, double dof) {
@@ -171,8 +173,7 @@ NoiseMeter::Status NoiseMeter::Finish() {
       }
     }
   }
-  std::int64_t t_first_ns = 0, t_last_ns = 0, n_dev = 0, n = 0;
-  std::optional<double> t_dev_first, t_dev_last;
+  std::int64_t t_first_ns = 0, t_last_ns = 0, n = 0;
   for (std::size_t i = 0; i < samples_.size(); ++i) {
     const StillSample& s = samples_[i];
     if (!keep[i]) {
@@ -182,11 +183,6 @@ NoiseMeter::Status NoiseMeter::Finish() {
     if (n == 0) t_first_ns = s.t_host_ns;
     t_last_ns = s.t_host_ns;
     ++n;
-    if (s.t_device_s) {
-      if (!t_dev_first) t_dev_first = s.t_device_s;
-      t_dev_last = s.t_device_s;
-      ++n_dev;
-    }
     const double since = static_cast<double>(s.t_host_ns - samples_.front().t_host_ns) * 1e-9;
     const auto k = std::min<std::size_t>(
         parts_.size() - 1,
@@ -268,14 +264,28 @@ NoiseMeter::Status NoiseMeter::Finish() {
       prof.gyr_bias_sigma_radps = sigma.maxCoeff() / std::sqrt(nd);
     }
   }
-  if (!(span > 0)) return reject("the samples of the noise measurement share one timestamp");
-  prof.rate_hz = (nd - 1) / span;
-  if (t_dev_first && n_dev > 1 && *t_dev_last > *t_dev_first) {
-    prof.device_period_s = (*t_dev_last - *t_dev_first) / static_cast<double>(n_dev - 1);
-    // The device clock ticks evenly; host receive times come in bursts. Its rate is the
-    // sample rate (to its drift, ppm).
-    if (n_dev == n) prof.rate_hz = 1.0 / *prof.device_period_s;
+  // The rate over every sample of the attempt (outliers were received too); host receive times
+  // come in bursts, so the device clock's median spacing is preferred when every sample has it
+  // (robust to lost samples, which only lengthen a few spacings).
+  const double span_all =
+      static_cast<double>(samples_.back().t_host_ns - samples_.front().t_host_ns) * 1e-9;
+  if (!(span_all > 0)) return reject("the samples of the noise measurement share one timestamp");
+  prof.rate_hz = (total - 1) / span_all;
+  std::vector<double> spacing;
+  for (std::size_t i = 1; i < samples_.size(); ++i) {
+    if (samples_[i].t_device_s && samples_[i - 1].t_device_s) {
+      spacing.push_back(*samples_[i].t_device_s - *samples_[i - 1].t_device_s);
+    }
   }
+  if (spacing.size() + 1 == samples_.size() && !spacing.empty()) {
+    auto mid = spacing.begin() + static_cast<long>(spacing.size() / 2);
+    std::nth_element(spacing.begin(), mid, spacing.end());
+    if (*mid > 0) {
+      prof.device_period_s = *mid;
+      prof.rate_hz = 1.0 / *mid;
+    }
+  }
+
   prof.sigma_dof = dof;
   prof.source =
       fmt::format("measured over {:.2f} s ({} samples, {} outliers left out)", span, n, outliers_);
@@ -286,12 +296,12 @@ NoiseMeter::Status NoiseMeter::Finish() {
 }
 
 bool StillnessOptions::IsValid(std::string* error) const {
-  if (!(window_s > 0) || !(false_alarm > 0 && false_alarm < 0.5) || !(outlier_k >= 3) ||
-      !(gyr_bias_drift_radps >= 0)) {
+  if (!(window_s > 0 && window_s <= 10) || !(false_alarm > 0 && false_alarm < 0.5) ||
+      !(outlier_k >= 3) || !(gyr_bias_drift_radps >= 0)) {
     if (error) {
       *error =
-          "stillness: window must be > 0 s, false alarm in (0, 0.5), outlier k >= 3, gyro bias "
-          "drift >= 0";
+          "stillness: window must be in (0, 10] s, false alarm in (0, 0.5), outlier k >= 3, gyro "
+          "bias drift >= 0";
     }
     return false;
   }
@@ -320,7 +330,8 @@ std::string StillFinding::Describe() const {
 
 StillnessDetector::StillnessDetector(const NoiseProfile& profile, const StillnessOptions& options)
     : profile_(profile), options_(options) {
-  w_ = std::max(8, static_cast<int>(std::lround(options.window_s * profile.rate_hz)));
+  // At least 8 samples; at most 100000 (10 s at 10 kHz), whatever a measured rate says.
+  w_ = static_cast<int>(std::clamp(options.window_s * profile.rate_hz, 8.0, 100000.0));
   h_ = w_ / 2;
   ring_.resize(static_cast<std::size_t>(w_));
   scratch_.resize(static_cast<std::size_t>(w_));
@@ -459,6 +470,11 @@ void StillnessDetector::Evaluate() {
   double worst = 1.0;
   StillFinding f;
   auto consider = [&](StillFinding::Kind kind, int t, int a, double value, double limit) {
+    if (!std::isfinite(value)) {  // cannot vouch for stillness
+      worst = std::numeric_limits<double>::infinity();
+      f = StillFinding{kind, t, a, value, limit};
+      return;
+    }
     if (value > limit && value / limit > worst) {
       worst = value / limit;
       f = StillFinding{kind, t, a, value, limit};
@@ -469,7 +485,8 @@ void StillnessDetector::Evaluate() {
     for (int a = 0; a < 3; ++a) {
       const int c = 3 * t + a;
       const double sigma = (*profile_.sigma[t])[a];
-      const double var = std::max(0.0, (s2_[c] - s1_[c] * s1_[c] / n) / (n - 1));
+      double var = (s2_[c] - s1_[c] * s1_[c] / n) / (n - 1);
+      if (var < 0) var = 0;  // rounding; NaN stays NaN
       consider(StillFinding::kVariance, t, a, std::sqrt(var), sigma * std::sqrt(q_var_));
       const double drift = (s1_[c] - h1_[c]) / n2 - h1_[c] / n1;
       consider(StillFinding::kDrift, t, a, std::abs(drift),

@@ -159,6 +159,8 @@ class StillnessDetector {
   // The limits in words, for logs and docs.
   std::string DescribeLimits() const;
   const NoiseProfile& profile() const { return profile_; }
+  // The two-sided quantile the drift test uses (normal, or Student's t for a measured noise).
+  double drift_z() const { return z_drift_; }
 
  private:
   const Eigen::Vector3d& At(std::size_t logical, int triad) const;

@@ -40,15 +40,19 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
   }
   a.pose = TablePose{angles[0], angles[1], angles[2]};
   if (const auto it = j.find("index"); it != j.end()) {
-    if (!it->is_number_integer()) {
-      if (error) *error = "pose: 'index' must be an integer";
+    const bool in_range =
+        (it->is_number_unsigned() && it->get<std::uint64_t>() <= 2147483647u) ||
+        (it->is_number_integer() && !it->is_number_unsigned() && it->get<std::int64_t>() >= 0 &&
+         it->get<std::int64_t>() <= 2147483647);
+    if (!in_range) {
+      if (error) *error = "pose: 'index' must be an integer in [0, 2147483647]";
       return false;
     }
-    a.index = it->get<int>();
+    a.index = static_cast<int>(it->get<std::int64_t>());
   }
   if (const auto it = j.find("dwell_s"); it != j.end()) {
-    if (!it->is_number() || !(it->get<double>() > 0)) {
-      if (error) *error = "pose: 'dwell_s' must be a number > 0 (seconds)";
+    if (!it->is_number() || !(it->get<double>() > 0) || !(it->get<double>() <= 3600)) {
+      if (error) *error = "pose: 'dwell_s' must be a number in (0, 3600] (seconds)";
       return false;
     }
     a.dwell_s = it->get<double>();
@@ -73,7 +77,7 @@ nlohmann::json ToJson(const PoseRecord& r) {
 
 nlohmann::json ToJson(const SequencerEvent& e) {
   nlohmann::json j = {{"class", ToString(e.kind)}, {"t", e.t_s}};
-  if (e.index >= 0 || e.kind != SequencerEventKind::kNoiseMeasured) {
+  if (e.index >= 0) {
     j["index"] = e.index;
     j["pose"] = {{"phi_deg", e.pose.phi_rad / kDegToRad},
                  {"gamma_deg", e.pose.gamma_rad / kDegToRad},

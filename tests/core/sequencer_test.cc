@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <random>
 
@@ -229,15 +230,14 @@ TEST(StillnessDetector, SeesSlowTurnsTiltsAndVibration) {
   });
   EXPECT_EQ(turn.kind, StillFinding::kRate) << turn.Describe();
   EXPECT_EQ(turn.axis, 2);
-  // A tilt creeping at 0.5 deg/s about x (gyro shows it too, but the drift is decisive).
+  // A tilt creeping at 0.3 deg/s about x, the gyro left still: only the accelerometer's drift
+  // test can see it (its limit in one 0.5 s window: 0.15 deg/s at this noise).
   const StillFinding tilt = run([](double t, StillSample* s) {
-    if (t > 1.0) {
-      const double a = 0.5 * M_PI / 180 * (t - 1.0);
-      s->v[kTriadAcc].y() += 9.80665 * std::sin(a);
-      s->v[kTriadGyr].x() += 0.5 * M_PI / 180;
-    }
+    if (t > 1.0) s->v[kTriadAcc].y() += 9.80665 * std::sin(0.3 * M_PI / 180 * (t - 1.0));
   });
-  EXPECT_NE(tilt.kind, StillFinding::kNone);
+  EXPECT_EQ(tilt.kind, StillFinding::kDrift) << tilt.Describe();
+  EXPECT_EQ(tilt.triad, kTriadAcc);
+  EXPECT_EQ(tilt.axis, 1);
   // Vibration: 20 Hz, 0.02 m/s^2 on z.
   const StillFinding vib = run([](double t, StillSample* s) {
     if (t > 1.0) s->v[kTriadAcc].z() += 0.02 * std::sin(2 * M_PI * 20 * t);
@@ -601,6 +601,130 @@ TEST(Sequencer, ProgressEventsCountUpToTheDwell) {
   EXPECT_GE(progress, 8);
   EXPECT_LE(progress, 10);
   EXPECT_EQ(c.events.front().kind, SequencerEventKind::kNoiseMeasured);
+}
+
+TEST(Sequencer, NonFiniteSamplesAreExcludedNeverAveraged) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const auto& ev = s.sim.events[3];
+  int poisoned = 0;
+  Replay(s, &seq, [&](Sample* x) {
+    const double t = x->t_host_ns * 1e-9;
+    // Two NaNs in a row (which the outlier gate alone would take for a real change).
+    if (t > ev.t_s + 1.0 && t < ev.t_s + 1.025) {
+      x->acc_mps2->x() = std::numeric_limits<double>::quiet_NaN();
+      ++poisoned;
+    }
+    return true;
+  });
+  ASSERT_EQ(c.captured.size(), 26u);
+  EXPECT_EQ(poisoned, 2);
+  EXPECT_TRUE(c.captured[3].record->acc->mean.allFinite());
+  EXPECT_EQ(c.captured[3].counts.flagged, 2);
+}
+
+// Schedule mode: a gap in the stream during a still segment must not let the rest of that
+// segment count for the next pose.
+TEST(Sequencer, InterruptionInAScheduledSegmentDoesNotShiftThePoses) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  std::string error;
+  ASSERT_TRUE(seq.SetSchedule(s.poses, &error));
+  // 0.7 s without samples right after pose 2's record is complete (4.2 s into its 6 s still).
+  const auto& ev = s.sim.events[2];
+  for (const Sample& x : s.sim.samples) {
+    const double t = x.t_host_ns * 1e-9;
+    if (t > ev.t_s + 3.6 && t < ev.t_s + 4.3) continue;
+    seq.Push(x);
+  }
+  seq.Finish(s.sim.samples.back().t_host_ns);
+  ASSERT_EQ(c.captured.size(), 26u);
+  for (std::size_t i = 0; i < 26; ++i) {
+    const auto& e = s.sim.events[i];
+    EXPECT_GE(c.captured[i].record->t_start_s, e.t_s - s.options.settle_s) << "pose " << i;
+    EXPECT_LE(c.captured[i].record->t_end_s, e.dwell_end_s + 1e-9) << "pose " << i;
+  }
+  EXPECT_NE(c.events.back().reason.find("0 further still segments"), std::string::npos)
+      << c.events.back().reason;
+}
+
+// A flagged sample right after a gap must not hide the gap.
+TEST(Sequencer, FlaggedSampleAfterAGapStillInterruptsThePose) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const auto& ev = s.sim.events[4];
+  Replay(s, &seq, [&](Sample* x) {
+    const double t = x->t_host_ns * 1e-9;
+    if (t > ev.t_s + 1.0 && t < ev.t_s + 1.3) return false;  // 30 samples lost
+    if (t >= ev.t_s + 1.3 && t < ev.t_s + 1.31) x->flags |= kAccSaturated;
+    return true;
+  });
+  ASSERT_EQ(c.rejected.size(), 1u);
+  EXPECT_EQ(c.rejected[0].index, 4);
+  EXPECT_NE(c.rejected[0].reason.find("the stream was interrupted ("), std::string::npos)
+      << c.rejected[0].reason;
+}
+
+// A creep too slow for one window (0.03 deg/s, gyro still) shows between the dwell's halves.
+TEST(Sequencer, CreepDuringTheDwellIsRejected) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const auto& ev = s.sim.events[6];
+  Replay(s, &seq, [&](Sample* x) {
+    const double t = x->t_host_ns * 1e-9;
+    if (t > ev.t_s && t < ev.dwell_end_s) {
+      x->acc_mps2->x() += 9.80665 * std::sin(0.03 * M_PI / 180 * (t - ev.t_s));
+    }
+    return true;
+  });
+  ASSERT_EQ(c.rejected.size(), 1u);
+  EXPECT_EQ(c.rejected[0].index, 6);
+  EXPECT_NE(c.rejected[0].reason.find("acc x mean drifted"), std::string::npos)
+      << c.rejected[0].reason;
+  EXPECT_EQ(c.captured.size(), 25u);
+}
+
+TEST(Sequencer, StreamThatStopsDuringTheDwellIsRejectedByTick) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const auto& ev = s.sim.events[0];
+  std::size_t next = 0;
+  for (const Sample& x : s.sim.samples) {
+    if (x.t_host_ns * 1e-9 > ev.t_s + 2.0) break;
+    if (next == 0 && Ns(ev.t_s) <= x.t_host_ns) {
+      Announcement a;
+      a.index = 0;
+      a.pose = ev.pose;
+      a.t_host_ns = Ns(ev.t_s);
+      std::string error;
+      ASSERT_TRUE(seq.Announce(a, &error));
+      ++next;
+    }
+    seq.Push(x);
+  }
+  EXPECT_TRUE(seq.busy());
+  seq.Tick(Ns(ev.t_s + 3.0));
+  EXPECT_FALSE(seq.busy());
+  ASSERT_EQ(c.rejected.size(), 1u);
+  EXPECT_NE(c.rejected[0].reason.find("stopped during the dwell"), std::string::npos)
+      << c.rejected[0].reason;
+}
+
+TEST(Sequencer, ConfiguredNoiseForADeviceWithoutMagnetometer) {
+  Session s = Simulate();
+  for (auto& x : s.sim.samples) x.mag.reset();
+  SequencerOptions o;
+  o.noise = NoiseProfileForClass(s.options.sensor, s.options.rate_hz, true);
+  Collected c;
+  Sequencer seq(o, Collect(&c));
+  Replay(s, &seq);
+  EXPECT_EQ(c.captured.size(), 26u);
+  EXPECT_EQ(seq.totals().flagged, 0);
 }
 
 }  // namespace
