@@ -85,7 +85,8 @@ bool ReplayInto(drivers::CaptureReader* reader, ReplayTarget* target, bool annou
     // Host times are nanoseconds since the capture began; beyond 2^62 (146 years) a record is
     // corrupt, and the arithmetic on it would overflow.
     if (r.t_ns > (std::uint64_t{1} << 62)) {
-      stats->warnings.push_back(fmt::format("a record's time {} ns is not plausible; skipped", r.t_ns));
+      stats->warnings.push_back(
+          fmt::format("a record's time {} ns is not plausible; skipped", r.t_ns));
       continue;
     }
     const auto t_ns = static_cast<std::int64_t>(r.t_ns);

@@ -4,6 +4,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "daemon/config.h"
 #include "daemon/options.h"
 #include "daemon/replay_once.h"
 #include "turncal/version.h"
@@ -20,10 +21,24 @@ int main(int argc, char** argv) {
     spdlog::error("{}", error);
     return 2;
   }
+  // The configuration file, then the flags over it.
+  turncal::daemon::Config config;
+  if (!options.config_path.empty() &&
+      !turncal::daemon::LoadConfig(options.config_path, &config, &error)) {
+    spdlog::error("{}", error);
+    return 2;
+  }
+  if (config.socket_path && app.count("--socket") == 0) options.socket_path = *config.socket_path;
+  if (config.state_dir && app.count("--state-dir") == 0) options.state_dir = *config.state_dir;
+  for (const auto& d : config.devices) {
+    bool overridden = false;
+    for (const auto& f : options.devices) overridden = overridden || f.name == d.name;
+    if (!overridden) options.devices.push_back(d);
+  }
   if (options.once) {
     // The whole pipeline on a capture at full speed: events to stderr, the result to
     // --result-out (and a summary line per model).
-    turncal::daemon::StationOptions station;
+    const turncal::daemon::StationOptions& station = config.station;
     turncal::daemon::ReplayOnceOutcome outcome;
     if (options.replay_protocol) {
       spdlog::error(

@@ -1,0 +1,224 @@
+#include "daemon/config.h"
+
+#include <fmt/format.h>
+
+#include <toml++/toml.h>
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace turncal::daemon {
+namespace {
+
+std::string Where(const toml::node& node, const std::string& source) {
+  const auto& r = node.source();
+  return fmt::format("{}:{}", source, r.begin.line);
+}
+
+// Checks that `table` has only `allowed` keys.
+bool OnlyKeys(const toml::table& table, const std::set<std::string>& allowed,
+              const std::string& context, const std::string& source, std::string* error) {
+  for (const auto& [key, node] : table) {
+    if (!allowed.count(std::string(key.str()))) {
+      std::string list;
+      for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+      *error = fmt::format("{}: unknown key '{}' in {} (known: {})", Where(node, source), key.str(),
+                           context, list);
+      return false;
+    }
+  }
+  return true;
+}
+
+bool GetNumber(const toml::table& t, const char* key, double* out, const std::string& source,
+               std::string* error) {
+  const toml::node* n = t.get(key);
+  if (!n) return true;
+  if (auto v = n->value<double>()) {
+    if (!std::isfinite(*v)) {
+      *error = fmt::format("{}: '{}' must be finite", Where(*n, source), key);
+      return false;
+    }
+    *out = *v;
+    return true;
+  }
+  *error = fmt::format("{}: '{}' must be a number", Where(*n, source), key);
+  return false;
+}
+
+bool GetString(const toml::table& t, const char* key, std::string* out, const std::string& source,
+               std::string* error) {
+  const toml::node* n = t.get(key);
+  if (!n) return true;
+  if (auto v = n->value<std::string>()) {
+    *out = *v;
+    return true;
+  }
+  *error = fmt::format("{}: '{}' must be a string", Where(*n, source), key);
+  return false;
+}
+
+}  // namespace
+
+bool ParseConfig(const std::string& text, const std::string& source, Config* out,
+                 std::string* error) {
+  toml::table root;
+  try {
+    root = toml::parse(text, source);
+  } catch (const toml::parse_error& e) {
+    *error = fmt::format("{}:{}: {}", source, e.source().begin.line, e.description());
+    return false;
+  }
+  Config c;
+  if (!OnlyKeys(root, {"socket", "state_dir", "station", "sequencer", "gate", "device"}, "the file",
+                source, error)) {
+    return false;
+  }
+  std::string s;
+  if (root.get("socket")) {
+    if (!GetString(root, "socket", &s, source, error)) return false;
+    c.socket_path = s;
+  }
+  if (root.get("state_dir")) {
+    if (!GetString(root, "state_dir", &s, source, error)) return false;
+    c.state_dir = s;
+  }
+  StationOptions& st = c.station;
+  if (const toml::table* t = root["station"].as_table()) {
+    if (!OnlyKeys(*t, {"models", "sensor_class"}, "[station]", source, error)) return false;
+    if (!GetString(*t, "sensor_class", &st.sensor_class, source, error)) return false;
+    if (const toml::node* n = t->get("models")) {
+      const toml::array* a = n->as_array();
+      if (!a || a->empty()) {
+        *error =
+            fmt::format("{}: 'models' must be a non-empty array of model names", Where(*n, source));
+        return false;
+      }
+      st.models.clear();
+      for (const auto& m : *a) {
+        auto v = m.value<std::string>();
+        if (!v) {
+          *error = fmt::format("{}: 'models' must hold strings", Where(m, source));
+          return false;
+        }
+        st.models.push_back(*v);
+      }
+    }
+  }
+  if (const toml::table* t = root["sequencer"].as_table()) {
+    if (!OnlyKeys(*t,
+                  {"dwell_s", "window_s", "settle_guard_s", "still_timeout_s", "startup_s",
+                   "max_bad_fraction", "false_alarm", "outlier_k", "gyr_bias_drift_radps",
+                   "pose_check_false_alarm"},
+                  "[sequencer]", source, error)) {
+      return false;
+    }
+    SequencerOptions& q = st.sequencer;
+    if (!GetNumber(*t, "dwell_s", &q.dwell_s, source, error) ||
+        !GetNumber(*t, "window_s", &q.stillness.window_s, source, error) ||
+        !GetNumber(*t, "settle_guard_s", &q.settle_guard_s, source, error) ||
+        !GetNumber(*t, "still_timeout_s", &q.still_timeout_s, source, error) ||
+        !GetNumber(*t, "startup_s", &q.noise_meter.duration_s, source, error) ||
+        !GetNumber(*t, "max_bad_fraction", &q.max_bad_fraction, source, error) ||
+        !GetNumber(*t, "false_alarm", &q.stillness.false_alarm, source, error) ||
+        !GetNumber(*t, "outlier_k", &q.stillness.outlier_k, source, error) ||
+        !GetNumber(*t, "gyr_bias_drift_radps", &q.stillness.gyr_bias_drift_radps, source, error) ||
+        !GetNumber(*t, "pose_check_false_alarm", &q.pose_check_false_alarm, source, error)) {
+      return false;
+    }
+  }
+  GateTolerancesForClass(st.sensor_class, &st.gate.tolerances);
+  if (const toml::table* t = root["gate"].as_table()) {
+    if (!OnlyKeys(*t,
+                  {"scale_factor", "angle_deg", "acceleration_mps2", "gain", "field", "min_p_value",
+                   "max_normalized_residual", "parameters"},
+                  "[gate]", source, error)) {
+      return false;
+    }
+    GateTolerances& g = st.gate.tolerances;
+    double angle_deg = g.angle_rad * 180 / M_PI;
+    if (!GetNumber(*t, "scale_factor", &g.scale_factor, source, error) ||
+        !GetNumber(*t, "angle_deg", &angle_deg, source, error) ||
+        !GetNumber(*t, "acceleration_mps2", &g.acceleration_mps2, source, error) ||
+        !GetNumber(*t, "gain", &g.gain, source, error) ||
+        !GetNumber(*t, "field", &g.field, source, error) ||
+        !GetNumber(*t, "min_p_value", &st.gate.min_p_value, source, error) ||
+        !GetNumber(*t, "max_normalized_residual", &st.gate.max_normalized_residual, source,
+                   error)) {
+      return false;
+    }
+    g.angle_rad = angle_deg * M_PI / 180;
+    if (const toml::table* p = (*t)["parameters"].as_table()) {
+      for (const auto& [key, node] : *p) {
+        auto v = node.value<double>();
+        if (!v || !(*v > 0)) {
+          *error = fmt::format("{}: gate tolerance '{}' must be a number > 0", Where(node, source),
+                               key.str());
+          return false;
+        }
+        st.gate.parameter_tolerance[std::string(key.str())] = *v;
+      }
+    }
+    st.gate_tolerances_set = true;
+  }
+  if (const toml::node* n = root.get("device")) {
+    const toml::array* a = n->as_array();
+    if (!a) {
+      *error = fmt::format("{}: devices are [[device]] tables", Where(*n, source));
+      return false;
+    }
+    for (const auto& d : *a) {
+      const toml::table* t = d.as_table();
+      if (!t) {
+        *error = fmt::format("{}: devices are [[device]] tables", Where(d, source));
+        return false;
+      }
+      if (!OnlyKeys(*t, {"name", "protocol", "port", "baud"}, "[[device]]", source, error)) {
+        return false;
+      }
+      std::string name, protocol, port;
+      double baud = 0;
+      if (!GetString(*t, "name", &name, source, error) ||
+          !GetString(*t, "protocol", &protocol, source, error) ||
+          !GetString(*t, "port", &port, source, error) ||
+          !GetNumber(*t, "baud", &baud, source, error)) {
+        return false;
+      }
+      std::string spec = fmt::format("{}={}:{}", name, protocol, port);
+      if (baud > 0) spec += fmt::format("@{}", static_cast<long long>(baud));
+      std::string why;
+      auto parsed = drivers::ParseDeviceSpec(spec, &why);
+      if (!parsed) {
+        *error = fmt::format("{}: device: {}", Where(d, source), why);
+        return false;
+      }
+      for (const auto& other : c.devices) {
+        if (other.name == parsed->name) {
+          *error = fmt::format("{}: device name '{}' is given twice", Where(d, source), name);
+          return false;
+        }
+      }
+      c.devices.push_back(*parsed);
+    }
+  }
+  if (!st.IsValid(error)) {
+    *error = source + ": " + *error;
+    return false;
+  }
+  *out = std::move(c);
+  return true;
+}
+
+bool LoadConfig(const std::string& path, Config* out, std::string* error) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    *error = "cannot open configuration '" + path + "'";
+    return false;
+  }
+  std::stringstream text;
+  text << in.rdbuf();
+  return ParseConfig(text.str(), path, out, error);
+}
+
+}  // namespace turncal::daemon
