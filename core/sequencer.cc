@@ -68,7 +68,8 @@ const char* ToString(SequencerEventKind kind) {
 Sequencer::Sequencer(const SequencerOptions& options, Sink sink)
     : options_(options), sink_(std::move(sink)), meter_(options.noise_meter) {}
 
-void Sequencer::Emit(SequencerEventKind kind, double t_s, std::string reason) {
+void Sequencer::Emit(SequencerEventKind kind, double t_s, std::string reason,
+                     const PoseRecord* record) {
   if (!sink_) return;
   SequencerEvent e;
   e.kind = kind;
@@ -79,6 +80,7 @@ void Sequencer::Emit(SequencerEventKind kind, double t_s, std::string reason) {
   e.needed = needed_;
   e.counts = counts_;
   e.reason = std::move(reason);
+  if (record) e.record = *record;
   sink_(e);
 }
 
@@ -471,19 +473,8 @@ void Sequencer::Complete(double t_s) {
     }
   }
   ++captured_;
-  if (sink_) {
-    SequencerEvent e;
-    e.kind = SequencerEventKind::kCaptured;
-    e.t_s = t_s;
-    e.index = index_;
-    e.pose = pose_;
-    e.collected = counts_.used;
-    e.needed = needed_;
-    e.counts = counts_;
-    e.record = record;
-    e.reason = fmt::format("{} samples over {:.2f} s", counts_.used, record.duration_s());
-    sink_(e);
-  }
+  Emit(SequencerEventKind::kCaptured, t_s,
+       fmt::format("{} samples over {:.2f} s", counts_.used, record.duration_s()), &record);
   if (scheduled()) {
     ++next_scheduled_;
     NextScheduled(t_s);

@@ -133,7 +133,8 @@ class Sequencer {
 
  private:
   enum class State { kIdle, kWaiting, kCollecting, kSegmentDone, kScheduleDone };
-  void Emit(SequencerEventKind kind, double t_s, std::string reason = {});
+  void Emit(SequencerEventKind kind, double t_s, std::string reason = {},
+            const PoseRecord* record = nullptr);
   void StartDetector(const NoiseProfile& profile, double t_s);
   void Feed(const StillSample& s);
   void StartCollecting(const StillSample& first);

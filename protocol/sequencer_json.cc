@@ -40,10 +40,9 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
   }
   a.pose = TablePose{angles[0], angles[1], angles[2]};
   if (const auto it = j.find("index"); it != j.end()) {
-    const bool in_range =
-        (it->is_number_unsigned() && it->get<std::uint64_t>() <= 2147483647u) ||
-        (it->is_number_integer() && !it->is_number_unsigned() && it->get<std::int64_t>() >= 0 &&
-         it->get<std::int64_t>() <= 2147483647);
+    const bool in_range = (it->is_number_unsigned() && it->get<std::uint64_t>() <= 2147483647u) ||
+                          (it->is_number_integer() && !it->is_number_unsigned() &&
+                           it->get<std::int64_t>() >= 0 && it->get<std::int64_t>() <= 2147483647);
     if (!in_range) {
       if (error) *error = "pose: 'index' must be an integer in [0, 2147483647]";
       return false;
