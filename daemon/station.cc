@@ -2,8 +2,13 @@
 
 #include <fmt/format.h>
 
+#include <chrono>
+#include <ctime>
+
+#include "daemon/persistence.h"
 #include "protocol/observability_json.h"
 #include "protocol/sequencer_json.h"
+#include "turncal/version.h"
 
 namespace turncal::daemon {
 
@@ -21,8 +26,22 @@ struct Station::DeviceState {
   std::string name;
   std::unique_ptr<Sequencer> sequencer;
   std::vector<ModelState> models;
+  std::vector<TablePose> poses_used;
   int poses = 0;
 };
+
+namespace {
+
+std::string UtcNow() {
+  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char text[32];
+  std::strftime(text, sizeof(text), "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return text;
+}
+
+}  // namespace
 
 bool StationOptions::IsValid(std::string* error) const {
   if (!sequencer.IsValid(error) || !gate.IsValid(error)) return false;
@@ -62,9 +81,55 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
     }
     devices_.push_back(std::move(d));
   }
+  if (!options_.state_dir.empty()) Resume();
 }
 
 Station::~Station() = default;
+
+void Station::Publish(const nlohmann::json& event) {
+  if (sink_) sink_(event);
+}
+
+// A journal from an earlier run of this session: its poses go through the calibrators again
+// (without re-journaling or re-publishing), and versions continue from the stored calibrations.
+void Station::Resume() {
+  std::vector<JournalEntry> entries;
+  int skipped = 0;
+  std::string error;
+  if (!PoseJournal::Load(options_.state_dir, &entries, &skipped, &error)) {
+    Publish({{"class", "ERROR"}, {"message", error}});
+  }
+  for (auto& d : devices_) {
+    for (ModelState& m : d->models) {
+      nlohmann::json stored;
+      if (ReadActiveCalibration(options_.state_dir, d->name, m.model->name(), &stored) &&
+          stored.contains("version") && stored["version"].is_number_integer()) {
+        m.active_version = stored["version"].get<int>();
+      }
+    }
+  }
+  resuming_ = true;
+  std::vector<int> resumed(devices_.size(), 0);
+  for (const auto& e : entries) {
+    for (std::size_t i = 0; i < devices_.size(); ++i) {
+      if (devices_[i]->name != e.device) continue;
+      Update(i, e.record, e.record.t_end_s);
+      ++resumed[i];
+    }
+  }
+  resuming_ = false;
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    Publish({{"class", "SESSION_RESUMED"},
+             {"device", devices_[i]->name},
+             {"poses", resumed[i]},
+             {"journal_lines_skipped", skipped}});
+  }
+  journal_ = std::make_unique<PoseJournal>();
+  if (!journal_->Open(options_.state_dir, &error)) {
+    Publish({{"class", "ERROR"}, {"message", error}});
+    journal_.reset();
+  }
+}
 
 void Station::OnSample(int device, const Sample& sample) {
   devices_[static_cast<std::size_t>(device)]->sequencer->Push(sample);
@@ -90,12 +155,63 @@ void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
     j["device"] = devices_[device]->name;
     sink_(j);
   }
-  if (e.kind == SequencerEventKind::kCaptured && e.record) Update(device, *e.record, e.t_s);
+  if (e.kind == SequencerEventKind::kCaptured && e.record) {
+    // Journaled before it is used: a crash after this line loses nothing.
+    std::string error;
+    if (journal_ && !journal_->Append(devices_[device]->name, *e.record, &error)) {
+      Publish({{"class", "ERROR"}, {"device", devices_[device]->name}, {"message", error}});
+    }
+    Update(device, *e.record, e.t_s);
+  }
+}
+
+nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& m) const {
+  const Estimate& e = m.estimate;
+  nlohmann::json params = nlohmann::json::object();
+  nlohmann::json order = nlohmann::json::array();
+  for (std::size_t i = 0; i < e.parameters.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    params[e.parameters[i].name] = {
+        {"value", e.theta[k]},
+        {"sigma", std::isfinite(e.sigma[k]) ? nlohmann::json(e.sigma[k]) : nlohmann::json()}};
+    order.push_back(e.parameters[i].name);
+  }
+  nlohmann::json covariance = nlohmann::json::array();
+  for (Eigen::Index r = 0; r < e.covariance.rows(); ++r) {
+    nlohmann::json row = nlohmann::json::array();
+    for (Eigen::Index c = 0; c < e.covariance.cols(); ++c) {
+      const double v = e.covariance(r, c);
+      row.push_back(std::isfinite(v) ? nlohmann::json(v) : nlohmann::json());
+    }
+    covariance.push_back(row);
+  }
+  nlohmann::json poses = nlohmann::json::array();
+  for (const auto& p : d.poses_used) poses.push_back(ToJson(p));
+  return {{"schema", 1},
+          {"class", "CALIBRATION"},
+          {"device", d.name},
+          {"model", m.model->name()},
+          {"version", m.active_version},
+          {"software", kVersion},
+          {"time", UtcNow()},
+          {"params", params},
+          {"parameter_order", order},
+          {"covariance", covariance},
+          {"gauge", e.gauge},
+          {"rank", m.rank},
+          {"chi2", e.chi2},
+          {"dof", e.dof},
+          {"p_value", e.p_value},
+          {"gate", ToJson(m.gate)},
+          // Device identity and the device-side stored calibration come from the device
+          // dialogue of a live station; a replay does not have them.
+          {"provenance", {{"poses", poses}, {"device_identity", nullptr}}}};
 }
 
 void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   DeviceState& d = *devices_[device];
   ++d.poses;
+  d.poses_used.push_back(record.pose);
   for (ModelState& m : d.models) {
     const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
     if (accel ? !record.acc : !record.mag) continue;
@@ -119,7 +235,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
     } else {
       m.gate.reasons.push_back("no estimate: " + m.estimate.error);
     }
-    if (sink_) {
+    if (sink_ && !resuming_) {
       sink_({{"class", "ESTIMATE"},
              {"t", t_s},
              {"device", d.name},
@@ -128,17 +244,23 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
              {"summary", m.estimate.BriefReport()},
              {"gate", ToJson(m.gate)}});
     }
-    if (m.gate.pass) {
+    if (m.gate.pass && !resuming_) {
       ++m.active_version;
       m.active = m.estimate;
-      if (sink_) {
-        sink_({{"class", "CALIBRATION_ACTIVE"},
+      std::string write_error;
+      if (!options_.state_dir.empty() &&
+          !WriteActiveCalibration(options_.state_dir, d.name, m.model->name(),
+                                  CalibrationJson(d, m), &write_error)) {
+        Publish({{"class", "ERROR"}, {"device", d.name}, {"message", write_error}});
+      }
+      Publish({{"class", "CALIBRATION_ACTIVE"},
                {"t", t_s},
                {"device", d.name},
                {"model", m.model->name()},
                {"version", m.active_version},
                {"poses", m.estimate.poses}});
-      }
+    } else if (m.gate.pass) {
+      m.active = m.estimate;
     }
   }
 }

@@ -33,6 +33,9 @@ struct StationOptions {
   ModelContext context;
   GateOptions gate;  // tolerances replaced by the class's unless gate_tolerances_set
   bool gate_tolerances_set = false;
+  // Where the pose journal and the active calibrations live (daemon/persistence.h); empty:
+  // nothing is persisted. A journal found there is replayed first: the session resumes.
+  std::string state_dir;
   bool IsValid(std::string* error) const;
 };
 
@@ -59,11 +62,16 @@ class Station : public ReplayTarget {
  private:
   void OnSequencerEvent(std::size_t device, const SequencerEvent& event);
   void Update(std::size_t device, const PoseRecord& record, double t_s);
+  void Resume();
+  void Publish(const nlohmann::json& event);
+  nlohmann::json CalibrationJson(const DeviceState& d, const ModelState& m) const;
 
   StationOptions options_;
   SensorClass sensor_;
   EventSink sink_;
   std::vector<std::unique_ptr<DeviceState>> devices_;
+  std::unique_ptr<class PoseJournal> journal_;
+  bool resuming_ = false;
 };
 
 }  // namespace turncal::daemon

@@ -74,6 +74,74 @@ nlohmann::json ToJson(const PoseRecord& r) {
   return j;
 }
 
+namespace {
+
+bool ReadVec(const nlohmann::json& j, Eigen::Vector3d* v) {
+  if (!j.is_array() || j.size() != 3) return false;
+  for (int i = 0; i < 3; ++i) {
+    if (!j[static_cast<std::size_t>(i)].is_number()) return false;
+    (*v)[i] = j[static_cast<std::size_t>(i)].get<double>();
+  }
+  return v->allFinite();
+}
+
+bool ReadTriad(const nlohmann::json& j, TriadStats* t) {
+  if (!j.is_object() || !j.contains("mean") || !j.contains("covariance") || !j.contains("count")) {
+    return false;
+  }
+  if (!ReadVec(j["mean"], &t->mean) || !j["count"].is_number_integer()) return false;
+  t->count = j["count"].get<std::int64_t>();
+  const auto& c = j["covariance"];
+  if (!c.is_array() || c.size() != 3 || t->count < 1) return false;
+  for (int r = 0; r < 3; ++r) {
+    Eigen::Vector3d row;
+    if (!ReadVec(c[static_cast<std::size_t>(r)], &row)) return false;
+    t->covariance.row(r) = row.transpose();
+  }
+  return true;
+}
+
+}  // namespace
+
+bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* error) {
+  auto fail = [&](const char* what) {
+    if (error) *error = std::string("pose record: ") + what;
+    return false;
+  };
+  if (!j.is_object()) return fail("not an object");
+  PoseRecord r;
+  const auto& p = j.value("pose", nlohmann::json());
+  const char* const keys[] = {"phi_deg", "gamma_deg", "psi_deg"};
+  double a[3];
+  for (int i = 0; i < 3; ++i) {
+    if (!p.is_object() || !p.contains(keys[i]) || !p[keys[i]].is_number()) {
+      return fail("pose angles missing");
+    }
+    a[i] = p[keys[i]].get<double>() * kDegToRad;
+  }
+  r.pose = TablePose{a[0], a[1], a[2]};
+  if (!j.contains("t_start") || !j.contains("t_end") || !j["t_start"].is_number() ||
+      !j["t_end"].is_number()) {
+    return fail("window times missing");
+  }
+  r.t_start_s = j["t_start"].get<double>();
+  r.t_end_s = j["t_end"].get<double>();
+  const char* const triads[] = {"acc", "gyr", "mag"};
+  std::optional<TriadStats>* slots[] = {&r.acc, &r.gyr, &r.mag};
+  for (int i = 0; i < 3; ++i) {
+    if (!j.contains(triads[i])) continue;
+    TriadStats t;
+    if (!ReadTriad(j[triads[i]], &t)) return fail("a triad is malformed");
+    *slots[i] = t;
+  }
+  if (j.contains("temp")) {
+    if (!j["temp"].is_number()) return fail("temp is not a number");
+    r.temp_c = j["temp"].get<double>();
+  }
+  *out = r;
+  return true;
+}
+
 nlohmann::json ToJson(const SequencerEvent& e) {
   nlohmann::json j = {{"class", ToString(e.kind)}, {"t", e.t_s}};
   if (e.index >= 0) {

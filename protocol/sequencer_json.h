@@ -23,5 +23,8 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
 // and count, the window and the temperature.
 nlohmann::json ToJson(const SequencerEvent& event);
 nlohmann::json ToJson(const PoseRecord& record);
+// The inverse of ToJson(PoseRecord) (journals): false with a message when a key is missing or a
+// value is not a finite number of the right shape.
+bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* error);
 
 }  // namespace turncal::protocol

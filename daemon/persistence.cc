@@ -1,0 +1,120 @@
+#include "daemon/persistence.h"
+
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "drivers/atomic_file.h"
+#include "protocol/sequencer_json.h"
+
+namespace turncal::daemon {
+namespace fs = std::filesystem;
+
+PoseJournal::~PoseJournal() {
+  if (file_) std::fclose(file_);
+}
+
+bool PoseJournal::Open(const std::string& state_dir, std::string* error) {
+  std::error_code ec;
+  fs::create_directories(state_dir, ec);
+  if (ec) {
+    *error = fmt::format("cannot create the state directory '{}': {}", state_dir, ec.message());
+    return false;
+  }
+  const std::string path = (fs::path(state_dir) / "journal.jsonl").string();
+  file_ = std::fopen(path.c_str(), "ae");
+  if (!file_) {
+    *error = fmt::format("cannot open the journal '{}': {}", path, std::strerror(errno));
+    return false;
+  }
+  return true;
+}
+
+bool PoseJournal::Append(const std::string& device, const PoseRecord& record, std::string* error) {
+  if (!file_) {
+    *error = "the journal is not open";
+    return false;
+  }
+  const std::string line =
+      nlohmann::json{{"device", device}, {"record", protocol::ToJson(record)}}.dump() + "\n";
+  if (std::fwrite(line.data(), 1, line.size(), file_) != line.size() || std::fflush(file_) != 0 ||
+      ::fsync(::fileno(file_)) != 0) {
+    *error = fmt::format("cannot append to the journal: {}", std::strerror(errno));
+    return false;
+  }
+  return true;
+}
+
+bool PoseJournal::Load(const std::string& state_dir, std::vector<JournalEntry>* entries,
+                       int* skipped, std::string* error) {
+  entries->clear();
+  *skipped = 0;
+  const std::string path = (fs::path(state_dir) / "journal.jsonl").string();
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    if (fs::exists(path)) {
+      *error = fmt::format("cannot read the journal '{}'", path);
+      return false;
+    }
+    return true;
+  }
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto j = nlohmann::json::parse(line, nullptr, false);
+    JournalEntry e;
+    std::string why;
+    if (j.is_discarded() || !j.is_object() || !j.contains("device") || !j["device"].is_string() ||
+        !j.contains("record") || !protocol::ParsePoseRecord(j["record"], &e.record, &why)) {
+      ++*skipped;
+      continue;
+    }
+    e.device = j["device"].get<std::string>();
+    entries->push_back(std::move(e));
+  }
+  return true;
+}
+
+bool ReadActiveCalibration(const std::string& state_dir, const std::string& device,
+                           const std::string& model, nlohmann::json* calibration) {
+  std::ifstream in(fs::path(state_dir) / "calibrations" / fmt::format("{}.{}.json", device, model),
+                   std::ios::binary);
+  if (!in) return false;
+  *calibration = nlohmann::json::parse(in, nullptr, false);
+  return !calibration->is_discarded() && calibration->is_object();
+}
+
+bool WriteActiveCalibration(const std::string& state_dir, const std::string& device,
+                            const std::string& model, const nlohmann::json& calibration,
+                            std::string* error) {
+  std::error_code ec;
+  const fs::path dir = fs::path(state_dir) / "calibrations";
+  const fs::path history = fs::path(state_dir) / "history";
+  fs::create_directories(dir, ec);
+  if (!ec) fs::create_directories(history, ec);
+  if (ec) {
+    *error = fmt::format("cannot create '{}': {}", dir.string(), ec.message());
+    return false;
+  }
+  const fs::path path = dir / fmt::format("{}.{}.json", device, model);
+  // The calibration being replaced goes to the history first (a copy: until the new one is in
+  // place, the old one stays active).
+  nlohmann::json old;
+  if (ReadActiveCalibration(state_dir, device, model, &old)) {
+    const int version = old.contains("version") && old["version"].is_number_integer()
+                            ? old["version"].get<int>()
+                            : 0;
+    if (!drivers::WriteFileAtomically(
+            (history / fmt::format("{}.{}.v{}.json", device, model, version)).string(),
+            old.dump(2) + "\n", error)) {
+      return false;
+    }
+  }
+  return drivers::WriteFileAtomically(path.string(), calibration.dump(2) + "\n", error);
+}
+
+}  // namespace turncal::daemon

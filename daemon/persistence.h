@@ -1,0 +1,49 @@
+#pragma once
+// The state directory (issue "The daemon"): what must survive a crash.
+//
+//   journal.jsonl                  every captured pose record, one JSON line each, appended and
+//                                  fsynced before the pose is used: a restart resumes the session
+//   calibrations/DEVICE.MODEL.json the active calibration (schema 1), written atomically
+//   history/DEVICE.MODEL.vN.json   every earlier active calibration
+//
+// A kill -9 can leave the journal's last line incomplete; loading skips it and says so.
+
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/pose_record.h"
+
+namespace turncal::daemon {
+
+struct JournalEntry {
+  std::string device;
+  PoseRecord record;
+};
+
+class PoseJournal {
+ public:
+  ~PoseJournal();
+  // Opens (creating the directory and file) for appending. False with a message.
+  bool Open(const std::string& state_dir, std::string* error);
+  // Appends one record and fsyncs it. False with a message (the entry may be missing then).
+  bool Append(const std::string& device, const PoseRecord& record, std::string* error);
+  // Every whole entry of the journal in `state_dir` (none when there is no journal). Lines that
+  // do not parse (a torn last line) are counted in *skipped.
+  static bool Load(const std::string& state_dir, std::vector<JournalEntry>* entries, int* skipped,
+                   std::string* error);
+
+ private:
+  std::FILE* file_ = nullptr;
+};
+
+// Writes calibrations/DEVICE.MODEL.json atomically; the calibration it replaces is copied to
+// history/ first. `calibration` must carry "version".
+bool ReadActiveCalibration(const std::string& state_dir, const std::string& device,
+                           const std::string& model, nlohmann::json* calibration);
+bool WriteActiveCalibration(const std::string& state_dir, const std::string& device,
+                            const std::string& model, const nlohmann::json& calibration,
+                            std::string* error);
+
+}  // namespace turncal::daemon
