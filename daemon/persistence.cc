@@ -79,6 +79,28 @@ bool PoseJournal::Load(const std::string& state_dir, std::vector<JournalEntry>* 
   return true;
 }
 
+bool WriteNoiseProfile(const std::string& state_dir, const std::string& device,
+                       const NoiseProfile& profile, std::string* error) {
+  std::error_code ec;
+  const fs::path dir = fs::path(state_dir) / "noise";
+  fs::create_directories(dir, ec);
+  if (ec) {
+    *error = fmt::format("cannot create '{}': {}", dir.string(), ec.message());
+    return false;
+  }
+  return drivers::WriteFileAtomically((dir / (device + ".json")).string(),
+                                      protocol::ToJson(profile).dump(2) + "\n", error);
+}
+
+bool ReadNoiseProfile(const std::string& state_dir, const std::string& device,
+                      NoiseProfile* profile) {
+  std::ifstream in(fs::path(state_dir) / "noise" / (device + ".json"), std::ios::binary);
+  if (!in) return false;
+  const auto j = nlohmann::json::parse(in, nullptr, false);
+  std::string error;
+  return !j.is_discarded() && protocol::ParseNoiseProfile(j, profile, &error);
+}
+
 bool ReadActiveCalibration(const std::string& state_dir, const std::string& device,
                            const std::string& model, nlohmann::json* calibration) {
   std::ifstream in(fs::path(state_dir) / "calibrations" / fmt::format("{}.{}.json", device, model),

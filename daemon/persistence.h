@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/pose_record.h"
+#include "core/stillness.h"
 
 namespace turncal::daemon {
 
@@ -40,6 +41,11 @@ class PoseJournal {
 
 // Writes calibrations/DEVICE.MODEL.json atomically; the calibration it replaces is copied to
 // history/ first. `calibration` must carry "version".
+// noise/DEVICE.json: the noise profile measured in this session.
+bool WriteNoiseProfile(const std::string& state_dir, const std::string& device,
+                       const NoiseProfile& profile, std::string* error);
+bool ReadNoiseProfile(const std::string& state_dir, const std::string& device,
+                      NoiseProfile* profile);
 bool ReadActiveCalibration(const std::string& state_dir, const std::string& device,
                            const std::string& model, nlohmann::json* calibration);
 bool WriteActiveCalibration(const std::string& state_dir, const std::string& device,

@@ -28,6 +28,7 @@ struct Station::DeviceState {
   std::vector<ModelState> models;
   std::vector<TablePose> poses_used;
   int poses = 0;
+  bool noise_stored = false;  // the sequencer uses the profile kept in the state directory
 };
 
 namespace {
@@ -70,8 +71,16 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
   for (std::size_t i = 0; i < device_names.size(); ++i) {
     auto d = std::make_unique<DeviceState>();
     d->name = device_names[i];
+    SequencerOptions so = options_.sequencer;
+    // The noise this session measured before a restart: stillness is judged as before.
+    NoiseProfile stored;
+    if (!so.noise && !options_.state_dir.empty() &&
+        ReadNoiseProfile(options_.state_dir, d->name, &stored)) {
+      so.noise = stored;
+      d->noise_stored = true;
+    }
     d->sequencer = std::make_unique<Sequencer>(
-        options_.sequencer, [this, i](const SequencerEvent& e) { OnSequencerEvent(i, e); });
+        so, [this, i](const SequencerEvent& e) { OnSequencerEvent(i, e); });
     for (const auto& name : options_.models) {
       ModelState m;
       std::string error;
@@ -122,6 +131,7 @@ void Station::Resume() {
     Publish({{"class", "SESSION_RESUMED"},
              {"device", devices_[i]->name},
              {"poses", resumed[i]},
+             {"noise", devices_[i]->noise_stored ? "stored" : "to be measured"},
              {"journal_lines_skipped", skipped}});
   }
   journal_ = std::make_unique<PoseJournal>();
@@ -154,6 +164,14 @@ void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
     nlohmann::json j = protocol::ToJson(e);
     j["device"] = devices_[device]->name;
     sink_(j);
+  }
+  if (e.kind == SequencerEventKind::kNoiseMeasured && !options_.state_dir.empty() &&
+      devices_[device]->sequencer->noise()) {
+    std::string error;
+    if (!WriteNoiseProfile(options_.state_dir, devices_[device]->name,
+                           *devices_[device]->sequencer->noise(), &error)) {
+      Publish({{"class", "ERROR"}, {"device", devices_[device]->name}, {"message", error}});
+    }
   }
   if (e.kind == SequencerEventKind::kCaptured && e.record) {
     // Journaled before it is used: a crash after this line loses nothing.

@@ -142,6 +142,57 @@ bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* erro
   return true;
 }
 
+nlohmann::json ToJson(const NoiseProfile& p) {
+  nlohmann::json sigma = nlohmann::json::object();
+  for (int t = 0; t < 3; ++t) {
+    if (p.sigma[t]) sigma[TriadName(t)] = Vec(*p.sigma[t]);
+  }
+  nlohmann::json j = {{"sigma", sigma},
+                      {"gyr_bias_radps", Vec(p.gyr_bias_radps)},
+                      {"gyr_bias_sigma_radps", p.gyr_bias_sigma_radps},
+                      {"rate_hz", p.rate_hz},
+                      {"source", p.source}};
+  if (p.device_period_s) j["device_period_s"] = *p.device_period_s;
+  if (std::isfinite(p.sigma_dof)) j["sigma_dof"] = p.sigma_dof;
+  return j;
+}
+
+bool ParseNoiseProfile(const nlohmann::json& j, NoiseProfile* out, std::string* error) {
+  auto fail = [&](const char* what) {
+    if (error) *error = std::string("noise profile: ") + what;
+    return false;
+  };
+  if (!j.is_object() || !j.contains("sigma") || !j["sigma"].is_object()) {
+    return fail("no sigma");
+  }
+  NoiseProfile p;
+  for (int t = 0; t < 3; ++t) {
+    if (!j["sigma"].contains(TriadName(t))) continue;
+    Eigen::Vector3d v;
+    if (!ReadVec(j["sigma"][TriadName(t)], &v)) return fail("a sigma is malformed");
+    p.sigma[t] = v;
+  }
+  if (!j.contains("gyr_bias_radps") || !ReadVec(j["gyr_bias_radps"], &p.gyr_bias_radps)) {
+    return fail("gyro bias malformed");
+  }
+  if (!j.contains("rate_hz") || !j["rate_hz"].is_number() || !j.contains("gyr_bias_sigma_radps") ||
+      !j["gyr_bias_sigma_radps"].is_number()) {
+    return fail("rate or gyro bias sigma missing");
+  }
+  p.rate_hz = j["rate_hz"].get<double>();
+  p.gyr_bias_sigma_radps = j["gyr_bias_sigma_radps"].get<double>();
+  if (j.contains("device_period_s") && j["device_period_s"].is_number()) {
+    p.device_period_s = j["device_period_s"].get<double>();
+  }
+  if (j.contains("sigma_dof") && j["sigma_dof"].is_number()) {
+    p.sigma_dof = j["sigma_dof"].get<double>();
+  }
+  p.source = j.value("source", std::string("stored")) + " (stored)";
+  if (!p.IsValid(error)) return false;
+  *out = p;
+  return true;
+}
+
 nlohmann::json ToJson(const SequencerEvent& e) {
   nlohmann::json j = {{"class", ToString(e.kind)}, {"t", e.t_s}};
   if (e.index >= 0) {

@@ -23,6 +23,10 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
 // and count, the window and the temperature.
 nlohmann::json ToJson(const SequencerEvent& event);
 nlohmann::json ToJson(const PoseRecord& record);
+// A noise profile (the state directory keeps the measured one, so a restarted station judges
+// stillness exactly as before) and its inverse; the parse checks NoiseProfile::IsValid.
+nlohmann::json ToJson(const NoiseProfile& profile);
+bool ParseNoiseProfile(const nlohmann::json& j, NoiseProfile* out, std::string* error);
 // The inverse of ToJson(PoseRecord) (journals): false with a message when a key is missing or a
 // value is not a finite number of the right shape.
 bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* error);
