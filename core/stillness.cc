@@ -338,8 +338,7 @@ StillnessDetector::StillnessDetector(const NoiseProfile& profile, const Stillnes
   for (int t = 0; t < 3; ++t) use_[t] = profile.sigma[t].has_value();
   const double dof = profile.sigma_dof;
   q_var_ = VarianceRatioLimit(options.false_alarm, w_ - 1, dof);
-  z_drift_ = TwoSidedZ(options.false_alarm, dof);
-  z_rate_ = TwoSidedZ(options.false_alarm, dof);
+  z_ = TwoSidedZ(options.false_alarm, dof);
   finding_.kind = StillFinding::kFilling;
 }
 
@@ -490,13 +489,12 @@ void StillnessDetector::Evaluate() {
       consider(StillFinding::kVariance, t, a, std::sqrt(var), sigma * std::sqrt(q_var_));
       const double drift = (s1_[c] - h1_[c]) / n2 - h1_[c] / n1;
       consider(StillFinding::kDrift, t, a, std::abs(drift),
-               z_drift_ * sigma * std::sqrt(1 / n1 + 1 / n2));
+               z_ * sigma * std::sqrt(1 / n1 + 1 / n2));
       if (t == kTriadGyr) {
         const double mean = anchor_[c] + s1_[c] / n;
-        const double limit =
-            z_rate_ * std::sqrt(sigma * sigma / n +
-                                profile_.gyr_bias_sigma_radps * profile_.gyr_bias_sigma_radps) +
-            options_.gyr_bias_drift_radps;
+        const double limit = z_ * std::sqrt(sigma * sigma / n + profile_.gyr_bias_sigma_radps *
+                                                                    profile_.gyr_bias_sigma_radps) +
+                             options_.gyr_bias_drift_radps;
         consider(StillFinding::kRate, t, a, std::abs(mean - profile_.gyr_bias_radps[a]), limit);
       }
     }
@@ -508,7 +506,7 @@ std::string StillnessDetector::DescribeLimits() const {
   std::string out = fmt::format(
       "window {} samples ({:.2f} s); false alarm {:.0e} per test; variance ratio <= {:.3f}, "
       "drift <= {:.2f} sigma sqrt(4/W), gyro rate <= {:.2f} sigma + {:.3g} rad/s",
-      w_, w_ / profile_.rate_hz, options_.false_alarm, q_var_, z_drift_, z_rate_,
+      w_, w_ / profile_.rate_hz, options_.false_alarm, q_var_, z_, z_,
       options_.gyr_bias_drift_radps);
   return out;
 }

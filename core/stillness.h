@@ -160,7 +160,7 @@ class StillnessDetector {
   std::string DescribeLimits() const;
   const NoiseProfile& profile() const { return profile_; }
   // The two-sided quantile the drift test uses (normal, or Student's t for a measured noise).
-  double drift_z() const { return z_drift_; }
+  double drift_z() const { return z_; }
 
  private:
   const Eigen::Vector3d& At(std::size_t logical, int triad) const;
@@ -181,7 +181,8 @@ class StillnessDetector {
   std::array<double, 9> anchor_{}, s1_{}, s2_{}, h1_{};
   std::array<double, 9> median_{}, robust_sigma_{};
   std::vector<double> scratch_;
-  double q_var_ = 0.0, z_drift_ = 0.0, z_rate_ = 0.0;
+  double q_var_ = 0.0;
+  double z_ = 0.0;  // two-sided quantile of the drift and rate tests
   std::int64_t still_run_ = 0;
   StillFinding finding_;
 };

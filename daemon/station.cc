@@ -33,6 +33,18 @@ struct Station::DeviceState {
 
 namespace {
 
+// {NAME:{"value","sigma"}} in the model's order; sigma null when undetermined.
+nlohmann::json ParamsJson(const Estimate& e) {
+  nlohmann::json params = nlohmann::json::object();
+  for (std::size_t i = 0; i < e.parameters.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    params[e.parameters[i].name] = {
+        {"value", e.theta[k]},
+        {"sigma", std::isfinite(e.sigma[k]) ? nlohmann::json(e.sigma[k]) : nlohmann::json()}};
+  }
+  return params;
+}
+
 std::string UtcNow() {
   const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
   std::tm tm{};
@@ -185,15 +197,8 @@ void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
 
 nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& m) const {
   const Estimate& e = m.estimate;
-  nlohmann::json params = nlohmann::json::object();
   nlohmann::json order = nlohmann::json::array();
-  for (std::size_t i = 0; i < e.parameters.size(); ++i) {
-    const auto k = static_cast<Eigen::Index>(i);
-    params[e.parameters[i].name] = {
-        {"value", e.theta[k]},
-        {"sigma", std::isfinite(e.sigma[k]) ? nlohmann::json(e.sigma[k]) : nlohmann::json()}};
-    order.push_back(e.parameters[i].name);
-  }
+  for (const auto& p : e.parameters) order.push_back(p.name);
   nlohmann::json covariance = nlohmann::json::array();
   for (Eigen::Index r = 0; r < e.covariance.rows(); ++r) {
     nlohmann::json row = nlohmann::json::array();
@@ -212,7 +217,7 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
           {"version", m.active_version},
           {"software", kVersion},
           {"time", UtcNow()},
-          {"params", params},
+          {"params", ParamsJson(e)},
           {"parameter_order", order},
           {"covariance", covariance},
           {"gauge", e.gauge},
@@ -289,17 +294,9 @@ nlohmann::json Station::Result() const {
     nlohmann::json models = nlohmann::json::object();
     for (const ModelState& m : d->models) {
       const Estimate& e = m.estimate;
-      nlohmann::json params = nlohmann::json::object();
-      for (std::size_t i = 0; i < e.parameters.size(); ++i) {
-        const auto k = static_cast<Eigen::Index>(i);
-        const double sigma = e.sigma[k];
-        params[e.parameters[i].name] = {
-            {"value", e.theta[k]},
-            {"sigma", std::isfinite(sigma) ? nlohmann::json(sigma) : nlohmann::json(nullptr)}};
-      }
       models[m.model->name()] = {{"ok", e.ok},
                                  {"poses", e.poses},
-                                 {"params", params},
+                                 {"params", ParamsJson(e)},
                                  {"rank", m.rank},
                                  {"chi2", e.chi2},
                                  {"dof", e.dof},

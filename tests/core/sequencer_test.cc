@@ -57,6 +57,14 @@ Sequencer::Sink Collect(Collected* c) {
   };
 }
 
+// The uncalibrated pose check: nominal accelerometer, 5 degrees of tolerance.
+PosePredictor NominalAccPredictor(const MeasurementModel& accel) {
+  return [&accel](const TablePose& pose, int triad) -> std::optional<TriadPrediction> {
+    if (triad != kTriadAcc) return std::nullopt;
+    return NominalPrediction(accel, pose, 5 * M_PI / 180, 1e-6);
+  };
+}
+
 std::int64_t Ns(double t_s) { return static_cast<std::int64_t>(std::llround(t_s * 1e9)); }
 
 // Feeds the session with its pose events as announcements (optionally `early` seconds early for
@@ -493,11 +501,7 @@ TEST(Sequencer, WrongAnnouncementIsRejected) {
   const Session s = Simulate();
   Collected c;
   Sequencer seq(SequencerOptions{}, Collect(&c));
-  const MeasurementModel& accel = *s.accel;
-  seq.SetPredictor([&](const TablePose& pose, int triad) -> std::optional<TriadPrediction> {
-    if (triad != kTriadAcc) return std::nullopt;
-    return NominalPrediction(accel, pose, 5 * M_PI / 180, 1e-6);
-  });
+  seq.SetPredictor(NominalAccPredictor(*s.accel));
   // Pose 4 is announced as pose 0's angles (the controller sent the wrong pose).
   std::size_t next = 0;
   for (const Sample& x : s.sim.samples) {
@@ -563,11 +567,7 @@ TEST(Sequencer, ScheduleWithTheWrongOrderSaysSo) {
   const Session s = Simulate();
   Collected c;
   Sequencer seq(SequencerOptions{}, Collect(&c));
-  const MeasurementModel& accel = *s.accel;
-  seq.SetPredictor([&](const TablePose& pose, int triad) -> std::optional<TriadPrediction> {
-    if (triad != kTriadAcc) return std::nullopt;
-    return NominalPrediction(accel, pose, 5 * M_PI / 180, 1e-6);
-  });
+  seq.SetPredictor(NominalAccPredictor(*s.accel));
   std::vector<TablePose> poses = s.poses;
   std::swap(poses[1], poses[2]);
   std::string error;
