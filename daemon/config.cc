@@ -4,9 +4,11 @@
 
 #include <toml++/toml.h>
 #include <cmath>
+
 #include <fstream>
 #include <set>
 #include <sstream>
+#include "daemon/socket_server.h"
 
 namespace turncal::daemon {
 namespace {
@@ -71,14 +73,46 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
     return false;
   }
   Config c;
-  if (!OnlyKeys(root, {"socket", "state_dir", "station", "sequencer", "gate", "device"}, "the file",
-                source, error)) {
+  if (!OnlyKeys(root,
+                {"socket", "socket_group", "control_users", "state_dir", "station", "sequencer",
+                 "gate", "device"},
+                "the file", source, error)) {
     return false;
   }
   std::string s;
   if (root.get("socket")) {
     if (!GetString(root, "socket", &s, source, error)) return false;
     c.socket_path = s;
+  }
+  if (root.get("socket_group")) {
+    if (!GetString(root, "socket_group", &s, source, error)) return false;
+    c.socket_group = s;
+  }
+  if (const toml::node* n = root.get("control_users")) {
+    const toml::array* a = n->as_array();
+    if (!a) {
+      *error = fmt::format("{}: 'control_users' must be an array of user names or uids",
+                           Where(*n, source));
+      return false;
+    }
+    for (const auto& u : *a) {
+      std::string name;
+      if (auto v = u.value<std::string>()) {
+        name = *v;
+      } else if (auto i = u.value<std::int64_t>(); i && *i >= 0) {
+        name = std::to_string(*i);
+      } else {
+        *error = fmt::format("{}: 'control_users' holds user names or uids", Where(u, source));
+        return false;
+      }
+      unsigned uid = 0;
+      std::string why;
+      if (!ResolveUser(name, &uid, &why)) {
+        *error = fmt::format("{}: control_users: {}", Where(u, source), why);
+        return false;
+      }
+      c.control_uids.push_back(uid);
+    }
   }
   if (root.get("state_dir")) {
     if (!GetString(root, "state_dir", &s, source, error)) return false;
@@ -174,7 +208,22 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
         *error = fmt::format("{}: devices are [[device]] tables", Where(d, source));
         return false;
       }
-      if (!OnlyKeys(*t, {"name", "protocol", "port", "baud"}, "[[device]]", source, error)) {
+      if (!OnlyKeys(*t, {"name", "protocol", "port", "baud", "rate_hz", "configure"}, "[[device]]",
+                    source, error)) {
+        return false;
+      }
+      DeviceSettings settings;
+      if (!GetNumber(*t, "rate_hz", &settings.rate_hz, source, error)) return false;
+      if (const toml::node* cn = t->get("configure")) {
+        auto v = cn->value<bool>();
+        if (!v) {
+          *error = fmt::format("{}: 'configure' must be true or false", Where(*cn, source));
+          return false;
+        }
+        settings.configure = *v;
+      }
+      if (t->get("rate_hz") && !(settings.rate_hz > 0 && settings.rate_hz <= 4000)) {
+        *error = fmt::format("{}: 'rate_hz' must be in (0, 4000]", Where(d, source));
         return false;
       }
       std::string name, protocol, port;
@@ -200,6 +249,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
         }
       }
       c.devices.push_back(*parsed);
+      c.device_settings[parsed->name] = settings;
     }
   }
   if (!st.IsValid(error)) {

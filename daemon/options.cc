@@ -8,6 +8,11 @@ bool Options::IsValid(std::string* error) const {
     return false;
   };
   if (once && replay_path.empty()) return fail("--once needs --replay FILE");
+  if (!replay_path.empty() && !once) {
+    return fail(
+        "--replay needs --once (to replay a capture through the live service, give a device "
+        "with PORT replay:FILE)");
+  }
   if (!result_out.empty() && !once) return fail("--result-out needs --replay FILE --once");
   if (replay_protocol && replay_path.empty()) return fail("--protocol needs --replay FILE");
   for (std::size_t i = 0; i < devices.size(); ++i) {

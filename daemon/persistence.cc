@@ -6,6 +6,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 
@@ -137,6 +138,33 @@ bool WriteActiveCalibration(const std::string& state_dir, const std::string& dev
     }
   }
   return drivers::WriteFileAtomically(path.string(), calibration.dump(2) + "\n", error);
+}
+
+bool ArchiveSession(const std::string& state_dir, std::string* archived, std::string* error) {
+  archived->clear();
+  const fs::path root(state_dir);
+  std::error_code ec;
+  const bool journal = fs::exists(root / "journal.jsonl", ec);
+  const bool noise = fs::exists(root / "noise", ec);
+  if (!journal && !noise) return true;
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char stamp[32];
+  std::strftime(stamp, sizeof(stamp), "%Y%m%dT%H%M%SZ", &tm);
+  fs::path target = root / "sessions" / stamp;
+  for (int n = 2; fs::exists(target, ec); ++n) {
+    target = root / "sessions" / fmt::format("{}-{}", stamp, n);
+  }
+  fs::create_directories(target, ec);
+  if (!ec && journal) fs::rename(root / "journal.jsonl", target / "journal.jsonl", ec);
+  if (!ec && noise) fs::rename(root / "noise", target / "noise", ec);
+  if (ec) {
+    *error = fmt::format("cannot archive the session to '{}': {}", target.string(), ec.message());
+    return false;
+  }
+  *archived = target.string();
+  return true;
 }
 
 }  // namespace turncal::daemon

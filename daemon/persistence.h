@@ -5,6 +5,8 @@
 //                                  fsynced before the pose is used: a restart resumes the session
 //   calibrations/DEVICE.MODEL.json the active calibration (schema 1), written atomically
 //   history/DEVICE.MODEL.vN.json   every earlier active calibration
+//   noise/DEVICE.json              the noise profile this session measured
+//   sessions/UTCTIME/              earlier sessions' journals and noise profiles (`reset`)
 //
 // A kill -9 can leave the journal's last line incomplete; loading skips it and says so.
 
@@ -48,6 +50,11 @@ bool ReadNoiseProfile(const std::string& state_dir, const std::string& device,
                       NoiseProfile* profile);
 bool ReadActiveCalibration(const std::string& state_dir, const std::string& device,
                            const std::string& model, nlohmann::json* calibration);
+// `reset`: the session's journal and noise profiles move to sessions/UTCTIME/ (the active
+// calibrations stay, and stay applied). *archived receives the folder ("" when there was nothing
+// to archive). False with a message.
+bool ArchiveSession(const std::string& state_dir, std::string* archived, std::string* error);
+
 bool WriteActiveCalibration(const std::string& state_dir, const std::string& device,
                             const std::string& model, const nlohmann::json& calibration,
                             std::string* error);

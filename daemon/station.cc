@@ -5,6 +5,7 @@
 #include <chrono>
 #include <ctime>
 
+#include "core/pose_planner.h"
 #include "daemon/persistence.h"
 #include "protocol/observability_json.h"
 #include "protocol/sequencer_json.h"
@@ -20,6 +21,10 @@ struct Station::ModelState {
   int rank = 0;
   int active_version = 0;  // 0: no active calibration
   Estimate active;
+  // The calibration live samples are corrected with: the active one, or the one stored in the
+  // state directory when the station started (version 0 / empty: none).
+  int applied_version = 0;
+  Eigen::VectorXd applied_theta;
 };
 
 struct Station::DeviceState {
@@ -29,6 +34,8 @@ struct Station::DeviceState {
   std::vector<TablePose> poses_used;
   int poses = 0;
   bool noise_stored = false;  // the sequencer uses the profile kept in the state directory
+  nlohmann::json identity;    // from the device dialogue (null in replays)
+  nlohmann::json current;     // the pose being collected: its last sequencer event
 };
 
 namespace {
@@ -102,7 +109,94 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
     }
     devices_.push_back(std::move(d));
   }
-  if (!options_.state_dir.empty()) Resume();
+  if (!options_.state_dir.empty()) {
+    LoadApplied();
+    Resume();
+  }
+}
+
+// The calibrations stored in the state directory are applied to live samples from the start:
+// a restarted daemon corrects with what it published before.
+void Station::LoadApplied() {
+  for (auto& d : devices_) {
+    for (ModelState& m : d->models) {
+      nlohmann::json stored;
+      if (!ReadActiveCalibration(options_.state_dir, d->name, m.model->name(), &stored)) continue;
+      const auto& params = m.model->parameters();
+      Eigen::VectorXd theta(static_cast<Eigen::Index>(params.size()));
+      bool ok = stored.contains("version") && stored["version"].is_number_integer() &&
+                stored.contains("params") && stored["params"].is_object();
+      for (std::size_t i = 0; ok && i < params.size(); ++i) {
+        const auto it = stored["params"].find(params[i].name);
+        ok = it != stored["params"].end() && it->is_object() && (*it)["value"].is_number();
+        if (ok) theta[static_cast<Eigen::Index>(i)] = (*it)["value"].get<double>();
+      }
+      if (!ok) {
+        Publish({{"class", "ERROR"},
+                 {"device", d->name},
+                 {"model", m.model->name()},
+                 {"message", "the stored calibration is unreadable and is not applied"}});
+        continue;
+      }
+      m.applied_version = stored["version"].get<int>();
+      m.applied_theta = theta;
+    }
+  }
+}
+
+int Station::DeviceIndex(const std::string& name) const {
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    if (devices_[i]->name == name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+void Station::SetDeviceIdentity(int device, nlohmann::json identity) {
+  devices_[static_cast<std::size_t>(device)]->identity = std::move(identity);
+}
+
+bool Station::HasAppliedCalibration(int device) const {
+  for (const ModelState& m : devices_[static_cast<std::size_t>(device)]->models) {
+    if (m.applied_version > 0) return true;
+  }
+  return false;
+}
+
+bool Station::Correct(int device, const Sample& sample, Corrected* out) const {
+  *out = Corrected{};
+  for (const ModelState& m : devices_[static_cast<std::size_t>(device)]->models) {
+    if (m.applied_version <= 0) continue;
+    const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
+    const std::optional<Eigen::Vector3d>& raw = accel ? sample.acc_mps2 : sample.mag;
+    if (!raw) continue;
+    std::optional<Eigen::Vector3d>& target = accel ? out->acc_mps2 : out->mag;
+    if (target) continue;  // the first model of a sensor in the configured order wins
+    target = m.model->Correct(m.applied_theta, *raw);
+    if (accel) out->acc_frame = ToString(m.model->corrected_frame());
+    out->versions.emplace_back(m.model->name(), m.applied_version);
+  }
+  return !out->versions.empty();
+}
+
+nlohmann::json Station::Status(int device) const {
+  const DeviceState& d = *devices_[static_cast<std::size_t>(device)];
+  nlohmann::json models = nlohmann::json::object();
+  for (const ModelState& m : d.models) {
+    models[m.model->name()] = {{"poses", m.estimate.poses},
+                               {"gate", ToJson(m.gate)},
+                               {"active_version", m.active_version},
+                               {"applied_version", m.applied_version}};
+  }
+  const SampleCounts& t = d.sequencer->totals();
+  return {{"poses", d.poses},
+          {"captured", d.sequencer->captured()},
+          {"rejected", d.sequencer->rejected()},
+          {"busy", d.sequencer->busy()},
+          {"noise", d.sequencer->noise() ? "measured" : "measuring"},
+          {"current", d.sequencer->busy() ? d.current : nlohmann::json()},
+          {"samples",
+           {{"used", t.used}, {"flagged", t.flagged}, {"outliers", t.outliers}, {"lost", t.lost}}},
+          {"models", models}};
 }
 
 Station::~Station() = default;
@@ -157,6 +251,14 @@ void Station::OnSample(int device, const Sample& sample) {
   devices_[static_cast<std::size_t>(device)]->sequencer->Push(sample);
 }
 
+void Station::TickDevice(int device, std::int64_t now_ns) {
+  devices_[static_cast<std::size_t>(device)]->sequencer->Tick(now_ns);
+}
+
+bool Station::AnnounceTo(int device, const Announcement& a, std::string* error) {
+  return devices_[static_cast<std::size_t>(device)]->sequencer->Announce(a, error);
+}
+
 bool Station::OnAnnounce(const Announcement& a, std::string* error) {
   bool ok = true;
   for (auto& d : devices_) ok = d->sequencer->Announce(a, error) && ok;
@@ -172,10 +274,15 @@ void Station::OnFinish(std::int64_t now_ns) {
 }
 
 void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
-  if (sink_) {
+  if (sink_ || e.kind == SequencerEventKind::kPoseStarted ||
+      e.kind == SequencerEventKind::kCollecting || e.kind == SequencerEventKind::kProgress) {
     nlohmann::json j = protocol::ToJson(e);
     j["device"] = devices_[device]->name;
-    sink_(j);
+    if (e.kind == SequencerEventKind::kPoseStarted || e.kind == SequencerEventKind::kCollecting ||
+        e.kind == SequencerEventKind::kProgress) {
+      devices_[device]->current = j;
+    }
+    if (sink_) sink_(j);
   }
   if (e.kind == SequencerEventKind::kNoiseMeasured && !options_.state_dir.empty() &&
       devices_[device]->sequencer->noise()) {
@@ -227,8 +334,8 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
           {"p_value", e.p_value},
           {"gate", ToJson(m.gate)},
           // Device identity and the device-side stored calibration come from the device
-          // dialogue of a live station; a replay does not have them.
-          {"provenance", {{"poses", poses}, {"device_identity", nullptr}}}};
+          // dialogue of a live station (SetDeviceIdentity); a replay does not have them (null).
+          {"provenance", {{"poses", poses}, {"device_identity", d.identity}}}};
 }
 
 void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
@@ -259,33 +366,105 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
       m.gate.reasons.push_back("no estimate: " + m.estimate.error);
     }
     if (sink_ && !resuming_) {
+      // Every gated parameter's sigma against its tolerance (the watch view's bars).
+      nlohmann::json precision = nlohmann::json::object();
+      if (m.estimate.ok) {
+        const auto& params = m.model->parameters();
+        for (int j : GatedParameters(*m.model)) {
+          const double sigma = m.estimate.sigma[j];
+          precision[params[static_cast<std::size_t>(j)].name] = {
+              {"sigma", std::isfinite(sigma) ? nlohmann::json(sigma) : nlohmann::json()},
+              {"tolerance", ToleranceFor(params[static_cast<std::size_t>(j)], options_.gate)}};
+        }
+      }
       sink_({{"class", "ESTIMATE"},
              {"t", t_s},
              {"device", d.name},
              {"model", m.model->name()},
              {"poses", m.estimate.poses},
              {"summary", m.estimate.BriefReport()},
+             {"precision", precision},
              {"gate", ToJson(m.gate)}});
     }
     if (m.gate.pass && !resuming_) {
-      ++m.active_version;
-      m.active = m.estimate;
-      std::string write_error;
-      if (!options_.state_dir.empty() &&
-          !WriteActiveCalibration(options_.state_dir, d.name, m.model->name(),
-                                  CalibrationJson(d, m), &write_error)) {
-        Publish({{"class", "ERROR"}, {"device", d.name}, {"message", write_error}});
-      }
-      Publish({{"class", "CALIBRATION_ACTIVE"},
-               {"t", t_s},
-               {"device", d.name},
-               {"model", m.model->name()},
-               {"version", m.active_version},
-               {"poses", m.estimate.poses}});
+      Activate(d, m, t_s, nullptr);
     } else if (m.gate.pass) {
       m.active = m.estimate;
+      m.applied_version = m.active_version;
+      m.applied_theta = m.estimate.theta;
     }
   }
+}
+
+void Station::Activate(DeviceState& d, ModelState& m, double t_s,
+                       const nlohmann::json& override_who) {
+  ++m.active_version;
+  m.active = m.estimate;
+  m.applied_version = m.active_version;
+  m.applied_theta = m.estimate.theta;
+  nlohmann::json calibration = CalibrationJson(d, m);
+  if (!override_who.is_null()) calibration["override"] = override_who;
+  std::string write_error;
+  if (!options_.state_dir.empty() &&
+      !WriteActiveCalibration(options_.state_dir, d.name, m.model->name(), calibration,
+                              &write_error)) {
+    Publish({{"class", "ERROR"}, {"device", d.name}, {"message", write_error}});
+  }
+  nlohmann::json event = {{"class", "CALIBRATION_ACTIVE"},
+                          {"t", t_s},
+                          {"device", d.name},
+                          {"model", m.model->name()},
+                          {"version", m.active_version},
+                          {"poses", m.estimate.poses}};
+  if (!override_who.is_null()) event["override"] = override_who;
+  Publish(event);
+}
+
+bool Station::PublishOverride(const std::string& device, const std::string& model,
+                              const nlohmann::json& who, std::string* error) {
+  const int i = DeviceIndex(device);
+  if (i < 0) {
+    *error = "no device '" + device + "'";
+    return false;
+  }
+  DeviceState& d = *devices_[static_cast<std::size_t>(i)];
+  for (ModelState& m : d.models) {
+    if (m.model->name() != model) continue;
+    if (!m.estimate.ok) {
+      *error = fmt::format("{} {} has no estimate to publish{}", device, model,
+                           m.estimate.error.empty() ? "" : ": " + m.estimate.error);
+      return false;
+    }
+    nlohmann::json record = who;
+    record["gate_pass"] = m.gate.pass;
+    record["gate_reasons"] = m.gate.reasons;
+    Activate(d, m, 0.0, record);
+    return true;
+  }
+  *error = fmt::format("device '{}' estimates no model '{}'", device, model);
+  return false;
+}
+
+nlohmann::json Station::NextPose(const std::string& device) const {
+  const int i = DeviceIndex(device);
+  if (i < 0)
+    return {{"class", "NEXT_POSE"}, {"ok", false}, {"error", "no device '" + device + "'"}};
+  const DeviceState& d = *devices_[static_cast<std::size_t>(i)];
+  std::vector<PlanningTarget> targets;
+  for (const ModelState& m : d.models) {
+    PlanningTarget t;
+    t.model = m.model.get();
+    t.theta = m.estimate.ok ? m.estimate.theta : m.model->nominal();
+    const auto& opt = m.calibrator->options();
+    t.sqrt_information = ExpectedSqrtInformation(opt.noise_density, opt.pose_offset_sigma,
+                                                 options_.sequencer.dwell_s);
+    t.captured = m.calibrator->weighted_poses();
+    t.gate = options_.gate;
+    targets.push_back(std::move(t));
+  }
+  nlohmann::json j = ToJson(PlanNextPose(targets, PlannerOptions{}));
+  j["device"] = device;
+  return j;
 }
 
 nlohmann::json Station::Result() const {

@@ -11,6 +11,7 @@
 #include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -49,12 +50,47 @@ class Station : public ReplayTarget {
 
   void OnSample(int device, const Sample& sample) override;
   bool OnAnnounce(const Announcement& announcement, std::string* error) override;
+  // Timeouts of one device's sequencer, in that device's host clock (a replayed device's clock is
+  // its capture's, so the service ticks only live devices).
+  void TickDevice(int device, std::int64_t now_ns);
+  // A pose for one device only (`turncal pose --device D`).
+  bool AnnounceTo(int device, const Announcement& announcement, std::string* error);
   void OnTick(std::int64_t now_ns) override;
   void OnFinish(std::int64_t now_ns) override;
 
   // {"class":"RESULT","devices":{NAME:{"poses":N,"models":{MODEL:{"params":{NAME:{"value","sigma"}},
   //  "rank","gate":{"pass","reasons"},"active_version",...}}}}}
   nlohmann::json Result() const;
+
+  // What the live dialogue learned about a device (identity, firmware, device-side stored
+  // calibration): recorded in the provenance of every calibration it gets.
+  void SetDeviceIdentity(int device, nlohmann::json identity);
+
+  // The correction of a live sample with the device's applied calibrations (MODELS.md
+  // "Correction of live samples"): false when the device has none. Each triad is corrected by
+  // its model's applied calibration; `versions` receives MODEL:version of those used.
+  struct Corrected {
+    std::optional<Eigen::Vector3d> acc_mps2, mag;
+    const char* acc_frame = nullptr;  // "case" or "table"
+    std::vector<std::pair<std::string, int>> versions;
+  };
+  bool Correct(int device, const Sample& sample, Corrected* out) const;
+  bool HasAppliedCalibration(int device) const;
+
+  // Per device: poses, the pose being collected (its last progress), sample counts, and per model
+  // the gate's verdict and the active version (`status` on the socket).
+  nlohmann::json Status(int device) const;
+
+  // Makes the current estimate of DEVICE's MODEL active although the gate refused it (the
+  // operator's explicit override). `who` (operator, reason, peer uid) is recorded in the
+  // calibration with the gate's reasons. False with a message when there is no estimate.
+  bool PublishOverride(const std::string& device, const std::string& model,
+                       const nlohmann::json& who, std::string* error);
+
+  // The next pose to capture (D-optimal over every model of the device), as NEXT_POSE.
+  nlohmann::json NextPose(const std::string& device) const;
+
+  int DeviceIndex(const std::string& name) const;  // -1 when unknown
 
   struct ModelState;
   struct DeviceState;
@@ -65,6 +101,8 @@ class Station : public ReplayTarget {
   void Resume();
   void Publish(const nlohmann::json& event);
   nlohmann::json CalibrationJson(const DeviceState& d, const ModelState& m) const;
+  void Activate(DeviceState& d, ModelState& m, double t_s, const nlohmann::json& override_who);
+  void LoadApplied();
 
   StationOptions options_;
   SensorClass sensor_;

@@ -5,8 +5,10 @@
 #include <CLI/CLI.hpp>
 
 #include "daemon/config.h"
+#include "daemon/notify.h"
 #include "daemon/options.h"
 #include "daemon/replay_once.h"
+#include "daemon/service.h"
 #include "turncal/version.h"
 
 int main(int argc, char** argv) {
@@ -68,11 +70,42 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
-  // The service loop (socket server, live devices, persistence) is built by the daemon issue;
-  // until then turncald checks its command line and says so plainly instead of pretending to run.
-  spdlog::error(
-      "turncald {}: the service loop is not part of this build yet; "
-      "the command line above is checked and accepted",
-      turncal::kVersion);
-  return 3;
+  // The service: devices, station, socket. SIGHUP re-reads the configuration file and applies
+  // the same flags over it.
+  const bool socket_flag = app.count("--socket") > 0;
+  const bool state_flag = app.count("--state-dir") > 0;
+  const turncal::daemon::Options flags = options;
+  auto build = [flags, socket_flag, state_flag](turncal::daemon::ServiceOptions* out,
+                                                std::string* why) {
+    turncal::daemon::Config c;
+    if (!flags.config_path.empty() && !turncal::daemon::LoadConfig(flags.config_path, &c, why)) {
+      return false;
+    }
+    out->station = c.station;
+    out->state_dir = c.state_dir && !state_flag ? *c.state_dir : flags.state_dir;
+    out->socket.path = c.socket_path && !socket_flag ? *c.socket_path : flags.socket_path;
+    out->socket.group = c.socket_group.value_or("");
+    out->socket.control_uids = {c.control_uids.begin(), c.control_uids.end()};
+    out->device_settings = c.device_settings;
+    out->devices = flags.devices;
+    for (const auto& d : c.devices) {
+      bool overridden = false;
+      for (const auto& f : flags.devices) overridden = overridden || f.name == d.name;
+      if (!overridden) out->devices.push_back(d);
+    }
+    if (out->devices.empty()) {
+      *why = "no device: give --device NAME=PROTOCOL:PORT[@BAUD] or [[device]] in --config";
+      return false;
+    }
+    return true;
+  };
+  turncal::daemon::ServiceOptions service_options;
+  if (!build(&service_options, &error)) {
+    spdlog::error("{}", error);
+    return 2;
+  }
+  service_options.socket.activated_fd = turncal::daemon::ActivatedSocket();
+  if (!options.config_path.empty()) service_options.reload = build;
+  turncal::daemon::Service service(std::move(service_options));
+  return service.Run();
 }

@@ -138,6 +138,8 @@ int RunDevices(bool json) {
 
 }  // namespace
 
+int RunLocalDevices(bool json) { return RunDevices(json); }
+
 void AddCaptureCommands(CLI::App* app) {
   auto spec = std::make_shared<std::string>();
   auto output = std::make_shared<std::string>();
@@ -149,21 +151,6 @@ void AddCaptureCommands(CLI::App* app) {
   cmd->add_option("--note", *note, "free text stored in the capture's header");
   cmd->callback(
       [spec, output, note] { throw CLI::RuntimeError(RunCapture(*spec, *output, *note)); });
-
-  auto local = std::make_shared<bool>(false);
-  auto json = std::make_shared<bool>(false);
-  auto* devices = app->add_subcommand("devices", "serial ports (--local: of this machine)");
-  devices->add_flag("--local", *local, "list this machine's serial ports (libserialport)");
-  devices->add_flag("--json", *json, "one JSON object a line");
-  devices->callback([local, json] {
-    if (!*local) {
-      fmt::print(
-          stderr,
-          "turncal devices: the daemon's device list needs turncald (issue 8); use --local\n");
-      throw CLI::RuntimeError(2);
-    }
-    throw CLI::RuntimeError(RunDevices(*json));
-  });
 }
 
 }  // namespace turncal::tools

@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include "tools/capture_command.h"
+#include "tools/client_commands.h"
 #include "tools/decode_command.h"
 #include "tools/models_command.h"
 #include "tools/observability_command.h"
@@ -25,6 +26,7 @@ int main(int argc, char** argv) {
   turncal::tools::AddObservabilityCommands(&app);
   turncal::tools::AddPlanCompareCommand(&app);
   turncal::tools::AddSequenceCommand(&app);
+  turncal::tools::AddClientCommands(&app);
   CLI11_PARSE(app, argc, argv);
   return 0;
 }

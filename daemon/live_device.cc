@@ -1,0 +1,321 @@
+#include "daemon/live_device.h"
+
+#include <fmt/format.h>
+
+#include <boost/asio/post.hpp>
+
+#include "daemon/transport_link.h"
+#include "drivers/decoder_factory.h"
+#include "drivers/mip/mip_dialogue.h"
+#include "drivers/xbus/mtdata2.h"
+#include "drivers/xbus/xbus_dialogue.h"
+
+namespace turncal::daemon {
+
+namespace {
+
+nlohmann::json VectorJson(const std::optional<Eigen::Vector3d>& v) {
+  if (!v) return nullptr;
+  return {(*v)[0], (*v)[1], (*v)[2]};
+}
+
+nlohmann::json MipIdentity(const drivers::mip::Configured& c, double rate_hz) {
+  nlohmann::json soft = nullptr;
+  if (c.stored.soft_iron) {
+    soft = nlohmann::json::array();
+    for (int r = 0; r < 3; ++r) {
+      soft.push_back(
+          {(*c.stored.soft_iron)(r, 0), (*c.stored.soft_iron)(r, 1), (*c.stored.soft_iron)(r, 2)});
+    }
+  }
+  return {{"protocol", "mip"},
+          {"model_name", c.info.model_name},
+          {"model_number", c.info.model_number},
+          {"serial", c.info.serial},
+          {"lot", c.info.lot},
+          {"options", c.info.options},
+          {"firmware", c.info.firmware},
+          {"base_rate_hz", c.base_rate_hz},
+          {"decimation", c.decimation},
+          {"rate_hz", rate_hz},
+          // What the device applies itself before output (recorded with every calibration).
+          {"stored_calibration",
+           {{"accel_bias_g", VectorJson(c.stored.accel_bias)},
+            {"gyro_bias_radps", VectorJson(c.stored.gyro_bias)},
+            {"hard_iron_gauss", VectorJson(c.stored.hard_iron)},
+            {"soft_iron", soft}}}};
+}
+
+// Counter and fine time at every sample, then the calibrated triads, temperature and status.
+drivers::xbus::OutputConfiguration XbusOutputs(double rate_hz) {
+  const auto rate = static_cast<std::uint16_t>(std::lround(rate_hz));
+  namespace x = drivers::xbus;
+  return {{x::kPacketCounter, 0xFFFF}, {x::kSampleTimeFine, 0xFFFF}, {x::kTemperature, rate},
+          {x::kAcceleration, rate},    {x::kRateOfTurn, rate},       {x::kMagneticField, rate},
+          {x::kStatusWord, rate}};
+}
+
+}  // namespace
+
+double DefaultRateHz(drivers::Protocol protocol) {
+  return protocol == drivers::Protocol::kMip ? 500.0 : 100.0;
+}
+
+class LiveDevice::Sink final : public drivers::DecoderSink {
+ public:
+  explicit Sink(LiveDevice* device) : device_(device) {}
+  void OnFrame(const drivers::FrameView&) override {}
+  void OnSample(const Sample& sample) override {
+    ++device_->samples_;
+    ++device_->rate_samples_;
+    device_->on_sample_(sample);
+  }
+
+ private:
+  LiveDevice* device_;
+};
+
+LiveDevice::LiveDevice(boost::asio::io_context& io, drivers::DeviceSpec spec,
+                       DeviceSettings settings, SampleHandler on_sample, NoticeHandler on_notice,
+                       IdentityHandler on_identity)
+    : io_(io),
+      spec_(std::move(spec)),
+      settings_(settings),
+      on_sample_(std::move(on_sample)),
+      on_notice_(std::move(on_notice)),
+      on_identity_(std::move(on_identity)),
+      sink_(std::make_unique<Sink>(this)),
+      retry_timer_(io) {
+  if (!(settings_.rate_hz > 0)) settings_.rate_hz = DefaultRateHz(spec_.protocol);
+}
+
+LiveDevice::~LiveDevice() {
+  Stop();
+  JoinWorker();
+}
+
+void LiveDevice::JoinWorker() {
+  if (link_) link_->Close("turncald is stopping");
+  if (worker_.joinable()) worker_.join();
+}
+
+bool LiveDevice::Start(std::string* error) {
+  drivers::TransportOptions options;
+  options.reconnect_max = settings_.reconnect_max;
+  transport_ = drivers::MakeTransport(io_, spec_.port, spec_.baud, options, error);
+  if (!transport_) return false;
+  stopping_ = false;
+  if (on_capture_event_) transport_->SetEventHandler(on_capture_event_);
+  SetState("info", "opening", "opening " + transport_->Describe());
+  transport_->Start(
+      [this](std::span<const std::uint8_t> bytes, std::int64_t t) { OnData(bytes, t); },
+      [this](drivers::TransportStatus s, const std::string& m) { OnTransportStatus(s, m); });
+  return true;
+}
+
+void LiveDevice::Stop() {
+  if (stopping_) return;
+  stopping_ = true;
+  ++generation_;
+  retry_timer_.cancel();
+  if (link_) link_->Close("turncald is stopping");
+  if (transport_) transport_->Stop();
+  if (decoder_) decoder_->Finish();
+  state_ = "stopped";
+}
+
+void LiveDevice::SetState(const std::string& level, std::string state, std::string message) {
+  state_ = std::move(state);
+  message_ = std::move(message);
+  if (on_notice_) on_notice_(level, state_, message_);
+}
+
+void LiveDevice::OnTransportStatus(drivers::TransportStatus status, const std::string& message) {
+  if (stopping_) return;
+  switch (status) {
+    case drivers::TransportStatus::kOpened:
+      if (spec_.protocol == drivers::Protocol::kGx2 || !settings_.configure ||
+          spec_.port.rfind("replay:", 0) == 0) {
+        const char* why = spec_.protocol == drivers::Protocol::kGx2 ? " (gx2: no dialogue)"
+                          : !settings_.configure                    ? " (configure = false)"
+                                                 : " (a replay: its dialogue is in the capture)";
+        SetState("info", "streaming", message + why);
+        StartStreaming(std::nullopt);
+      } else {
+        SetState("info", "configuring", message);
+        BeginConfigure();
+      }
+      break;
+    case drivers::TransportStatus::kOpenFailed:
+      SetState("warn", "opening", message);
+      break;
+    case drivers::TransportStatus::kDisconnected:
+      ++generation_;
+      retry_timer_.cancel();
+      if (link_) link_->Close(message);
+      if (decoder_) {
+        decoder_->Finish();
+        const auto& c = decoder_->counters();
+        retired_.bytes_in += c.bytes_in;
+        retired_.frames += c.frames;
+        retired_.bad_checksums += c.bad_checksums;
+        retired_.bytes_skipped += c.bytes_skipped;
+        retired_.lost_samples += c.lost_samples;
+        retired_.samples += c.samples;
+        decoder_.reset();
+      }
+      SetState("error", "disconnected", message);
+      break;
+    case drivers::TransportStatus::kFinished:
+      if (decoder_) decoder_->Finish();
+      SetState("info", "finished", message);
+      break;
+    case drivers::TransportStatus::kRecordingFailed:
+      SetState("warn", state_, message);
+      break;
+    case drivers::TransportStatus::kStopped:
+      break;
+  }
+}
+
+void LiveDevice::OnData(std::span<const std::uint8_t> bytes, std::int64_t t_host_ns) {
+  if (decoder_) {
+    decoder_->Push(bytes, t_host_ns);
+    return;
+  }
+  if (link_ && state_ == "configuring") {
+    link_->Deliver(bytes);
+    return;
+  }
+  bytes_ignored_ += bytes.size();  // between a failed dialogue and its retry
+}
+
+void LiveDevice::BeginConfigure() {
+  JoinWorker();  // an earlier dialogue has ended (its result was dropped) or is told to end
+  link_ = std::make_shared<TransportLink>(io_, transport_.get());
+  const std::uint64_t generation = ++generation_;
+  const drivers::Protocol protocol = spec_.protocol;
+  const double rate_hz = settings_.rate_hz;
+  std::shared_ptr<TransportLink> link = link_;
+  worker_ = std::thread([this, link, generation, protocol, rate_hz] {
+    std::string error;
+    nlohmann::json identity;
+    std::optional<drivers::XbusLegacyLayout> layout;
+    bool ok = false;
+    if (protocol == drivers::Protocol::kMip) {
+      drivers::mip::Dialogue dialogue(link.get());
+      if (auto c = dialogue.Configure(rate_hz, &error)) {
+        identity = MipIdentity(*c, c->base_rate_hz / static_cast<double>(c->decimation));
+        ok = true;
+      }
+    } else {
+      drivers::xbus::Dialogue dialogue(link.get());
+      const bool legacy = protocol == drivers::Protocol::kXbusLegacy;
+      std::optional<drivers::xbus::DeviceIdentity> id;
+      if (legacy) {
+        if (dialogue.GoToConfig(&error) && (id = dialogue.Identify(&error)) &&
+            (layout = dialogue.ReadLegacyLayout(&error)) && dialogue.GoToMeasurement(&error)) {
+          ok = true;
+        }
+      } else if ((id = dialogue.Configure(XbusOutputs(rate_hz), &error))) {
+        ok = true;
+      }
+      if (ok) {
+        identity = {{"protocol", drivers::ToString(protocol)},
+                    {"device_id", fmt::format("{:08X}", id->device_id)},
+                    {"product_code", id->product_code},
+                    {"firmware", id->firmware},
+                    {"rate_hz", rate_hz}};
+        if (layout) {
+          identity["output_mode"] = fmt::format("0x{:04X}", layout->output_mode);
+          identity["output_settings"] = fmt::format("0x{:08X}", layout->output_settings);
+        }
+      }
+    }
+    boost::asio::post(io_, [this, generation, ok, error, identity, layout] {
+      if (generation != generation_) return;  // the device went away meanwhile
+      EndConfigure(ok, error, identity, layout);
+    });
+  });
+}
+
+void LiveDevice::EndConfigure(bool ok, const std::string& error, nlohmann::json identity,
+                              std::optional<drivers::XbusLegacyLayout> layout) {
+  if (!ok) {
+    ++configure_failures_;
+    SetState("error", "configure failed",
+             fmt::format("{}: {}; retrying in {} s", spec_.name, error,
+                         static_cast<double>(settings_.configure_retry.count()) / 1000.0));
+    link_->Close("the dialogue failed");
+    const std::uint64_t generation = generation_;
+    retry_timer_.expires_after(settings_.configure_retry);
+    retry_timer_.async_wait([this, generation](const boost::system::error_code& ec) {
+      if (ec || stopping_ || generation != generation_ || !transport_->is_open()) return;
+      SetState("info", "configuring", "retrying the configuration dialogue");
+      BeginConfigure();
+    });
+    return;
+  }
+  identity_ = std::move(identity);
+  link_->Close("configured");
+  if (on_identity_) on_identity_(identity_);
+  SetState("info", "streaming", "configured: " + identity_.dump());
+  StartStreaming(layout);
+}
+
+void LiveDevice::StartStreaming(std::optional<drivers::XbusLegacyLayout> layout) {
+  drivers::DecoderOptions options;
+  options.device = spec_.name;
+  if (layout) options.xbus_legacy = *layout;
+  std::string error;
+  decoder_ = drivers::MakeDecoder(spec_.protocol, options, sink_.get(), &error);
+  if (!decoder_) SetState("error", "configure failed", spec_.name + ": " + error);
+}
+
+void LiveDevice::UpdateRate(std::int64_t now_ns) {
+  if (rate_t_ns_ > 0 && now_ns > rate_t_ns_) {
+    rate_hz_ = static_cast<double>(rate_samples_) * 1e9 / static_cast<double>(now_ns - rate_t_ns_);
+  }
+  rate_t_ns_ = now_ns;
+  rate_samples_ = 0;
+  if (decoder_) decoder_->CheckTimeout(now_ns);
+}
+
+nlohmann::json LiveDevice::Status() const {
+  drivers::DecoderCounters c = retired_;
+  if (decoder_) {
+    const auto& d = decoder_->counters();
+    c.bytes_in += d.bytes_in;
+    c.frames += d.frames;
+    c.bad_checksums += d.bad_checksums;
+    c.bytes_skipped += d.bytes_skipped;
+    c.lost_samples += d.lost_samples;
+    c.samples += d.samples;
+  }
+  const drivers::TransportCounters t =
+      transport_ ? transport_->counters() : drivers::TransportCounters{};
+  return {{"name", spec_.name},
+          {"protocol", drivers::ToString(spec_.protocol)},
+          {"port", spec_.port},
+          {"baud", spec_.baud},
+          {"state", state_},
+          {"message", message_},
+          {"identity", identity_},
+          {"rate_hz", rate_hz_},
+          {"configured_rate_hz", settings_.rate_hz},
+          {"counters",
+           {{"bytes_read", t.bytes_read},
+            {"bytes_written", t.bytes_written},
+            {"opens", t.opens},
+            {"open_failures", t.open_failures},
+            {"disconnects", t.disconnects},
+            {"configure_failures", configure_failures_},
+            {"bytes_ignored", bytes_ignored_},
+            {"frames", c.frames},
+            {"samples", c.samples},
+            {"bad_checksums", c.bad_checksums},
+            {"skipped_bytes", c.bytes_skipped},
+            {"lost_samples", c.lost_samples}}}};
+}
+
+}  // namespace turncal::daemon

@@ -1,0 +1,107 @@
+#pragma once
+// One live device of a station: its transport (opened and reopened with backoff), its
+// configuration dialogue (idle, identify, output format and rate, the device's stored
+// calibration, stream) on a worker thread so the loop never waits for a reply, then its decoder.
+// A device that is absent or whose dialogue fails is reported and retried; the others go on.
+//
+// States: "opening" → "configuring" → "streaming"; "configure failed" (retried after
+// `configure_retry`), "disconnected" (reopened by the transport), "stopped".
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <functional>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "core/sample.h"
+#include "drivers/decoder.h"
+#include "drivers/device_spec.h"
+#include "drivers/transport/transport.h"
+#include "drivers/xbus/xbus_decoder.h"
+
+namespace turncal::daemon {
+
+class TransportLink;
+
+struct DeviceSettings {
+  double rate_hz = 0.0;   // output rate asked for in the dialogue; <= 0: the protocol's default
+  bool configure = true;  // false: listen only (a device configured elsewhere)
+  std::chrono::milliseconds configure_retry{5000};
+  std::chrono::milliseconds reconnect_max{5000};
+};
+
+// The rate the dialogue asks for when none is configured: mip 500 Hz, the others 100 Hz (the
+// simulator's defaults, and what SENSORS.md's link budgets carry at the default bauds).
+double DefaultRateHz(drivers::Protocol protocol);
+
+class LiveDevice {
+ public:
+  using SampleHandler = std::function<void(const Sample&)>;
+  // A state change or a problem, in a sentence a log can carry; `level` "info", "warn", "error".
+  using NoticeHandler =
+      std::function<void(const std::string& level, const std::string& state, const std::string&)>;
+  // Runs on the loop when a dialogue succeeded: what the device said about itself.
+  using IdentityHandler = std::function<void(const nlohmann::json& identity)>;
+
+  LiveDevice(boost::asio::io_context& io, drivers::DeviceSpec spec, DeviceSettings settings,
+             SampleHandler on_sample, NoticeHandler on_notice, IdentityHandler on_identity);
+  ~LiveDevice();  // stops, and joins a dialogue still running
+  LiveDevice(const LiveDevice&) = delete;
+  LiveDevice& operator=(const LiveDevice&) = delete;
+
+  // replay: ports only: the capture's events (pose commands), at their time. Before Start().
+  void SetCaptureEventHandler(drivers::Transport::EventHandler handler) {
+    on_capture_event_ = std::move(handler);
+  }
+  // False with a message when the port cannot be used at all (a malformed tcp:// address).
+  bool Start(std::string* error);
+  void Stop();
+
+  const drivers::DeviceSpec& spec() const { return spec_; }
+  const std::string& state() const { return state_; }
+  // {"name","protocol","port","baud","state","message","identity","rate_hz","counters":{...}}
+  nlohmann::json Status() const;
+  // Called once a second by the service: measures the sample rate.
+  void UpdateRate(std::int64_t now_ns);
+  std::uint64_t samples() const { return samples_; }
+
+ private:
+  class Sink;
+  void OnData(std::span<const std::uint8_t> bytes, std::int64_t t_host_ns);
+  void OnTransportStatus(drivers::TransportStatus status, const std::string& message);
+  void BeginConfigure();
+  void EndConfigure(bool ok, const std::string& error, nlohmann::json identity,
+                    std::optional<drivers::XbusLegacyLayout> layout);
+  void StartStreaming(std::optional<drivers::XbusLegacyLayout> layout);
+  void SetState(const std::string& level, std::string state, std::string message);
+  void JoinWorker();
+
+  boost::asio::io_context& io_;
+  drivers::DeviceSpec spec_;
+  DeviceSettings settings_;
+  SampleHandler on_sample_;
+  NoticeHandler on_notice_;
+  IdentityHandler on_identity_;
+  drivers::Transport::EventHandler on_capture_event_;
+  std::unique_ptr<drivers::Transport> transport_;
+  std::unique_ptr<Sink> sink_;
+  std::unique_ptr<drivers::Decoder> decoder_;
+  drivers::DecoderCounters retired_;  // counters of decoders replaced after a reconfiguration
+  std::shared_ptr<TransportLink> link_;
+  std::thread worker_;
+  boost::asio::steady_timer retry_timer_;
+  std::uint64_t generation_ = 0;  // a dialogue's result is dropped when the device moved on
+  std::string state_ = "stopped";
+  std::string message_;
+  nlohmann::json identity_;
+  std::uint64_t samples_ = 0, bytes_ignored_ = 0, configure_failures_ = 0;
+  std::uint64_t rate_samples_ = 0;
+  std::int64_t rate_t_ns_ = 0;
+  double rate_hz_ = 0.0;
+  bool stopping_ = false;
+};
+
+}  // namespace turncal::daemon

@@ -1,0 +1,612 @@
+#include "daemon/service.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <csignal>
+
+#include "daemon/notify.h"
+#include "daemon/persistence.h"
+#include "drivers/transport/transport.h"
+#include "protocol/messages.h"
+#include "protocol/sequencer_json.h"
+#include "turncal/version.h"
+
+namespace turncal::daemon {
+
+namespace {
+
+constexpr std::int64_t kNsPerMs = 1'000'000;
+constexpr auto kTick = std::chrono::milliseconds(50);
+
+// The triad as JSON text with enough digits for a 24-bit ADC.
+void AppendTriad(std::string* out, const char* key, const Eigen::Vector3d& v) {
+  fmt::format_to(std::back_inserter(*out), ",\"{}\":[{:.9g},{:.9g},{:.9g}]", key, v[0], v[1], v[2]);
+}
+
+void AppendSampleTime(std::string* out, const Sample& s) {
+  fmt::format_to(std::back_inserter(*out), ",\"device\":\"{}\",\"t_host_ns\":{}", s.device,
+                 s.t_host_ns);
+  if (s.t_device_s) fmt::format_to(std::back_inserter(*out), ",\"t_device\":{:.9f}", *s.t_device_s);
+  if (s.counter) fmt::format_to(std::back_inserter(*out), ",\"counter\":{}", *s.counter);
+}
+
+void AppendRaw(std::string* out, const Sample& s) {
+  if (s.acc_mps2) AppendTriad(out, "acc", *s.acc_mps2);
+  if (s.gyr_radps) AppendTriad(out, "gyr", *s.gyr_radps);
+  if (s.mag) AppendTriad(out, "mag", *s.mag);
+  if (s.temp_c) fmt::format_to(std::back_inserter(*out), ",\"temp\":{:.4g}", *s.temp_c);
+  if (s.flags) fmt::format_to(std::back_inserter(*out), ",\"flags\":{}", s.flags);
+}
+
+// Mutating commands need a peer the configuration allows.
+bool IsMutating(const std::string& cmd) {
+  return cmd == "pose" || cmd == "reset" || cmd == "publish";
+}
+
+const char* kCommands = "status, devices, pose, watch, result, next_pose, reset, publish, version";
+
+}  // namespace
+
+Service::Service(ServiceOptions options)
+    : options_(std::move(options)), signals_(io_), tick_timer_(io_) {}
+
+Service::~Service() {
+  StopDevices();
+  if (server_) server_->Stop();
+}
+
+bool Service::StartStation(std::string* error) {
+  std::vector<std::string> names;
+  for (const auto& d : options_.devices) names.push_back(d.name);
+  StationOptions so = options_.station;
+  so.state_dir = options_.state_dir;
+  if (!so.IsValid(error)) return false;
+  station_.reset();  // closes the journal before a new station opens it
+  station_ = std::make_unique<Station>(names, so, [this](const nlohmann::json& e) { OnEvent(e); });
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    if (!devices_[i]->Status()["identity"].is_null()) {
+      station_->SetDeviceIdentity(static_cast<int>(i), devices_[i]->Status()["identity"]);
+    }
+  }
+  // Pose indices continue after the journal's.
+  const nlohmann::json result = station_->Result();
+  for (const auto& [name, d] : result["devices"].items()) {
+    next_pose_index_ = std::max(next_pose_index_, d["poses"].get<int>());
+  }
+  return true;
+}
+
+void Service::StartDevices() {
+  for (std::size_t i = 0; i < options_.devices.size(); ++i) {
+    const auto& spec = options_.devices[i];
+    DeviceSettings settings;
+    if (auto it = options_.device_settings.find(spec.name); it != options_.device_settings.end()) {
+      settings = it->second;
+    }
+    auto device = std::make_unique<LiveDevice>(
+        io_, spec, settings, [this, i](const Sample& s) { OnSample(i, s); },
+        [this, name = spec.name](const std::string& level, const std::string& state,
+                                 const std::string& message) {
+          if (level == "error") {
+            spdlog::error("{}: {}: {}", name, state, message);
+          } else if (level == "warn") {
+            spdlog::warn("{}: {}: {}", name, state, message);
+          } else {
+            spdlog::info("{}: {}: {}", name, state, message);
+          }
+          OnEvent({{"class", "DEVICE"}, {"device", name}, {"state", state}, {"message", message}});
+        },
+        [this, i](const nlohmann::json& identity) {
+          if (station_) station_->SetDeviceIdentity(static_cast<int>(i), identity);
+        });
+    // A replayed capture's pose commands go to this device as they would from a controller.
+    device->SetCaptureEventHandler([this, i](const std::string& text, std::int64_t t_host_ns) {
+      const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+      Announcement a;
+      bool is_pose = false;
+      std::string why;
+      if (j.is_discarded() || !station_) return;
+      if (!protocol::ParsePoseCommand(j, t_host_ns, &a, &is_pose, &why)) {
+        if (is_pose) OnEvent({{"class", "ERROR"}, {"message", "capture event: " + why}});
+        return;
+      }
+      if (!station_->AnnounceTo(static_cast<int>(i), a, &why)) {
+        OnEvent({{"class", "ERROR"}, {"message", "capture event: " + why}});
+      }
+      next_pose_index_ = std::max(next_pose_index_, a.index + 1);
+    });
+    std::string error;
+    if (!device->Start(&error)) {
+      spdlog::error("{}: {}", spec.name, error);
+      OnEvent({{"class", "ERROR"}, {"device", spec.name}, {"message", error}});
+    }
+    devices_.push_back(std::move(device));
+  }
+}
+
+void Service::StopDevices() {
+  for (auto& d : devices_) d->Stop();
+  devices_.clear();
+}
+
+int Service::Run() {
+  started_ns_ = drivers::MonotonicNowNs();
+  std::string error;
+  if (!StartStation(&error)) {
+    spdlog::error("{}", error);
+    return 1;
+  }
+  server_ = std::make_unique<SocketServer>(io_, options_.socket,
+                                           [this](const std::shared_ptr<ClientSession>& c,
+                                                  const nlohmann::json& r) { OnRequest(c, r); });
+  if (!server_->Listen(&error)) {
+    spdlog::error("{}", error);
+    return 1;
+  }
+  spdlog::info("turncald {}: listening on {}{}", kVersion,
+               options_.socket.activated_fd ? "the socket systemd passed" : options_.socket.path,
+               options_.state_dir.empty() ? "" : ", state in " + options_.state_dir);
+  StartDevices();
+  signals_.add(SIGTERM);
+  signals_.add(SIGINT);
+  signals_.add(SIGHUP);
+  std::function<void(const boost::system::error_code&, int)> on_signal =
+      [this, &on_signal](const boost::system::error_code& ec, int signal) {
+        if (ec) return;
+        if (signal == SIGHUP) {
+          Reload();
+          signals_.async_wait(on_signal);
+          return;
+        }
+        spdlog::info("turncald: {} received, stopping", signal == SIGTERM ? "SIGTERM" : "SIGINT");
+        Stop();
+      };
+  signals_.async_wait(on_signal);
+  if (auto w = WatchdogInterval()) {
+    watchdog_interval_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(*w).count() / 2;
+  }
+  UpdateStatusLine();
+  Notify("READY=1\nSTATUS=" + status_line_);
+  Tick();
+  io_.run();
+  return 0;
+}
+
+void Service::Stop() {
+  if (stopping_) return;
+  stopping_ = true;
+  Notify("STOPPING=1");
+  tick_timer_.cancel();
+  signals_.cancel();
+  StopDevices();
+  if (server_) server_->Stop();
+  station_.reset();  // the journal is fsynced at every append; this closes it
+  io_.stop();
+}
+
+void Service::Tick() {
+  const std::int64_t now = drivers::MonotonicNowNs();
+  if (station_) {
+    for (std::size_t i = 0; i < devices_.size(); ++i) {
+      if (devices_[i]->spec().port.rfind("replay:", 0) != 0) {
+        station_->TickDevice(static_cast<int>(i), now);
+      }
+    }
+  }
+  if (now - last_rate_ns_ >= 1000 * kNsPerMs) {
+    for (auto& d : devices_) d->UpdateRate(now);
+    last_rate_ns_ = now;
+  }
+  if (watchdog_interval_ns_ > 0 && now - last_watchdog_ns_ >= watchdog_interval_ns_) {
+    Notify("WATCHDOG=1");
+    last_watchdog_ns_ = now;
+  }
+  if (now - last_status_ns_ >= 5000 * kNsPerMs) {
+    const std::string before = status_line_;
+    UpdateStatusLine();
+    if (status_line_ != before) Notify("STATUS=" + status_line_);
+    last_status_ns_ = now;
+  }
+  tick_timer_.expires_after(kTick);
+  tick_timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (!ec && !stopping_) Tick();
+  });
+}
+
+void Service::UpdateStatusLine() {
+  int streaming = 0, poses = 0, active = 0;
+  for (const auto& d : devices_) streaming += d->state() == "streaming";
+  if (station_) {
+    const nlohmann::json r = station_->Result();
+    for (const auto& [name, d] : r["devices"].items()) {
+      poses += d["poses"].get<int>();
+      for (const auto& [model, m] : d["models"].items())
+        active += m["active_version"].get<int>() > 0;
+    }
+  }
+  status_line_ = fmt::format("{}/{} devices streaming, {} poses captured, {} calibrations active",
+                             streaming, devices_.size(), poses, active);
+}
+
+void Service::Reload() {
+  Notify("RELOADING=1");
+  if (!options_.reload) {
+    spdlog::warn("turncald: SIGHUP: no configuration file to reload");
+    Notify("READY=1");
+    return;
+  }
+  ServiceOptions next = options_;
+  std::string error;
+  if (!options_.reload(&next, &error)) {
+    spdlog::error("turncald: SIGHUP: the configuration is not reloaded: {}", error);
+    OnEvent({{"class", "ERROR"}, {"message", "reload refused: " + error}});
+    Notify("READY=1");
+    return;
+  }
+  // Devices and station are rebuilt; the station resumes from its journal, so every captured
+  // pose is kept (a pose being collected is lost and must be announced again).
+  StopDevices();
+  next.socket = options_.socket;  // the socket stays as it is
+  next.reload = options_.reload;
+  options_ = std::move(next);
+  if (!StartStation(&error)) {
+    spdlog::error("turncald: SIGHUP: {}", error);
+  }
+  StartDevices();
+  spdlog::info("turncald: configuration reloaded ({} devices)", devices_.size());
+  OnEvent({{"class", "RELOADED"}, {"devices", options_.devices.size()}});
+  UpdateStatusLine();
+  Notify("READY=1\nSTATUS=" + status_line_);
+}
+
+void Service::OnSample(std::size_t device, const Sample& sample) {
+  if (!station_) return;
+  const auto t0 = std::chrono::steady_clock::now();
+  station_->OnSample(static_cast<int>(device), sample);
+  const double ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  if (ms > 1.0) {  // a pose was captured and the calibrations were solved
+    solve_ms_last_ = ms;
+    solve_ms_max_ = std::max(solve_ms_max_, ms);
+  }
+  if (server_->sessions().empty()) return;
+  // The lines are built once, when somebody wants them, and shared by every subscriber.
+  std::shared_ptr<const std::string> corrected, corrected_raw, raw;
+  Station::Corrected c;
+  bool have_correction = false, tried = false;
+  auto sessions = server_->sessions();  // a send may close a session
+  for (auto& [id, s] : sessions) {
+    if (!s->watch || (!s->watch->corrected && !s->watch->raw)) continue;
+    const WatchSpec& w = *s->watch;
+    if (!w.device.empty() && w.device != sample.device) continue;
+    if (w.max_rate_hz > 0) {
+      std::int64_t& last = s->last_sample_ns[sample.device];
+      if (sample.t_host_ns - last < static_cast<std::int64_t>(1e9 / w.max_rate_hz)) continue;
+      last = sample.t_host_ns;
+    }
+    if (w.corrected) {
+      if (!tried) {
+        have_correction = station_->Correct(static_cast<int>(device), sample, &c);
+        tried = true;
+      }
+      if (!have_correction) {
+        if (!w.raw) continue;  // nothing to correct with yet; raw samples still go out
+      } else {
+        std::shared_ptr<const std::string>& line = w.raw ? corrected_raw : corrected;
+        if (!line) {
+          std::string text = "{\"class\":\"CORRECTED\"";
+          AppendSampleTime(&text, sample);
+          if (c.acc_mps2) AppendTriad(&text, "acc", *c.acc_mps2);
+          if (c.acc_frame)
+            fmt::format_to(std::back_inserter(text), ",\"acc_frame\":\"{}\"", c.acc_frame);
+          if (c.mag) AppendTriad(&text, "mag", *c.mag);
+          if (sample.gyr_radps) AppendTriad(&text, "gyr", *sample.gyr_radps);  // not calibrated
+          text += ",\"versions\":{";
+          for (std::size_t k = 0; k < c.versions.size(); ++k) {
+            fmt::format_to(std::back_inserter(text), "{}\"{}\":{}", k ? "," : "",
+                           c.versions[k].first, c.versions[k].second);
+          }
+          text += "}";
+          if (w.raw) {
+            text += ",\"raw\":{\"class\":\"SAMPLE\"";
+            AppendRaw(&text, sample);
+            text += "}";
+          }
+          text += "}\n";
+          line = std::make_shared<const std::string>(std::move(text));
+        }
+        s->Stream(line);
+        continue;
+      }
+    }
+    if (!raw) {
+      std::string text = "{\"class\":\"SAMPLE\"";
+      AppendSampleTime(&text, sample);
+      AppendRaw(&text, sample);
+      text += "}\n";
+      raw = std::make_shared<const std::string>(std::move(text));
+    }
+    s->Stream(raw);
+  }
+}
+
+void Service::OnEvent(const nlohmann::json& event) {
+  const std::string kind = event.value("class", "");
+  if (kind == "POSE_CAPTURED" || kind == "POSE_REJECTED" || kind == "CALIBRATION_ACTIVE" ||
+      kind == "NOISE_MEASURED" || kind == "NOISE_RETRY" || kind == "SESSION_RESUMED" ||
+      (kind == "ERROR" && event.contains("device"))) {
+    nlohmann::json brief = event;
+    brief.erase("record");
+    spdlog::info("{}", brief.dump());
+  }
+  if (kind == "ESTIMATE") {
+    spdlog::info("{} {}: {} poses, gate {}", event.value("device", ""), event.value("model", ""),
+                 event.value("poses", 0), event["gate"].value("pass", false) ? "pass" : "fail");
+  }
+  if (!server_) return;
+  std::shared_ptr<const std::string> line;
+  const bool pose_event = kind.rfind("POSE_", 0) == 0;
+  const std::string device = event.value("device", "");
+  const int index = event.value("index", -1);
+  auto sessions = server_->sessions();
+  for (auto& [id, s] : sessions) {
+    bool send = s->watch && s->watch->events &&
+                (s->watch->device.empty() || device.empty() || s->watch->device == device);
+    bool answers = false;
+    if (pose_event) {
+      auto it = s->pending_poses.find(index);
+      if (it != s->pending_poses.end() && it->second.count(device)) {
+        send = true;
+        if (kind == "POSE_CAPTURED" || kind == "POSE_REJECTED") {
+          it->second.erase(device);
+          if (it->second.empty()) s->pending_poses.erase(it);
+          answers = true;
+        }
+      }
+    }
+    if (!send) continue;
+    if (!line) line = std::make_shared<const std::string>(event.dump() + "\n");
+    if (answers) {
+      s->Reply(event);  // the answer to a pose is never dropped
+    } else {
+      s->Stream(line);
+    }
+  }
+}
+
+nlohmann::json Service::StatusJson() const {
+  nlohmann::json devices = nlohmann::json::object();
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    nlohmann::json d = devices_[i]->Status();
+    if (station_) d["station"] = station_->Status(static_cast<int>(i));
+    devices[devices_[i]->spec().name] = d;
+  }
+  return {{"class", "STATUS"},
+          {"release", kVersion},
+          {"uptime_s", static_cast<double>(drivers::MonotonicNowNs() - started_ns_) / 1e9},
+          {"state_dir", options_.state_dir},
+          {"clients", server_ ? server_->sessions().size() : 0},
+          {"solve_ms", {{"last", solve_ms_last_}, {"max", solve_ms_max_}}},
+          {"summary", status_line_},
+          {"devices", devices}};
+}
+
+nlohmann::json Service::DevicesJson() const {
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& d : devices_) {
+    nlohmann::json s = d->Status();
+    list.push_back({{"name", s["name"]},
+                    {"protocol", s["protocol"]},
+                    {"port", s["port"]},
+                    {"baud", s["baud"]},
+                    {"state", s["state"]},
+                    {"message", s["message"]},
+                    {"rate_hz", s["rate_hz"]},
+                    {"identity", s["identity"]}});
+  }
+  return {{"class", "DEVICES"}, {"devices", list}};
+}
+
+void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
+                        const nlohmann::json& request) {
+  const nlohmann::json id = request.contains("id") ? request["id"] : nlohmann::json();
+  auto reply = [&](nlohmann::json message) {
+    if (!id.is_null()) message["id"] = id;
+    client->Reply(message);
+  };
+  auto error = [&](const std::string& message) { reply(protocol::ErrorMessage(message)); };
+  if (!request.contains("cmd") || !request["cmd"].is_string()) {
+    error(std::string("malformed request: no \"cmd\" (commands: ") + kCommands + ")");
+    return;
+  }
+  const std::string cmd = request["cmd"].get<std::string>();
+  if (IsMutating(cmd) && !client->control()) {
+    error(
+        fmt::format("'{}' refused: uid {} may not change the session (control_users in the "
+                    "configuration)",
+                    cmd, client->uid()));
+    spdlog::warn("refused '{}' from uid {} (pid {})", cmd, client->uid(), client->pid());
+    return;
+  }
+  if (cmd == "status") {
+    reply(StatusJson());
+  } else if (cmd == "devices") {
+    reply(DevicesJson());
+  } else if (cmd == "version") {
+    reply(protocol::VersionMessage());
+  } else if (cmd == "result") {
+    reply(station_->Result());
+  } else if (cmd == "next_pose") {
+    std::string device = request.value("device", "");
+    if (device.empty() && !options_.devices.empty()) device = options_.devices.front().name;
+    reply(station_->NextPose(device));
+  } else if (cmd == "pose") {
+    HandlePose(client, request, id);
+  } else if (cmd == "watch") {
+    HandleWatch(client, request, id);
+  } else if (cmd == "reset") {
+    HandleReset(client, request, id);
+  } else if (cmd == "publish") {
+    HandlePublish(client, request, id);
+  } else {
+    error(fmt::format("unknown command '{}' (commands: {})", cmd, kCommands));
+  }
+}
+
+void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
+                         const nlohmann::json& request, const nlohmann::json& id) {
+  auto error = [&](const std::string& message) {
+    nlohmann::json e = protocol::ErrorMessage(message);
+    if (!id.is_null()) e["id"] = id;
+    client->Reply(e);
+  };
+  Announcement a;
+  bool is_pose = false;
+  std::string why;
+  if (!protocol::ParsePoseCommand(request, drivers::MonotonicNowNs(), &a, &is_pose, &why)) {
+    error("pose: " + why);
+    return;
+  }
+  if (!request.contains("index")) a.index = next_pose_index_;
+  std::vector<std::size_t> targets;
+  const std::string only = request.contains("device") && request["device"].is_string()
+                               ? request["device"].get<std::string>()
+                               : "";
+  nlohmann::json skipped = nlohmann::json::object();
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    if (!only.empty() && devices_[i]->spec().name != only) continue;
+    if (devices_[i]->state() != "streaming") {
+      skipped[devices_[i]->spec().name] = devices_[i]->state();
+      continue;
+    }
+    targets.push_back(i);
+  }
+  if (!only.empty() && targets.empty() && skipped.empty()) {
+    error("pose: no device '" + only + "'");
+    return;
+  }
+  if (targets.empty()) {
+    error("pose: no device is streaming (" + skipped.dump() + ")");
+    return;
+  }
+  nlohmann::json names = nlohmann::json::array();
+  std::set<std::string> waiting;
+  for (std::size_t i : targets) {
+    if (!station_->AnnounceTo(static_cast<int>(i), a, &why)) {
+      error("pose: " + devices_[i]->spec().name + ": " + why);
+      return;
+    }
+    names.push_back(devices_[i]->spec().name);
+    waiting.insert(devices_[i]->spec().name);
+  }
+  next_pose_index_ = std::max(next_pose_index_, a.index + 1);
+  client->pending_poses[a.index] = waiting;
+  nlohmann::json accepted = {
+      {"class", "POSE_ACCEPTED"}, {"index", a.index}, {"devices", names}, {"skipped", skipped}};
+  if (!id.is_null()) accepted["id"] = id;
+  client->Reply(accepted);
+}
+
+void Service::HandleWatch(const std::shared_ptr<ClientSession>& client,
+                          const nlohmann::json& request, const nlohmann::json& id) {
+  nlohmann::json reply;
+  if (request.contains("enable") && request["enable"].is_boolean() &&
+      !request["enable"].get<bool>()) {
+    client->watch.reset();
+    reply = {{"class", "WATCH"}, {"enable", false}};
+  } else {
+    WatchSpec w;
+    auto flag = [&](const char* key, bool* out) {
+      if (!request.contains(key)) return true;
+      if (!request[key].is_boolean()) return false;
+      *out = request[key].get<bool>();
+      return true;
+    };
+    bool ok = flag("events", &w.events) && flag("corrected", &w.corrected) && flag("raw", &w.raw);
+    if (ok && request.contains("device")) {
+      ok = request["device"].is_string();
+      if (ok) w.device = request["device"].get<std::string>();
+    }
+    if (ok && request.contains("max_rate_hz")) {
+      ok = request["max_rate_hz"].is_number() && request["max_rate_hz"].get<double>() >= 0;
+      if (ok) w.max_rate_hz = request["max_rate_hz"].get<double>();
+    }
+    if (!ok) {
+      reply = protocol::ErrorMessage(
+          "watch: events, corrected, raw are true/false, device a name, max_rate_hz >= 0");
+    } else {
+      client->watch = w;
+      client->last_sample_ns.clear();
+      reply = {{"class", "WATCH"},
+               {"enable", true},
+               {"events", w.events},
+               {"corrected", w.corrected},
+               {"raw", w.raw},
+               {"device", w.device},
+               {"max_rate_hz", w.max_rate_hz}};
+    }
+  }
+  if (!id.is_null()) reply["id"] = id;
+  client->Reply(reply);
+}
+
+void Service::HandleReset(const std::shared_ptr<ClientSession>& client,
+                          const nlohmann::json& request, const nlohmann::json& id) {
+  std::string archived, error;
+  station_.reset();  // closes the journal
+  nlohmann::json reply;
+  if (!options_.state_dir.empty() && !ArchiveSession(options_.state_dir, &archived, &error)) {
+    reply = protocol::ErrorMessage("reset: " + error);
+  }
+  next_pose_index_ = 0;
+  std::string start_error;
+  if (!StartStation(&start_error)) {
+    reply = protocol::ErrorMessage("reset: " + start_error);
+  }
+  if (reply.is_null()) {
+    reply = {{"class", "RESET"},
+             {"archived", archived.empty() ? nlohmann::json() : nlohmann::json(archived)},
+             {"note", request.value("note", "")},
+             {"uid", client->uid()}};
+    spdlog::info("session reset by uid {}{}", client->uid(),
+                 archived.empty() ? "" : "; previous session archived in " + archived);
+    OnEvent({{"class", "SESSION_RESET"}, {"archived", reply["archived"]}});
+  }
+  if (!id.is_null()) reply["id"] = id;
+  client->Reply(reply);
+}
+
+void Service::HandlePublish(const std::shared_ptr<ClientSession>& client,
+                            const nlohmann::json& request, const nlohmann::json& id) {
+  nlohmann::json reply;
+  const std::string device = request.value("device", "");
+  const std::string model = request.value("model", "");
+  const std::string operator_name = request.value("operator", "");
+  const std::string reason = request.value("reason", "");
+  if (!request.value("override", false) || device.empty() || model.empty() ||
+      operator_name.empty() || reason.empty()) {
+    reply = protocol::ErrorMessage(
+        "publish: an explicit operator override needs \"override\":true, \"device\", \"model\", "
+        "\"operator\" and \"reason\" (calibrations that pass the gate are published without "
+        "asking)");
+  } else {
+    const nlohmann::json who = {{"operator", operator_name},
+                                {"reason", reason},
+                                {"uid", client->uid()},
+                                {"pid", client->pid()}};
+    std::string error;
+    if (!station_->PublishOverride(device, model, who, &error)) {
+      reply = protocol::ErrorMessage("publish: " + error);
+    } else {
+      spdlog::warn("{} {} published by operator override: {} (uid {}): {}", device, model,
+                   operator_name, client->uid(), reason);
+      reply = {{"class", "PUBLISHED"}, {"device", device}, {"model", model}, {"override", who}};
+    }
+  }
+  if (!id.is_null()) reply["id"] = id;
+  client->Reply(reply);
+}
+
+}  // namespace turncal::daemon

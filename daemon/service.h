@@ -1,0 +1,84 @@
+#pragma once
+// The live service (issue "The daemon"): one Boost.Asio event loop carries every device's bytes
+// (LiveDevice: transport, dialogue on a worker thread, decoder), the Station (sequencer,
+// calibrators, gate, persistence), the corrected output, and the socket server with its
+// requests (docs/protocol.md). systemd: READY=1 once the socket listens and every device was
+// opened or reported absent, STATUS= lines, WATCHDOG=1 from the loop, SIGHUP reloads the
+// configuration (the station is rebuilt and resumes from its journal), SIGTERM/SIGINT stop
+// cleanly (exit 0).
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/signal_set.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <functional>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "daemon/config.h"
+#include "daemon/live_device.h"
+#include "daemon/socket_server.h"
+#include "daemon/station.h"
+
+namespace turncal::daemon {
+
+struct ServiceOptions {
+  std::vector<drivers::DeviceSpec> devices;
+  std::map<std::string, DeviceSettings> device_settings;  // by name; defaults otherwise
+  StationOptions station;                                 // state_dir set by the service
+  std::string state_dir;
+  SocketOptions socket;
+  // Re-reads the configuration on SIGHUP (nullptr: SIGHUP only logs). False with a message.
+  std::function<bool(ServiceOptions*, std::string*)> reload;
+};
+
+class Service {
+ public:
+  explicit Service(ServiceOptions options);
+  ~Service();
+
+  // Runs until SIGTERM/SIGINT or Stop(). Returns the exit code: 0 after a clean stop, 1 when the
+  // socket cannot be created or the station cannot start.
+  int Run();
+  void Stop();
+
+ private:
+  bool StartStation(std::string* error);
+  void StartDevices();
+  void StopDevices();
+  void OnSample(std::size_t device, const Sample& sample);
+  void OnEvent(const nlohmann::json& event);
+  void OnRequest(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request);
+  void Tick();
+  void Reload();
+  void UpdateStatusLine();
+
+  nlohmann::json StatusJson() const;
+  nlohmann::json DevicesJson() const;
+  void HandlePose(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request,
+                  const nlohmann::json& id);
+  void HandleWatch(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request,
+                   const nlohmann::json& id);
+  void HandleReset(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request,
+                   const nlohmann::json& id);
+  void HandlePublish(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request,
+                     const nlohmann::json& id);
+
+  ServiceOptions options_;
+  boost::asio::io_context io_;
+  boost::asio::signal_set signals_;
+  boost::asio::steady_timer tick_timer_;
+  std::unique_ptr<Station> station_;
+  std::vector<std::unique_ptr<LiveDevice>> devices_;
+  std::unique_ptr<SocketServer> server_;
+  std::int64_t started_ns_ = 0;
+  std::int64_t last_rate_ns_ = 0, last_watchdog_ns_ = 0, last_status_ns_ = 0;
+  std::int64_t watchdog_interval_ns_ = 0;
+  int next_pose_index_ = 0;
+  double solve_ms_max_ = 0.0, solve_ms_last_ = 0.0;
+  std::string status_line_;
+  bool stopping_ = false;
+};
+
+}  // namespace turncal::daemon

@@ -1,0 +1,259 @@
+#include "daemon/socket_server.h"
+
+#include <fmt/format.h>
+#include <grp.h>
+#include <pwd.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <boost/asio/write.hpp>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+
+#include "protocol/messages.h"
+
+namespace turncal::daemon {
+
+namespace local = boost::asio::local;
+
+bool ResolveUser(const std::string& name_or_uid, unsigned* uid, std::string* error) {
+  if (!name_or_uid.empty() && name_or_uid.find_first_not_of("0123456789") == std::string::npos) {
+    *uid = static_cast<unsigned>(std::stoul(name_or_uid));
+    return true;
+  }
+  const passwd* p = ::getpwnam(name_or_uid.c_str());
+  if (p == nullptr) {
+    *error = "no user '" + name_or_uid + "'";
+    return false;
+  }
+  *uid = p->pw_uid;
+  return true;
+}
+
+SocketServer::SocketServer(boost::asio::io_context& io, SocketOptions options,
+                           RequestHandler on_request)
+    : io_(io), options_(std::move(options)), on_request_(std::move(on_request)) {}
+
+SocketServer::~SocketServer() { Stop(); }
+
+bool SocketServer::Listen(std::string* error) {
+  namespace fs = std::filesystem;
+  acceptor_ = std::make_unique<local::stream_protocol::acceptor>(io_);
+  boost::system::error_code ec;
+  if (options_.activated_fd) {
+    acceptor_->assign(local::stream_protocol(), *options_.activated_fd, ec);
+    if (ec) {
+      *error = "cannot use the socket systemd passed: " + ec.message();
+      return false;
+    }
+    Accept();
+    return true;
+  }
+  const fs::path path(options_.path);
+  std::error_code fec;
+  if (path.has_parent_path()) fs::create_directories(path.parent_path(), fec);
+  if (fs::exists(path, fec)) {
+    // A socket file left by a crash is removed; one that still answers belongs to a running
+    // turncald.
+    local::stream_protocol::socket probe(io_);
+    probe.connect(local::stream_protocol::endpoint(options_.path), ec);
+    if (!ec) {
+      *error = fmt::format("another turncald is listening on {}", options_.path);
+      return false;
+    }
+    fs::remove(path, fec);
+  }
+  const mode_t old_mask = ::umask(0117);  // the socket is created 0660
+  acceptor_->open(local::stream_protocol(), ec);
+  if (!ec) acceptor_->bind(local::stream_protocol::endpoint(options_.path), ec);
+  ::umask(old_mask);
+  if (!ec) acceptor_->listen(64, ec);
+  if (ec) {
+    *error = fmt::format("cannot listen on {}: {}", options_.path, ec.message());
+    return false;
+  }
+  created_file_ = true;
+  ::chmod(options_.path.c_str(), 0660);
+  if (!options_.group.empty()) {
+    const group* g = ::getgrnam(options_.group.c_str());
+    if (g == nullptr) {
+      *error = fmt::format("socket group '{}' does not exist", options_.group);
+      return false;
+    }
+    if (::chown(options_.path.c_str(), static_cast<uid_t>(-1), g->gr_gid) != 0) {
+      *error = fmt::format("cannot give {} to group '{}': {}", options_.path, options_.group,
+                           std::strerror(errno));
+      return false;
+    }
+  }
+  Accept();
+  return true;
+}
+
+void SocketServer::Stop() {
+  if (stopped_) return;
+  stopped_ = true;
+  if (acceptor_) {
+    boost::system::error_code ignored;
+    acceptor_->close(ignored);
+  }
+  auto sessions = sessions_;
+  for (auto& [id, s] : sessions) s->Close();
+  sessions_.clear();
+  if (created_file_) {
+    std::error_code ec;
+    std::filesystem::remove(options_.path, ec);
+  }
+}
+
+void SocketServer::Accept() {
+  acceptor_->async_accept(
+      [this](const boost::system::error_code& ec, local::stream_protocol::socket socket) {
+        if (stopped_ || ec == boost::asio::error::operation_aborted) return;
+        if (!ec) {
+          ++accepted_;
+          auto session = std::make_shared<ClientSession>(this, std::move(socket), next_id_++);
+          sessions_[session->id()] = session;
+          session->Start();
+        }
+        Accept();  // a failed accept (EMFILE) does not stop the server
+      });
+}
+
+void SocketServer::Remove(std::uint64_t id) { sessions_.erase(id); }
+
+ClientSession::ClientSession(SocketServer* server, local::stream_protocol::socket socket,
+                             std::uint64_t id)
+    : server_(server), socket_(std::move(socket)), id_(id) {
+  ucred cred{};
+  socklen_t size = sizeof(cred);
+  if (::getsockopt(socket_.native_handle(), SOL_SOCKET, SO_PEERCRED, &cred, &size) == 0) {
+    uid_ = cred.uid;
+    pid_ = cred.pid;
+    control_ = cred.uid == 0 || cred.uid == ::geteuid() ||
+               server_->options_.control_uids.count(cred.uid) > 0;
+  }
+}
+
+void ClientSession::Start() {
+  Reply(protocol::VersionMessage());
+  Read();
+}
+
+void ClientSession::Close() {
+  if (!open_) return;
+  open_ = false;
+  boost::system::error_code ignored;
+  socket_.shutdown(local::stream_protocol::socket::shutdown_both, ignored);
+  socket_.close(ignored);
+  queue_.clear();
+  queued_bytes_ = 0;
+  server_->Remove(id_);
+}
+
+void ClientSession::Read() {
+  auto self = shared_from_this();
+  socket_.async_read_some(boost::asio::buffer(buffer_),
+                          [self](const boost::system::error_code& ec, std::size_t n) {
+                            if (!self->open_) return;
+                            if (ec) {
+                              self->Close();
+                              return;
+                            }
+                            self->OnBytes(n);
+                            if (self->open_) self->Read();
+                          });
+}
+
+void ClientSession::OnBytes(std::size_t n) {
+  std::size_t start = 0;
+  for (std::size_t i = 0; i < n && open_; ++i) {
+    if (buffer_[i] != '\n') continue;
+    if (discarding_) {
+      discarding_ = false;
+    } else {
+      line_.append(buffer_.data() + start, i - start);
+      if (!line_.empty() && line_.back() == '\r') line_.pop_back();
+      if (line_.find_first_not_of(" \t") != std::string::npos) {
+        nlohmann::json request = nlohmann::json::parse(line_, nullptr, false);
+        if (request.is_discarded()) {
+          Reply(protocol::ErrorMessage("malformed request: not JSON (one object per line)"));
+        } else if (!request.is_object()) {
+          Reply(protocol::ErrorMessage("malformed request: a JSON object with \"cmd\" expected"));
+        } else {
+          server_->on_request_(shared_from_this(), request);
+        }
+      }
+    }
+    line_.clear();
+    start = i + 1;
+  }
+  if (!open_ || discarding_) return;
+  line_.append(buffer_.data() + start, n - start);
+  if (line_.size() > protocol::kMaxRequestBytes) {
+    Reply(protocol::ErrorMessage(fmt::format(
+        "request longer than {} bytes: discarded up to its end", protocol::kMaxRequestBytes)));
+    line_.clear();
+    discarding_ = true;
+  }
+}
+
+void ClientSession::Reply(const nlohmann::json& message) {
+  Enqueue(std::make_shared<const std::string>(message.dump() + "\n"), false);
+}
+
+void ClientSession::Stream(const std::shared_ptr<const std::string>& line) { Enqueue(line, true); }
+
+void ClientSession::Enqueue(std::shared_ptr<const std::string> line, bool droppable) {
+  if (!open_) return;
+  if (droppable && queued_bytes_ + line->size() > server_->options_.stream_queue_bytes) {
+    ++dropped_;
+    ++dropped_total_;
+    return;
+  }
+  if (queued_bytes_ + line->size() > server_->options_.max_queue_bytes) {
+    Close();  // it reads nothing and keeps asking: the only bound left is to let it go
+    return;
+  }
+  if (dropped_ > 0 && droppable) {
+    auto note = std::make_shared<const std::string>(
+        nlohmann::json{{"class", "DROPPED"}, {"count", dropped_}, {"total", dropped_total_}}
+            .dump() +
+        "\n");
+    dropped_ = 0;
+    queued_bytes_ += note->size();
+    queue_.push_back(std::move(note));
+  }
+  queued_bytes_ += line->size();
+  queue_.push_back(std::move(line));
+  if (!writing_) Write();
+}
+
+void ClientSession::Write() {
+  if (!open_ || queue_.empty()) {
+    writing_ = false;
+    return;
+  }
+  writing_ = true;
+  out_.clear();
+  // Several queued lines in one write (up to 64 KiB).
+  while (!queue_.empty() && (out_.empty() || out_.size() + queue_.front()->size() <= 65536)) {
+    out_ += *queue_.front();
+    queued_bytes_ -= queue_.front()->size();
+    queue_.pop_front();
+  }
+  auto self = shared_from_this();
+  boost::asio::async_write(socket_, boost::asio::buffer(out_),
+                           [self](const boost::system::error_code& ec, std::size_t) {
+                             if (!self->open_) return;
+                             if (ec) {
+                               self->Close();
+                               return;
+                             }
+                             self->Write();
+                           });
+}
+
+}  // namespace turncal::daemon
