@@ -104,6 +104,12 @@ bool LiveDevice::Start(std::string* error) {
   options.reconnect_max = settings_.reconnect_max;
   transport_ = drivers::MakeTransport(io_, spec_.port, spec_.baud, options, error);
   if (!transport_) return false;
+  if (recorder_) {
+    auto recording = std::make_unique<drivers::RecordingTransport>(std::move(transport_), recorder_,
+                                                                   record_index_, record_start_ns_);
+    recording_ = recording.get();
+    transport_ = std::move(recording);
+  }
   stopping_ = false;
   if (on_capture_event_) transport_->SetEventHandler(on_capture_event_);
   SetState("info", "opening", "opening " + transport_->Describe());
@@ -111,6 +117,10 @@ bool LiveDevice::Start(std::string* error) {
       [this](std::span<const std::uint8_t> bytes, std::int64_t t) { OnData(bytes, t); },
       [this](drivers::TransportStatus s, const std::string& m) { OnTransportStatus(s, m); });
   return true;
+}
+
+void LiveDevice::RecordEvent(const std::string& json) {
+  if (recording_) recording_->RecordEvent(json);
 }
 
 void LiveDevice::Stop() {

@@ -19,6 +19,7 @@
 #include "core/sample.h"
 #include "drivers/decoder.h"
 #include "drivers/device_spec.h"
+#include "drivers/transport/recording.h"
 #include "drivers/transport/transport.h"
 #include "drivers/xbus/xbus_decoder.h"
 
@@ -56,6 +57,15 @@ class LiveDevice {
   void SetCaptureEventHandler(drivers::Transport::EventHandler handler) {
     on_capture_event_ = std::move(handler);
   }
+  // Records the device's bytes (both ways) as device `index` of `writer` (--record). Before
+  // Start(); the writer must outlive the device.
+  void RecordInto(drivers::CaptureWriter* writer, std::uint8_t index, std::int64_t start_ns) {
+    recorder_ = writer;
+    record_index_ = index;
+    record_start_ns_ = start_ns;
+  }
+  // An event (a pose command) into the recording, at the device's recording clock.
+  void RecordEvent(const std::string& json);
   // False with a message when the port cannot be used at all (a malformed tcp:// address).
   bool Start(std::string* error);
   void Stop();
@@ -86,6 +96,10 @@ class LiveDevice {
   NoticeHandler on_notice_;
   IdentityHandler on_identity_;
   drivers::Transport::EventHandler on_capture_event_;
+  drivers::CaptureWriter* recorder_ = nullptr;
+  std::uint8_t record_index_ = 0;
+  std::int64_t record_start_ns_ = -1;
+  drivers::RecordingTransport* recording_ = nullptr;  // inside transport_, when recording
   std::unique_ptr<drivers::Transport> transport_;
   std::unique_ptr<Sink> sink_;
   std::unique_ptr<drivers::Decoder> decoder_;

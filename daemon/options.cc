@@ -14,6 +14,7 @@ bool Options::IsValid(std::string* error) const {
         "with PORT replay:FILE)");
   }
   if (!result_out.empty() && !once) return fail("--result-out needs --replay FILE --once");
+  if (!record_path.empty() && once) return fail("--record is for live devices, not --once");
   if (replay_protocol && replay_path.empty()) return fail("--protocol needs --replay FILE");
   for (std::size_t i = 0; i < devices.size(); ++i) {
     for (std::size_t j = i + 1; j < devices.size(); ++j) {
@@ -58,6 +59,9 @@ void AddCommandLine(CLI::App* app, Options* options) {
       ->type_name("P");
   app->add_flag("--once", options->once, "with --replay: process the whole capture, then exit");
   app->add_option("--result-out", options->result_out, "with --once: write the RESULT JSON here");
+  app->add_option("--record", options->record_path,
+                  "record every device's bytes and the pose commands into this capture (.tcap), "
+                  "for `turncald --replay FILE --once`");
 }
 
 }  // namespace turncal::daemon

@@ -19,6 +19,7 @@ struct Options {
   std::optional<drivers::Protocol> replay_protocol;  // --protocol, for raw .bin replays
   bool once = false;                                 // --once: run the capture, then exit
   std::string result_out;                            // --result-out FILE
+  std::string record_path;  // --record FILE.tcap: every device's bytes and the pose commands
 
   // False with a message when the combination of flags cannot run.
   bool IsValid(std::string* error) const;

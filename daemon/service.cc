@@ -71,9 +71,9 @@ bool Service::StartStation(std::string* error) {
     }
   }
   // Pose indices continue after the journal's.
-  const nlohmann::json result = station_->Result();
-  for (const auto& [name, d] : result["devices"].items()) {
-    next_pose_index_ = std::max(next_pose_index_, d["poses"].get<int>());
+  for (std::size_t i = 0; i < options_.devices.size(); ++i) {
+    next_pose_index_ =
+        std::max(next_pose_index_, station_->Status(static_cast<int>(i))["poses"].get<int>());
   }
   return true;
 }
@@ -117,6 +117,9 @@ void Service::StartDevices() {
       }
       next_pose_index_ = std::max(next_pose_index_, a.index + 1);
     });
+    if (recorder_) {
+      device->RecordInto(recorder_.get(), static_cast<std::uint8_t>(i), record_start_ns_);
+    }
     std::string error;
     if (!device->Start(&error)) {
       spdlog::error("{}: {}", spec.name, error);
@@ -144,6 +147,19 @@ int Service::Run() {
   if (!server_->Listen(&error)) {
     spdlog::error("{}", error);
     return 1;
+  }
+  if (!options_.record_path.empty()) {
+    drivers::CaptureHeader header;
+    for (const auto& d : options_.devices)
+      header.devices.push_back({d.name, d.protocol, d.baud, {}, {}});
+    header.created = "turncald " + std::string(kVersion);
+    header.note = "recorded live by turncald --record";
+    recorder_ = drivers::CaptureWriter::Create(options_.record_path, header, &error);
+    record_start_ns_ = drivers::MonotonicNowNs();
+    if (!recorder_) {
+      spdlog::error("{}", error);
+      return 1;
+    }
   }
   spdlog::info("turncald {}: listening on {}{}", kVersion,
                options_.socket.activated_fd ? "the socket systemd passed" : options_.socket.path,
@@ -183,6 +199,11 @@ void Service::Stop() {
   StopDevices();
   if (server_) server_->Stop();
   station_.reset();  // the journal is fsynced at every append; this closes it
+  if (recorder_) {
+    std::string error;
+    if (!recorder_->Close(&error)) spdlog::error("recording: {}", error);
+    recorder_.reset();
+  }
   io_.stop();
 }
 
@@ -198,6 +219,11 @@ void Service::Tick() {
   if (now - last_rate_ns_ >= 1000 * kNsPerMs) {
     for (auto& d : devices_) d->UpdateRate(now);
     last_rate_ns_ = now;
+  }
+  if (recorder_ && now - last_flush_ns_ >= 1000 * kNsPerMs) {
+    std::string error;
+    recorder_->Flush(&error);  // a kill -9 loses at most a second of the recording
+    last_flush_ns_ = now;
   }
   if (watchdog_interval_ns_ > 0 && now - last_watchdog_ns_ >= watchdog_interval_ns_) {
     Notify("WATCHDOG=1");
@@ -273,7 +299,8 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
   }
   if (server_->sessions().empty()) return;
   // The lines are built once, when somebody wants them, and shared by every subscriber.
-  std::shared_ptr<const std::string> corrected, corrected_raw, raw;
+  // Four shapes of corrected line: with or without raw, with or without sigma.
+  std::shared_ptr<const std::string> corrected_lines[4], raw;
   Station::Corrected c;
   bool have_correction = false, tried = false;
   auto sessions = server_->sessions();  // a send may close a session
@@ -287,14 +314,15 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
       last = sample.t_host_ns;
     }
     if (w.corrected) {
-      if (!tried) {
-        have_correction = station_->Correct(static_cast<int>(device), sample, &c);
+      if (!tried || (w.uncertainty && !c.acc_sigma && !c.mag_sigma && have_correction)) {
+        have_correction = station_->Correct(static_cast<int>(device), sample, &c, w.uncertainty);
         tried = true;
       }
       if (!have_correction) {
         if (!w.raw) continue;  // nothing to correct with yet; raw samples still go out
       } else {
-        std::shared_ptr<const std::string>& line = w.raw ? corrected_raw : corrected;
+        std::shared_ptr<const std::string>& line =
+            corrected_lines[(w.raw ? 1 : 0) + (w.uncertainty ? 2 : 0)];
         if (!line) {
           std::string text = "{\"class\":\"CORRECTED\"";
           AppendSampleTime(&text, sample);
@@ -302,6 +330,8 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
           if (c.acc_frame)
             fmt::format_to(std::back_inserter(text), ",\"acc_frame\":\"{}\"", c.acc_frame);
           if (c.mag) AppendTriad(&text, "mag", *c.mag);
+          if (w.uncertainty && c.acc_sigma) AppendTriad(&text, "acc_sigma", *c.acc_sigma);
+          if (w.uncertainty && c.mag_sigma) AppendTriad(&text, "mag_sigma", *c.mag_sigma);
           if (sample.gyr_radps) AppendTriad(&text, "gyr", *sample.gyr_radps);  // not calibrated
           text += ",\"versions\":{";
           for (std::size_t k = 0; k < c.versions.size(); ++k) {
@@ -503,6 +533,16 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
   }
   next_pose_index_ = std::max(next_pose_index_, a.index + 1);
   client->pending_poses[a.index] = waiting;
+  if (recorder_) {
+    // The pose as a capture event (replays announce it to every device of the capture).
+    nlohmann::json event = {{"event", "pose"},
+                            {"index", a.index},
+                            {"phi_deg", request["phi_deg"]},
+                            {"gamma_deg", request["gamma_deg"]},
+                            {"psi_deg", request["psi_deg"]}};
+    if (a.dwell_s) event["dwell_s"] = *a.dwell_s;
+    devices_[targets.front()]->RecordEvent(event.dump());
+  }
   nlohmann::json accepted = {
       {"class", "POSE_ACCEPTED"}, {"index", a.index}, {"devices", names}, {"skipped", skipped}};
   if (!id.is_null()) accepted["id"] = id;
@@ -524,7 +564,8 @@ void Service::HandleWatch(const std::shared_ptr<ClientSession>& client,
       *out = request[key].get<bool>();
       return true;
     };
-    bool ok = flag("events", &w.events) && flag("corrected", &w.corrected) && flag("raw", &w.raw);
+    bool ok = flag("events", &w.events) && flag("corrected", &w.corrected) && flag("raw", &w.raw) &&
+              flag("uncertainty", &w.uncertainty);
     if (ok && request.contains("device")) {
       ok = request["device"].is_string();
       if (ok) w.device = request["device"].get<std::string>();
@@ -535,17 +576,15 @@ void Service::HandleWatch(const std::shared_ptr<ClientSession>& client,
     }
     if (!ok) {
       reply = protocol::ErrorMessage(
-          "watch: events, corrected, raw are true/false, device a name, max_rate_hz >= 0");
+          "watch: events, corrected, raw, uncertainty are true/false, device a name, "
+          "max_rate_hz >= 0");
     } else {
       client->watch = w;
       client->last_sample_ns.clear();
-      reply = {{"class", "WATCH"},
-               {"enable", true},
-               {"events", w.events},
-               {"corrected", w.corrected},
-               {"raw", w.raw},
-               {"device", w.device},
-               {"max_rate_hz", w.max_rate_hz}};
+      reply = {{"class", "WATCH"},   {"enable", true},
+               {"events", w.events}, {"corrected", w.corrected},
+               {"raw", w.raw},       {"uncertainty", w.uncertainty},
+               {"device", w.device}, {"max_rate_hz", w.max_rate_hz}};
     }
   }
   if (!id.is_null()) reply["id"] = id;

@@ -20,6 +20,7 @@
 #include "daemon/live_device.h"
 #include "daemon/socket_server.h"
 #include "daemon/station.h"
+#include "drivers/capture/tcap.h"
 
 namespace turncal::daemon {
 
@@ -29,6 +30,7 @@ struct ServiceOptions {
   StationOptions station;                                 // state_dir set by the service
   std::string state_dir;
   SocketOptions socket;
+  std::string record_path;  // --record: a capture of every device's bytes and the pose commands
   // Re-reads the configuration on SIGHUP (nullptr: SIGHUP only logs). False with a message.
   std::function<bool(ServiceOptions*, std::string*)> reload;
 };
@@ -72,7 +74,10 @@ class Service {
   std::unique_ptr<Station> station_;
   std::vector<std::unique_ptr<LiveDevice>> devices_;
   std::unique_ptr<SocketServer> server_;
+  std::unique_ptr<drivers::CaptureWriter> recorder_;
   std::int64_t started_ns_ = 0;
+  std::int64_t last_flush_ns_ = 0;
+  std::int64_t record_start_ns_ = -1;  // time 0 of every device's records
   std::int64_t last_rate_ns_ = 0, last_watchdog_ns_ = 0, last_status_ns_ = 0;
   std::int64_t watchdog_interval_ns_ = 0;
   int next_pose_index_ = 0;

@@ -43,6 +43,7 @@ struct WatchSpec {
   bool raw = false;
   std::string device;        // empty: every device
   double max_rate_hz = 0.0;  // per device, for samples; <= 0: every sample
+  bool uncertainty = false;  // corrected samples carry the calibration's 1 sigma per axis
 };
 
 class SocketServer {

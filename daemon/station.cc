@@ -25,6 +25,7 @@ struct Station::ModelState {
   // state directory when the station started (version 0 / empty: none).
   int applied_version = 0;
   Eigen::VectorXd applied_theta;
+  Eigen::MatrixXd applied_covariance;  // empty when unknown
 };
 
 struct Station::DeviceState {
@@ -43,6 +44,11 @@ namespace {
 // {NAME:{"value","sigma"}} in the model's order; sigma null when undetermined.
 nlohmann::json ParamsJson(const Estimate& e) {
   nlohmann::json params = nlohmann::json::object();
+  // A refused solve (too few poses) names its parameters but has no values yet.
+  if (e.theta.size() != static_cast<Eigen::Index>(e.parameters.size()) ||
+      e.sigma.size() != e.theta.size()) {
+    return params;
+  }
   for (std::size_t i = 0; i < e.parameters.size(); ++i) {
     const auto k = static_cast<Eigen::Index>(i);
     params[e.parameters[i].name] = {
@@ -140,6 +146,23 @@ void Station::LoadApplied() {
       }
       m.applied_version = stored["version"].get<int>();
       m.applied_theta = theta;
+      m.applied_covariance.resize(0, 0);
+      const auto& cov = stored.value("covariance", nlohmann::json());
+      if (cov.is_array() && cov.size() == params.size()) {
+        Eigen::MatrixXd c(theta.size(), theta.size());
+        bool good = true;
+        for (std::size_t r = 0; good && r < params.size(); ++r) {
+          good = cov[r].is_array() && cov[r].size() == params.size();
+          for (std::size_t k = 0; good && k < params.size(); ++k) {
+            good = cov[r][k].is_number();
+            if (good) {
+              c(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(k)) =
+                  cov[r][k].get<double>();
+            }
+          }
+        }
+        if (good) m.applied_covariance = c;
+      }
     }
   }
 }
@@ -162,7 +185,36 @@ bool Station::HasAppliedCalibration(int device) const {
   return false;
 }
 
-bool Station::Correct(int device, const Sample& sample, Corrected* out) const {
+namespace {
+
+// 1 sigma per axis of model.Correct(theta, raw) from cov(theta): J cov J^T with J by central
+// differences (steps of 1e-6 of each parameter's scale); nullopt without a usable covariance.
+std::optional<Eigen::Vector3d> CorrectionSigma(const MeasurementModel& model,
+                                               const Eigen::VectorXd& theta,
+                                               const Eigen::MatrixXd& covariance,
+                                               const Eigen::Vector3d& raw) {
+  const Eigen::Index n = theta.size();
+  if (covariance.rows() != n || covariance.cols() != n || !covariance.allFinite()) {
+    return std::nullopt;
+  }
+  Jacobian3 jacobian(3, n);
+  Eigen::VectorXd t = theta;
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const double h = 1e-6 * std::max(1.0, std::abs(theta[k]));
+    t[k] = theta[k] + h;
+    const Eigen::Vector3d up = model.Correct(t, raw);
+    t[k] = theta[k] - h;
+    const Eigen::Vector3d down = model.Correct(t, raw);
+    t[k] = theta[k];
+    jacobian.col(k) = (up - down) / (2 * h);
+  }
+  const Eigen::Matrix3d c = jacobian * covariance * jacobian.transpose();
+  return c.diagonal().cwiseMax(0.0).cwiseSqrt();
+}
+
+}  // namespace
+
+bool Station::Correct(int device, const Sample& sample, Corrected* out, bool with_sigma) const {
   *out = Corrected{};
   for (const ModelState& m : devices_[static_cast<std::size_t>(device)]->models) {
     if (m.applied_version <= 0) continue;
@@ -172,6 +224,10 @@ bool Station::Correct(int device, const Sample& sample, Corrected* out) const {
     std::optional<Eigen::Vector3d>& target = accel ? out->acc_mps2 : out->mag;
     if (target) continue;  // the first model of a sensor in the configured order wins
     target = m.model->Correct(m.applied_theta, *raw);
+    if (with_sigma) {
+      (accel ? out->acc_sigma : out->mag_sigma) =
+          CorrectionSigma(*m.model, m.applied_theta, m.applied_covariance, *raw);
+    }
     if (accel) out->acc_frame = ToString(m.model->corrected_frame());
     out->versions.emplace_back(m.model->name(), m.applied_version);
   }
@@ -368,7 +424,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
     if (sink_ && !resuming_) {
       // Every gated parameter's sigma against its tolerance (the watch view's bars).
       nlohmann::json precision = nlohmann::json::object();
-      if (m.estimate.ok) {
+      if (m.estimate.ok && m.estimate.sigma.size() == m.model->num_parameters()) {
         const auto& params = m.model->parameters();
         for (int j : GatedParameters(*m.model)) {
           const double sigma = m.estimate.sigma[j];
@@ -392,6 +448,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
       m.active = m.estimate;
       m.applied_version = m.active_version;
       m.applied_theta = m.estimate.theta;
+      m.applied_covariance = m.estimate.covariance;
     }
   }
 }
@@ -402,6 +459,7 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
   m.active = m.estimate;
   m.applied_version = m.active_version;
   m.applied_theta = m.estimate.theta;
+  m.applied_covariance = m.estimate.covariance;
   nlohmann::json calibration = CalibrationJson(d, m);
   if (!override_who.is_null()) calibration["override"] = override_who;
   std::string write_error;

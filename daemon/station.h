@@ -71,10 +71,13 @@ class Station : public ReplayTarget {
   // its model's applied calibration; `versions` receives MODEL:version of those used.
   struct Corrected {
     std::optional<Eigen::Vector3d> acc_mps2, mag;
+    // With `with_sigma`: the 1 sigma of each output axis from the calibration's covariance
+    // (J Sigma J^T, J = d correction / d theta by central differences; noise not included).
+    std::optional<Eigen::Vector3d> acc_sigma, mag_sigma;
     const char* acc_frame = nullptr;  // "case" or "table"
     std::vector<std::pair<std::string, int>> versions;
   };
-  bool Correct(int device, const Sample& sample, Corrected* out) const;
+  bool Correct(int device, const Sample& sample, Corrected* out, bool with_sigma = false) const;
   bool HasAppliedCalibration(int device) const;
 
   // Per device: poses, the pose being collected (its last progress), sample counts, and per model

@@ -16,7 +16,14 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("turncald ") + turncal::kVersion);
   turncal::daemon::Options options;
   turncal::daemon::AddCommandLine(&app, &options);
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help and --version exit 0; every command-line error exits 2 (systemd's
+    // RestartPreventExitStatus=2: a configuration mistake is not retried).
+    const int code = app.exit(e);
+    return code == 0 ? 0 : 2;
+  }
 
   std::string error;
   if (!options.IsValid(&error)) {
@@ -87,6 +94,7 @@ int main(int argc, char** argv) {
     out->socket.group = c.socket_group.value_or("");
     out->socket.control_uids = {c.control_uids.begin(), c.control_uids.end()};
     out->device_settings = c.device_settings;
+    out->record_path = flags.record_path;
     out->devices = flags.devices;
     for (const auto& d : c.devices) {
       bool overridden = false;

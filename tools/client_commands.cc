@@ -206,7 +206,7 @@ struct WatchView {
 struct WatchArgs {
   Common common;
   std::string device;
-  bool corrected = false, raw = false, no_events = false;
+  bool corrected = false, raw = false, no_events = false, uncertainty = false;
   double rate = 0.0;
   long count = 0;
   double seconds = 0.0;
@@ -216,11 +216,9 @@ int RunWatch(const WatchArgs& a) {
   ClientConnection conn;
   std::string error;
   if (!conn.Connect(a.common.socket, &error)) return Fail("watch", error);
-  nlohmann::json request = {{"cmd", "watch"},
-                            {"events", !a.no_events},
-                            {"corrected", a.corrected},
-                            {"raw", a.raw},
-                            {"max_rate_hz", a.rate}};
+  nlohmann::json request = {
+      {"cmd", "watch"}, {"events", !a.no_events},       {"corrected", a.corrected},
+      {"raw", a.raw},   {"uncertainty", a.uncertainty}, {"max_rate_hz", a.rate}};
   if (!a.device.empty()) request["device"] = a.device;
   auto reply = conn.Request(request, &error);
   if (!reply) return Fail("watch", error);
@@ -414,6 +412,8 @@ void AddClientCommands(CLI::App* app) {
   w->add_flag("--corrected", watch->corrected, "corrected samples too");
   w->add_flag("--raw", watch->raw, "raw samples too (alongside corrected ones with --corrected)");
   w->add_flag("--no-events", watch->no_events, "samples only");
+  w->add_flag("--uncertainty", watch->uncertainty,
+              "corrected samples carry the calibration's 1 sigma per axis (acc_sigma, mag_sigma)");
   w->add_option("--rate", watch->rate, "at most this many samples per second per device (0: all)")
       ->check(CLI::NonNegativeNumber);
   w->add_option("--count", watch->count, "exit after this many samples");

@@ -1,5 +1,7 @@
 #include "tools/sim_capture.h"
 
+#include "tools/sim_device.h"
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -42,9 +44,12 @@ ProtocolDefaults Defaults(drivers::Protocol p) {
   return {100.0, 115200, 10};
 }
 
-const drivers::XbusLegacyLayout kLegacyLayout{0x0003, 0x00000001};  // temp, calibrated, counter
+// temp, calibrated, counter: what the device emulator reports (tools/sim_device.h).
+constexpr drivers::XbusLegacyLayout kLegacyLayout = kSimXbusLegacyLayout;
 
-Bytes Encode(drivers::Protocol p, const Sample& s) {
+}  // namespace
+
+std::vector<std::uint8_t> EncodeSimSample(drivers::Protocol p, const Sample& s) {
   switch (p) {
     case drivers::Protocol::kMip: {
       Sample m = s;
@@ -60,6 +65,8 @@ Bytes Encode(drivers::Protocol p, const Sample& s) {
   }
   return {};
 }
+
+namespace {
 
 // What the host sends and the device answers before the stream starts.
 std::vector<std::pair<Bytes, Bytes>> StartUp(drivers::Protocol p, std::uint64_t seed, double rate,
@@ -165,7 +172,7 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
   probe.counter = 1;
   probe.acc_mps2 = probe.gyr_radps = probe.mag = Eigen::Vector3d::Zero();
   probe.temp_c = 25.0;
-  const double frame_bytes = static_cast<double>(Encode(protocol, probe).size());
+  const double frame_bytes = static_cast<double>(EncodeSimSample(protocol, probe).size());
   const double capacity = static_cast<double>(baud) / d.bits_per_byte;
   if (frame_bytes * o.rate_hz > capacity) {
     *error = fmt::format(
@@ -276,7 +283,7 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
       s.acc_mps2->x() = 16 * kStandardGravity_mps2;
       s.flags |= kAccSaturated;
     }
-    Bytes frame = Encode(protocol, s);
+    Bytes frame = EncodeSimSample(protocol, s);
     if (options.faults && one_in(fault_rng) < 2000) {
       const auto byte = static_cast<std::size_t>(one_in(fault_rng)) % frame.size();
       frame[byte] ^= static_cast<std::uint8_t>(1u << (one_in(fault_rng) % 8));

@@ -67,6 +67,10 @@ struct SimCapture {
   SimFaultReport faults;
 };
 
+// One sample as the simulated device frames it (mip: sensor packet without counter; gx2: 0xCB
+// reply; xbus: MTData2; xbus-legacy: MTData in the simulator's layout).
+std::vector<std::uint8_t> EncodeSimSample(drivers::Protocol protocol, const Sample& sample);
+
 // Simulates the session and builds its capture. False with a message (no "turncal sim:" prefix)
 // for an unknown or wrong-kind model, invalid session options, or a sample rate the link's baud
 // cannot carry.

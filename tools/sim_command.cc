@@ -22,6 +22,7 @@
 #include "drivers/capture/tcap.h"
 #include "protocol/pose_file.h"
 #include "tools/sim_capture.h"
+#include "tools/sim_live.h"
 
 namespace turncal::tools {
 
@@ -30,7 +31,8 @@ namespace {
 constexpr double kRadToDeg = 180.0 / M_PI;
 
 struct Args {
-  std::string protocol;
+  std::vector<std::string> protocols;
+  std::string protocol;  // the first of protocols
   std::vector<std::string> models = {"accel13", "mag13"};
   std::string poses_file;
   std::uint64_t seed = 1;
@@ -46,8 +48,11 @@ struct Args {
   double acc_noise = -1, acc_bias_instability = -1, gyr_noise = -1, mag_noise = -1,
          mag_bias_instability = -1;
   bool no_quantisation = false;
-  std::string live;  // a pty (or any writable tty/file) to stream to at real time
+  std::vector<std::string> lives;  // ptys (or writable ttys/files) to stream to at real time
+  std::string live;                // the first of lives
   double live_speed = 1.0;
+  std::string controller;  // turncald's socket: play the controller (tools/sim_live.h)
+  double answer_timeout_s = 120;
 };
 
 // Writes the received bytes of `records` to `path` at their times (divided by `speed`), as a
@@ -99,6 +104,111 @@ nlohmann::json TruthJson(const MeasurementModel& m, const Eigen::VectorXd& theta
   return j;
 }
 
+nlohmann::json TruthFor(const SimCapture& capture, const std::vector<TablePose>& poses,
+                        const Args& args) {
+  std::string error;
+  const SimulatedSession& session = capture.session;
+  auto accel = MakeModel(capture.accel_model, ModelContext{}, &error);
+  auto mag = MakeModel(capture.mag_model, ModelContext{}, &error);
+  nlohmann::json pose_list = nlohmann::json::array();
+  auto triad = [](const Eigen::Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
+  for (const auto& p : poses) {
+    // What a perfect correction outputs at this pose (noise-free, without the bias wander): the
+    // true model's correction of its own prediction, in the models' output frames.
+    const Eigen::Vector3d acc =
+        accel->Correct(session.accel_truth, accel->Predict(session.accel_truth, p));
+    const Eigen::Vector3d field =
+        mag->Correct(session.mag_truth, mag->Predict(session.mag_truth, p));
+    pose_list.push_back({{"phi_deg", p.phi_rad * kRadToDeg},
+                         {"gamma_deg", p.gamma_rad * kRadToDeg},
+                         {"psi_deg", p.psi_rad * kRadToDeg},
+                         {"true_output", {{"acc", triad(acc)}, {"mag", triad(field)}}}});
+  }
+  return {{"acc_bias_instability", capture.session_options.sensor.acc_bias_instability},
+          {"mag_bias_instability", capture.session_options.sensor.mag_bias_instability},
+          {"models",
+           {{capture.accel_model, TruthJson(*accel, session.accel_truth)},
+            {capture.mag_model, TruthJson(*mag, session.mag_truth)}}},
+          {"gyro_bias_radps",
+           {session.gyro_bias_radps.x(), session.gyro_bias_radps.y(), session.gyro_bias_radps.z()}},
+          // The biases in "models" are turn-on biases; a calibration over the session also sees
+          // the slow bias wander averaged over the dwells, given here (add it to bx, by, bz).
+          {"accel_bias_wander_mean",
+           {session.EffectiveAccBiasOffset().x(), session.EffectiveAccBiasOffset().y(),
+            session.EffectiveAccBiasOffset().z()}},
+          {"mag_bias_wander_mean",
+           {session.EffectiveMagBiasOffset().x(), session.EffectiveMagBiasOffset().y(),
+            session.EffectiveMagBiasOffset().z()}},
+          {"class", args.sensor_class},
+          {"protocol", args.protocol},
+          {"seed", args.seed},
+          {"rate_hz", capture.session_options.rate_hz},
+          {"dwell_s", capture.session_options.dwell_s},
+          {"samples", session.samples.size()},
+          {"poses", pose_list}};
+}
+
+int RunController(const Args& args, SimCaptureOptions options) {
+  std::vector<LiveSimDevice> devices;
+  std::string error;
+  nlohmann::json truths = nlohmann::json::array();
+  for (std::size_t i = 0; i < args.lives.size(); ++i) {
+    const std::string& name = args.protocols[std::min(i, args.protocols.size() - 1)];
+    const auto protocol = drivers::ParseProtocol(name);
+    if (!protocol) {
+      fmt::print(stderr, "turncal sim: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)\n",
+                 name);
+      return 2;
+    }
+    SimCaptureOptions o = options;
+    o.protocol = *protocol;
+    o.session.seed = options.session.seed + i;
+    LiveSimDevice d;
+    d.path = args.lives[i];
+    if (!BuildSimCapture(o, &d.capture, &error)) {
+      fmt::print(stderr, "turncal sim: {}\n", error);
+      return 2;
+    }
+    Args a = args;
+    a.protocol = name;
+    a.seed = o.session.seed;
+    nlohmann::json t = TruthFor(d.capture, o.poses, a);
+    t["live"] = d.path;
+    truths.push_back(t);
+    devices.push_back(std::move(d));
+  }
+  if (!args.truth_out.empty()) {
+    // Written before the session starts, so a test can read it while the session runs.
+    nlohmann::json truth = truths[0];
+    truth["devices"] = truths;
+    if (!drivers::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
+      fmt::print(stderr, "turncal sim: {}\n", error);
+      return 1;
+    }
+  }
+  LiveSimOptions live;
+  live.speed = args.live_speed;
+  live.controller = args.controller;
+  live.answer_timeout_s = args.answer_timeout_s;
+  LiveSimReport report;
+  if (!RunLiveSim(&devices, live, &report, &error)) {
+    fmt::print(stderr, "turncal sim: {}\n", error);
+    return 1;
+  }
+  std::string frames;
+  for (std::size_t i = 0; i < devices.size(); ++i) {
+    frames += fmt::format("{}{}: {} frames sent, {} withheld (idle/config), {} dropped (unread)",
+                          i ? "; " : "", devices[i].path, report.frames_sent[i],
+                          report.frames_withheld[i], report.frames_dropped[i]);
+  }
+  fmt::print(stderr,
+             "turncal sim: {} poses, {} captured by every device, {} given up, {} reconnects, "
+             "table held {:.1f} s past the planned dwells; {}\n",
+             report.poses, report.captured, report.unanswered, report.reconnects, report.held_s,
+             frames);
+  return report.captured == report.poses ? 0 : 1;
+}
+
 int Run(const Args& args) {
   const auto protocol = drivers::ParseProtocol(args.protocol);
   if (!protocol) {
@@ -146,6 +256,7 @@ int Run(const Args& args) {
   options.faults = args.faults;
   options.burst_ms = args.burst_ms;
 
+  if (!args.controller.empty()) return RunController(args, options);
   SimCapture capture;
   if (!BuildSimCapture(options, &capture, &error)) {
     fmt::print(stderr, "turncal sim: {}\n", error);
@@ -172,35 +283,7 @@ int Run(const Args& args) {
   }
 
   if (!args.truth_out.empty()) {
-    auto accel = MakeModel(capture.accel_model, ModelContext{}, &error);
-    auto mag = MakeModel(capture.mag_model, ModelContext{}, &error);
-    nlohmann::json pose_list = nlohmann::json::array();
-    for (const auto& p : options.poses) {
-      pose_list.push_back({{"phi_deg", p.phi_rad * kRadToDeg},
-                           {"gamma_deg", p.gamma_rad * kRadToDeg},
-                           {"psi_deg", p.psi_rad * kRadToDeg}});
-    }
-    const nlohmann::json truth = {
-        {"models",
-         {{capture.accel_model, TruthJson(*accel, session.accel_truth)},
-          {capture.mag_model, TruthJson(*mag, session.mag_truth)}}},
-        {"gyro_bias_radps",
-         {session.gyro_bias_radps.x(), session.gyro_bias_radps.y(), session.gyro_bias_radps.z()}},
-        // The biases in "models" are turn-on biases; a calibration over the session also sees the
-        // slow bias wander averaged over the dwells, given here (add it to bx, by, bz).
-        {"accel_bias_wander_mean",
-         {session.EffectiveAccBiasOffset().x(), session.EffectiveAccBiasOffset().y(),
-          session.EffectiveAccBiasOffset().z()}},
-        {"mag_bias_wander_mean",
-         {session.EffectiveMagBiasOffset().x(), session.EffectiveMagBiasOffset().y(),
-          session.EffectiveMagBiasOffset().z()}},
-        {"class", args.sensor_class},
-        {"protocol", args.protocol},
-        {"seed", args.seed},
-        {"rate_hz", capture.session_options.rate_hz},
-        {"dwell_s", capture.session_options.dwell_s},
-        {"samples", session.samples.size()},
-        {"poses", pose_list}};
+    const nlohmann::json truth = TruthFor(capture, options.poses, args);
     if (!drivers::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
       fmt::print(stderr, "turncal sim: {}\n", error);
       return 1;
@@ -230,7 +313,9 @@ void AddSimCommand(CLI::App* app) {
   auto args = std::make_shared<Args>();
   auto* cmd = app->add_subcommand(
       "sim", "simulate a complete turntable session as a .tcap capture with a truth file");
-  cmd->add_option("--protocol", args->protocol, "mip | gx2 | xbus | xbus-legacy")->required();
+  cmd->add_option("--protocol", args->protocols,
+                  "mip | gx2 | xbus | xbus-legacy (with --controller, one per --live, in order)")
+      ->required();
   cmd->add_option("--model", args->models,
                   "accelerometer and/or magnetometer model (accel12|accel13, mag13|mag22); "
                   "default accel13 and mag13")
@@ -272,15 +357,36 @@ void AddSimCommand(CLI::App* app) {
                   "its move ({} s before its dwell)",
                   kSimEarlyBeforeMoveEnd_s,
                   SessionSimOptions{}.settle_s + kSimEarlyBeforeMoveEnd_s));
-  cmd->add_option("--live", args->live,
+  cmd->add_option("--live", args->lives,
                   "also stream the device's bytes to this pty at real time (pose events on "
-                  "standard output)");
+                  "standard output); with --controller: a pty to create (or an existing tty) "
+                  "per simulated device, the device answering the daemon's dialogue");
+  cmd->add_option("--controller", args->controller,
+                  "turncald's socket: play the lab's controller too -- announce every pose there "
+                  "and hold the table until every device answered (docs/SIMULATOR.md)");
+  cmd->add_option("--answer-timeout", args->answer_timeout_s,
+                  "with --controller: seconds the table waits for an answer before moving on")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd->add_option("--live-speed", args->live_speed, "time scale of --live (2 = twice as fast)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->callback([args] {
-    if (args->output.empty() && args->live.empty()) {
+    if (args->output.empty() && args->lives.empty()) {
       throw CLI::ValidationError("sim", "give -o FILE.tcap and/or --live PATH");
+    }
+    args->protocol = args->protocols.front();
+    args->live = args->lives.empty() ? std::string() : args->lives.front();
+    if (!args->controller.empty()) {
+      if (args->lives.empty()) throw CLI::ValidationError("sim", "--controller needs --live PTY");
+      if (!args->output.empty() || args->faults) {
+        throw CLI::ValidationError("sim", "--controller runs live only (no -o, no --faults)");
+      }
+      if (args->protocols.size() != 1 && args->protocols.size() != args->lives.size()) {
+        throw CLI::ValidationError("sim", "give one --protocol, or one per --live");
+      }
+    } else if (args->lives.size() > 1 || args->protocols.size() > 1) {
+      throw CLI::ValidationError("sim", "several --live devices need --controller");
     }
     throw CLI::RuntimeError(Run(*args));
   });

@@ -3,8 +3,11 @@
 namespace turncal::drivers {
 
 RecordingTransport::RecordingTransport(std::unique_ptr<Transport> inner, CaptureWriter* writer,
-                                       std::uint8_t device)
-    : inner_(std::move(inner)), writer_(writer), device_(device), start_ns_(MonotonicNowNs()) {}
+                                       std::uint8_t device, std::int64_t start_ns)
+    : inner_(std::move(inner)),
+      writer_(writer),
+      device_(device),
+      start_ns_(start_ns >= 0 ? start_ns : MonotonicNowNs()) {}
 
 std::uint64_t RecordingTransport::Since() const {
   return static_cast<std::uint64_t>(std::max<std::int64_t>(0, MonotonicNowNs() - start_ns_));

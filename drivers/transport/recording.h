@@ -14,7 +14,10 @@ namespace turncal::drivers {
 class RecordingTransport final : public Transport {
  public:
   // `device` is the record's device index in the capture's header.
-  RecordingTransport(std::unique_ptr<Transport> inner, CaptureWriter* writer, std::uint8_t device);
+  // `start_ns` (MonotonicNowNs() clock) is time 0 of the records; several devices recording into
+  // one capture share it, so their records keep their relative timing. < 0: now.
+  RecordingTransport(std::unique_ptr<Transport> inner, CaptureWriter* writer, std::uint8_t device,
+                     std::int64_t start_ns = -1);
 
   void Start(DataHandler on_data, StatusHandler on_status) override;
   void SetEventHandler(EventHandler on_event) override;
