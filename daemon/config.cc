@@ -61,6 +61,79 @@ bool GetString(const toml::table& t, const char* key, std::string* out, const st
   return false;
 }
 
+bool GetVector(const toml::table& t, const char* key, Eigen::Vector3d* out,
+               const std::string& source, std::string* error) {
+  const toml::node* n = t.get(key);
+  if (!n) return true;
+  const toml::array* a = n->as_array();
+  bool ok = a && a->size() == 3;
+  for (std::size_t i = 0; ok && i < 3; ++i) {
+    auto v = (*a)[i].value<double>();
+    ok = v && std::isfinite(*v);
+    if (ok) (*out)[static_cast<Eigen::Index>(i)] = *v;
+  }
+  if (!ok)
+    *error = fmt::format("{}: '{}' must be [x, y, z] (finite numbers)", Where(*n, source), key);
+  return ok;
+}
+
+bool GetModels(const toml::table& t, std::vector<std::string>* models, const std::string& source,
+               std::string* error) {
+  const toml::node* n = t.get("models");
+  if (!n) return true;
+  const toml::array* a = n->as_array();
+  if (!a || a->empty()) {
+    *error =
+        fmt::format("{}: 'models' must be a non-empty array of model names", Where(*n, source));
+    return false;
+  }
+  models->clear();
+  for (const auto& m : *a) {
+    auto v = m.value<std::string>();
+    if (!v) {
+      *error = fmt::format("{}: 'models' must hold strings", Where(m, source));
+      return false;
+    }
+    models->push_back(*v);
+  }
+  return true;
+}
+
+// [gate] or a device's [device.gate]: tolerances over `gate`'s current values.
+bool ParseGate(const toml::table& t, const std::string& context, const std::string& source,
+               GateOptions* gate, std::string* error) {
+  if (!OnlyKeys(t,
+                {"scale_factor", "angle_deg", "acceleration_mps2", "gain", "field", "min_p_value",
+                 "max_normalized_residual", "parameters"},
+                context, source, error)) {
+    return false;
+  }
+  GateTolerances& g = gate->tolerances;
+  double angle_deg = g.angle_rad * 180 / M_PI;
+  if (!GetNumber(t, "scale_factor", &g.scale_factor, source, error) ||
+      !GetNumber(t, "angle_deg", &angle_deg, source, error) ||
+      !GetNumber(t, "acceleration_mps2", &g.acceleration_mps2, source, error) ||
+      !GetNumber(t, "gain", &g.gain, source, error) ||
+      !GetNumber(t, "field", &g.field, source, error) ||
+      !GetNumber(t, "min_p_value", &gate->min_p_value, source, error) ||
+      !GetNumber(t, "max_normalized_residual", &gate->max_normalized_residual, source, error)) {
+    return false;
+  }
+  g.angle_rad = angle_deg * M_PI / 180;
+  if (const toml::table* p = t["parameters"].as_table()) {
+    for (const auto& [key, node] : *p) {
+      auto v = node.value<double>();
+      if (!v || !(*v > 0)) {
+        *error = fmt::format("{}: gate tolerance '{}' must be a number > 0", Where(node, source),
+                             key.str());
+        return false;
+      }
+      gate->parameter_tolerance[std::string(key.str())] = *v;
+    }
+  }
+  return gate->IsValid(error);
+}
+
 }  // namespace
 
 bool ParseConfig(const std::string& text, const std::string& source, Config* out,
@@ -75,7 +148,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   Config c;
   if (!OnlyKeys(root,
                 {"socket", "socket_group", "control_users", "state_dir", "station", "sequencer",
-                 "gate", "device"},
+                 "gate", "reference", "device"},
                 "the file", source, error)) {
     return false;
   }
@@ -122,23 +195,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   if (const toml::table* t = root["station"].as_table()) {
     if (!OnlyKeys(*t, {"models", "sensor_class"}, "[station]", source, error)) return false;
     if (!GetString(*t, "sensor_class", &st.sensor_class, source, error)) return false;
-    if (const toml::node* n = t->get("models")) {
-      const toml::array* a = n->as_array();
-      if (!a || a->empty()) {
-        *error =
-            fmt::format("{}: 'models' must be a non-empty array of model names", Where(*n, source));
-        return false;
-      }
-      st.models.clear();
-      for (const auto& m : *a) {
-        auto v = m.value<std::string>();
-        if (!v) {
-          *error = fmt::format("{}: 'models' must hold strings", Where(m, source));
-          return false;
-        }
-        st.models.push_back(*v);
-      }
-    }
+    if (!GetModels(*t, &st.models, source, error)) return false;
   }
   if (const toml::table* t = root["sequencer"].as_table()) {
     if (!OnlyKeys(*t,
@@ -164,37 +221,15 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   }
   GateTolerancesForClass(st.sensor_class, &st.gate.tolerances);
   if (const toml::table* t = root["gate"].as_table()) {
-    if (!OnlyKeys(*t,
-                  {"scale_factor", "angle_deg", "acceleration_mps2", "gain", "field", "min_p_value",
-                   "max_normalized_residual", "parameters"},
-                  "[gate]", source, error)) {
-      return false;
-    }
-    GateTolerances& g = st.gate.tolerances;
-    double angle_deg = g.angle_rad * 180 / M_PI;
-    if (!GetNumber(*t, "scale_factor", &g.scale_factor, source, error) ||
-        !GetNumber(*t, "angle_deg", &angle_deg, source, error) ||
-        !GetNumber(*t, "acceleration_mps2", &g.acceleration_mps2, source, error) ||
-        !GetNumber(*t, "gain", &g.gain, source, error) ||
-        !GetNumber(*t, "field", &g.field, source, error) ||
-        !GetNumber(*t, "min_p_value", &st.gate.min_p_value, source, error) ||
-        !GetNumber(*t, "max_normalized_residual", &st.gate.max_normalized_residual, source,
-                   error)) {
-      return false;
-    }
-    g.angle_rad = angle_deg * M_PI / 180;
-    if (const toml::table* p = (*t)["parameters"].as_table()) {
-      for (const auto& [key, node] : *p) {
-        auto v = node.value<double>();
-        if (!v || !(*v > 0)) {
-          *error = fmt::format("{}: gate tolerance '{}' must be a number > 0", Where(node, source),
-                               key.str());
-          return false;
-        }
-        st.gate.parameter_tolerance[std::string(key.str())] = *v;
-      }
-    }
+    if (!ParseGate(*t, "[gate]", source, &st.gate, error)) return false;
     st.gate_tolerances_set = true;
+  }
+  if (const toml::table* t = root["reference"].as_table()) {
+    if (!OnlyKeys(*t, {"g_ned", "B_ned"}, "[reference]", source, error) ||
+        !GetVector(*t, "g_ned", &st.context.reference.g_ned, source, error) ||
+        !GetVector(*t, "B_ned", &st.context.reference.B_ned, source, error)) {
+      return false;
+    }
   }
   if (const toml::node* n = root.get("device")) {
     const toml::array* a = n->as_array();
@@ -208,8 +243,9 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
         *error = fmt::format("{}: devices are [[device]] tables", Where(d, source));
         return false;
       }
-      if (!OnlyKeys(*t, {"name", "protocol", "port", "baud", "rate_hz", "configure"}, "[[device]]",
-                    source, error)) {
+      if (!OnlyKeys(*t,
+                    {"name", "protocol", "port", "baud", "rate_hz", "configure", "models", "gate"},
+                    "[[device]]", source, error)) {
         return false;
       }
       DeviceSettings settings;
@@ -250,6 +286,19 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
       }
       c.devices.push_back(*parsed);
       c.device_settings[parsed->name] = settings;
+      // The device's own models and gate tolerances (over the station's).
+      DeviceModelOptions own;
+      if (t->get("models")) {
+        std::vector<std::string> models;
+        if (!GetModels(*t, &models, source, error)) return false;
+        own.models = models;
+      }
+      if (const toml::table* g = (*t)["gate"].as_table()) {
+        GateOptions gate = st.gate;  // tolerances so far: the class's or [gate]'s
+        if (!ParseGate(*g, "[device.gate]", source, &gate, error)) return false;
+        own.gate = gate;
+      }
+      if (own.models || own.gate) st.per_device[parsed->name] = own;
     }
   }
   if (!st.IsValid(error)) {

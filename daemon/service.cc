@@ -496,7 +496,7 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
   bool is_pose = false;
   std::string why;
   if (!protocol::ParsePoseCommand(request, drivers::MonotonicNowNs(), &a, &is_pose, &why)) {
-    error("pose: " + why);
+    error(why);
     return;
   }
   if (!request.contains("index")) a.index = next_pose_index_;

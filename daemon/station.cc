@@ -35,6 +35,7 @@ struct Station::DeviceState {
   std::vector<TablePose> poses_used;
   int poses = 0;
   bool noise_stored = false;  // the sequencer uses the profile kept in the state directory
+  GateOptions gate;           // the station's, or the device's own
   nlohmann::json identity;    // from the device dialogue (null in replays)
   nlohmann::json current;     // the pose being collected: its last sequencer event
 };
@@ -83,6 +84,16 @@ bool StationOptions::IsValid(std::string* error) const {
   for (const auto& m : models) {
     if (!MakeModel(m, context, error)) return false;
   }
+  for (const auto& [name, own] : per_device) {
+    if (own.models && own.models->empty()) {
+      if (error) *error = "device '" + name + "': no model to estimate";
+      return false;
+    }
+    for (const auto& m : own.models.value_or(std::vector<std::string>{})) {
+      if (!MakeModel(m, context, error)) return false;
+    }
+    if (own.gate && !own.gate->IsValid(error)) return false;
+  }
   return true;
 }
 
@@ -106,7 +117,13 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
     }
     d->sequencer = std::make_unique<Sequencer>(
         so, [this, i](const SequencerEvent& e) { OnSequencerEvent(i, e); });
-    for (const auto& name : options_.models) {
+    d->gate = options_.gate;
+    std::vector<std::string> models = options_.models;
+    if (auto it = options_.per_device.find(d->name); it != options_.per_device.end()) {
+      if (it->second.models) models = *it->second.models;
+      if (it->second.gate) d->gate = *it->second.gate;
+    }
+    for (const auto& name : models) {
       ModelState m;
       std::string error;
       m.model = MakeModel(name, options_.context, &error);
@@ -417,7 +434,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
       const DataReport data = AnalyzeData(*m.model, m.estimate.theta,
                                           m.calibrator->weighted_poses(), ObservabilityOptions{});
       m.rank = data.analysis.rank;
-      m.gate = EvaluateGate(*m.model, m.estimate, data, options_.gate);
+      m.gate = EvaluateGate(*m.model, m.estimate, data, d.gate);
     } else {
       m.gate.reasons.push_back("no estimate: " + m.estimate.error);
     }
@@ -430,7 +447,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
           const double sigma = m.estimate.sigma[j];
           precision[params[static_cast<std::size_t>(j)].name] = {
               {"sigma", std::isfinite(sigma) ? nlohmann::json(sigma) : nlohmann::json()},
-              {"tolerance", ToleranceFor(params[static_cast<std::size_t>(j)], options_.gate)}};
+              {"tolerance", ToleranceFor(params[static_cast<std::size_t>(j)], d.gate)}};
         }
       }
       sink_({{"class", "ESTIMATE"},
@@ -517,7 +534,7 @@ nlohmann::json Station::NextPose(const std::string& device) const {
     t.sqrt_information = ExpectedSqrtInformation(opt.noise_density, opt.pose_offset_sigma,
                                                  options_.sequencer.dwell_s);
     t.captured = m.calibrator->weighted_poses();
-    t.gate = options_.gate;
+    t.gate = d.gate;
     targets.push_back(std::move(t));
   }
   nlohmann::json j = ToJson(PlanNextPose(targets, PlannerOptions{}));

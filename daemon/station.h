@@ -9,6 +9,7 @@
 // (issue "The daemon") will feed it from transports.
 
 #include <functional>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -24,6 +25,13 @@
 
 namespace turncal::daemon {
 
+// One device's own models and gate (config [[device]] models, [device.gate]); absent: the
+// station's.
+struct DeviceModelOptions {
+  std::optional<std::vector<std::string>> models;
+  std::optional<GateOptions> gate;
+};
+
 struct StationOptions {
   SequencerOptions sequencer;
   // Models to estimate per device; a magnetometer model only where the records carry mag.
@@ -34,6 +42,7 @@ struct StationOptions {
   ModelContext context;
   GateOptions gate;  // tolerances replaced by the class's unless gate_tolerances_set
   bool gate_tolerances_set = false;
+  std::map<std::string, DeviceModelOptions> per_device;  // by device name
   // Where the pose journal and the active calibrations live (daemon/persistence.h); empty:
   // nothing is persisted. A journal found there is replayed first: the session resumes.
   std::string state_dir;

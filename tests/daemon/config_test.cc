@@ -55,6 +55,49 @@ Sx = 2e-4
   EXPECT_EQ(c.station.gate.tolerances.scale_factor, consumer.scale_factor);
 }
 
+TEST(Config, DevicesHaveTheirOwnModelsGatesRatesAndTheLabsReference) {
+  Config c;
+  std::string error;
+  ASSERT_TRUE(ParseConfig(R"(
+socket_group = "dialout"
+control_users = ["root", 1000]
+[gate]
+scale_factor = 2e-4
+[reference]
+g_ned = [0, 0, 9.81]
+B_ned = [0.2, 0.0, 0.45]
+[[device]]
+name = "a"
+protocol = "gx2"
+port = "/dev/ttyUSB0"
+models = ["accel12"]
+rate_hz = 200
+[device.gate]
+angle_deg = 0.02
+[[device]]
+name = "b"
+protocol = "xbus"
+port = "/dev/ttyUSB1"
+configure = false
+)",
+                          "t.toml", &c, &error))
+      << error;
+  EXPECT_EQ(*c.socket_group, "dialout");
+  EXPECT_EQ(c.control_uids, (std::vector<unsigned>{0, 1000}));
+  EXPECT_EQ(c.station.context.reference.g_ned, Eigen::Vector3d(0, 0, 9.81));
+  EXPECT_EQ(c.station.context.reference.B_ned, Eigen::Vector3d(0.2, 0.0, 0.45));
+  ASSERT_EQ(c.station.per_device.count("a"), 1u);
+  const DeviceModelOptions& a = c.station.per_device.at("a");
+  EXPECT_EQ(*a.models, std::vector<std::string>{"accel12"});
+  // The device's gate starts from the station's [gate] and changes only what it names.
+  EXPECT_EQ(a.gate->tolerances.scale_factor, 2e-4);
+  EXPECT_NEAR(a.gate->tolerances.angle_rad, 0.02 * M_PI / 180, 1e-15);
+  EXPECT_EQ(c.station.per_device.count("b"), 0u);
+  EXPECT_EQ(c.device_settings.at("a").rate_hz, 200.0);
+  EXPECT_TRUE(c.device_settings.at("a").configure);
+  EXPECT_FALSE(c.device_settings.at("b").configure);
+}
+
 struct Bad {
   const char* text;
   const char* message;
@@ -83,7 +126,17 @@ INSTANTIATE_TEST_SUITE_P(
         Bad{"[[device]]\nname = \"a\"\nprotocol = \"nmea\"\nport = \"/dev/x\"\n", "device:"},
         Bad{"socket = 3\n", "t.toml:1: 'socket' must be a string"},
         Bad{"[gate.parameters]\nSx = 0\n", "gate tolerance 'Sx' must be a number > 0"},
-        Bad{"this is not toml\n", "t.toml:1:"}));
+        Bad{"this is not toml\n", "t.toml:1:"},
+        Bad{"[reference]\ng_ned = [0, 9.8]\n", "t.toml:2: 'g_ned' must be [x, y, z]"},
+        Bad{"control_users = [\"no-such-user-here\"]\n", "no user 'no-such-user-here'"},
+        Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nmodels = "
+            "[\"mag99\"]\n",
+            "mag99"},
+        Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\n[device.gate]\n"
+            "angel_deg = 1\n",
+            "unknown key 'angel_deg' in [device.gate]"},
+        Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nrate_hz = 0\n",
+            "'rate_hz' must be in (0, 4000]"}));
 
 }  // namespace
 }  // namespace turncal::daemon

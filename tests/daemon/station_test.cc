@@ -221,3 +221,109 @@ TEST(StationPersistence, TornJournalLineIsSkipped) {
 
 }  // namespace
 }  // namespace turncal
+
+namespace turncal {
+namespace {
+
+// A device's own models and gate; corrected samples with the calibration's sigma; a restarted
+// station applies what it published before; an operator override is recorded.
+TEST(StationLive, PerDeviceModelsCorrectionRestartAndOverride) {
+  tools::SimCaptureOptions o;
+  o.protocol = drivers::Protocol::kXbus;
+  o.poses = CubePoses26();
+  o.session.seed = 21;
+  o.accel_model = "accel12";  // the device's own model is the one its truth follows
+  tools::SimCapture c;
+  std::string error;
+  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  const std::string dir = ::testing::TempDir() + "station_live_" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  daemon::StationOptions so;
+  so.state_dir = dir;
+  so.per_device["imu"].models = std::vector<std::string>{"accel12"};
+  const std::string path = WriteCapture(c, "live");
+  {
+    drivers::CaptureReader reader;
+    ASSERT_TRUE(reader.Open(path, &error)) << error;
+    daemon::Station station({"imu"}, so, {});
+    daemon::ReplayStats stats;
+    ASSERT_TRUE(daemon::ReplayInto(&reader, &station, true, {}, &stats, &error)) << error;
+    const nlohmann::json r = station.Result();
+    ASSERT_EQ(r["devices"]["imu"]["models"].size(), 1u);
+    EXPECT_TRUE(r["devices"]["imu"]["models"].contains("accel12"));
+    EXPECT_GE(r["devices"]["imu"]["models"]["accel12"]["active_version"].get<int>(), 1)
+        << r["devices"]["imu"]["models"]["accel12"]["gate"].dump();
+  }
+  // A fresh station on the same state directory (a restart after `reset` archived the journal):
+  // the stored calibration is applied from the start.
+  std::string archived;
+  ASSERT_TRUE(daemon::ArchiveSession(dir, &archived, &error)) << error;
+  EXPECT_FALSE(archived.empty());
+  daemon::Station restarted({"imu"}, so, {});
+  EXPECT_TRUE(restarted.HasAppliedCalibration(0));
+  EXPECT_EQ(restarted.Status(0)["poses"], 0);
+  // The correction of a sample at the first pose: the true specific force within 4 sigma, where
+  // sigma combines the calibration's (J Sigma J^T) with the noise and wander of one sample.
+  const auto& event = c.session.events[0];
+  Sample raw;
+  for (const auto& s : c.session.samples) {
+    if (static_cast<double>(s.t_host_ns) * 1e-9 > event.t_s + 1.0) {
+      raw = s;
+      break;
+    }
+  }
+  daemon::Station::Corrected out;
+  ASSERT_TRUE(restarted.Correct(0, raw, &out, true));
+  ASSERT_TRUE(out.acc_mps2 && out.acc_sigma);
+  EXPECT_FALSE(out.mag);  // accel12 only for this device
+  std::unique_ptr<MeasurementModel> model = MakeModel("accel12", ModelContext{}, &error);
+  const Eigen::Vector3d truth =
+      model->Correct(c.session.accel_truth, model->Predict(c.session.accel_truth, event.pose));
+  const SensorClass sensor = IndustrialClass();
+  const double per_sample = sensor.acc_noise_density * std::sqrt(c.session_options.rate_hz / 2);
+  for (int k = 0; k < 3; ++k) {
+    const double sigma = std::sqrt(std::pow((*out.acc_sigma)[k], 2) + per_sample * per_sample +
+                                   std::pow(sensor.acc_bias_instability, 2));
+    EXPECT_LT(std::abs((*out.acc_mps2)[k] - truth[k]), 4 * sigma) << "axis " << k;
+    EXPECT_GT((*out.acc_sigma)[k], 0.0);
+  }
+  // With too few poses the gate refuses; the operator may publish anyway, and it is recorded.
+  const std::string dir2 = dir + "_override";
+  std::filesystem::remove_all(dir2);
+  daemon::StationOptions so2;
+  so2.state_dir = dir2;
+  daemon::Station few({"imu"}, so2, {});
+  EXPECT_FALSE(few.PublishOverride("imu", "accel13", {{"operator", "x"}}, &error));  // no poses
+  EXPECT_NE(error.find("no estimate"), std::string::npos) << error;
+  {
+    tools::SimCapture part = c;
+    part.records.clear();
+    const auto cut =
+        static_cast<std::uint64_t>(c.offset_ns + std::llround(c.session.events[7].t_s * 1e9));
+    for (const auto& r : c.records)
+      if (r.t_ns <= cut) part.records.push_back(r);
+    const std::string p2 = WriteCapture(part, "few");
+    drivers::CaptureReader reader;
+    ASSERT_TRUE(reader.Open(p2, &error)) << error;
+    daemon::ReplayStats stats;
+    ASSERT_TRUE(daemon::ReplayInto(&reader, &few, true, {}, &stats, &error)) << error;
+    std::remove(p2.c_str());
+  }
+  const nlohmann::json before = few.Result()["devices"]["imu"]["models"]["accel13"];
+  ASSERT_FALSE(before["gate"]["pass"].get<bool>());
+  ASSERT_TRUE(
+      few.PublishOverride("imu", "accel13", {{"operator", "ada"}, {"reason", "test"}}, &error))
+      << error;
+  nlohmann::json stored;
+  ASSERT_TRUE(daemon::ReadActiveCalibration(dir2, "imu", "accel13", &stored));
+  EXPECT_EQ(stored["version"], 1);
+  EXPECT_EQ(stored["override"]["operator"], "ada");
+  EXPECT_FALSE(stored["override"]["gate_pass"].get<bool>());
+  EXPECT_FALSE(stored["override"]["gate_reasons"].empty());
+  std::remove(path.c_str());
+  std::filesystem::remove_all(dir);
+  std::filesystem::remove_all(dir2);
+}
+
+}  // namespace
+}  // namespace turncal
