@@ -81,6 +81,9 @@ bool ReplayInto(drivers::CaptureReader* reader, ReplayTarget* target, bool annou
   }
   drivers::CaptureRecord r;
   std::int64_t last_ns = 0;
+  // A device's configuration dialogue, as turncald --record marks it: its bytes went to the
+  // dialogue, not to the decoder, and are skipped here too (the same samples as live).
+  std::vector<bool> in_dialogue(decoders.size(), false);
   while (reader->Next(&r)) {
     // Host times are nanoseconds since the capture began; beyond 2^62 (146 years) a record is
     // corrupt, and the arithmetic on it would overflow.
@@ -93,6 +96,13 @@ bool ReplayInto(drivers::CaptureReader* reader, ReplayTarget* target, bool annou
     last_ns = std::max(last_ns, t_ns);
     if (r.type == drivers::RecordType::kEvent) {
       const auto j = nlohmann::json::parse(r.payload.begin(), r.payload.end(), nullptr, false);
+      if (j.is_object() && j.value("event", "") == "dialogue" && r.device < decoders.size()) {
+        in_dialogue[r.device] = j.value("state", "") == "begin";
+        // Live, a device being (re)configured has no decoder: what the old one held is finished.
+        if (in_dialogue[r.device]) decoders[r.device]->Finish();
+        ++stats->dialogue_events;
+        continue;
+      }
       Announcement a;
       bool is_pose = false;
       std::string why;
@@ -117,7 +127,13 @@ bool ReplayInto(drivers::CaptureReader* reader, ReplayTarget* target, bool annou
       continue;
     }
     target->OnTick(t_ns);
-    if (r.type == drivers::RecordType::kReceived) decoders[r.device]->Push(r.payload, t_ns);
+    if (r.type == drivers::RecordType::kReceived) {
+      if (in_dialogue[r.device]) {
+        stats->dialogue_bytes += r.payload.size();
+      } else {
+        decoders[r.device]->Push(r.payload, t_ns);
+      }
+    }
   }
   if (!reader->error().empty()) stats->warnings.push_back(reader->error());
   if (reader->truncated()) {

@@ -30,6 +30,10 @@ struct ReplayStats {
   std::vector<drivers::DecoderCounters> decoders;  // per device of the header
   std::uint64_t pose_commands = 0;                 // pose events in the capture
   std::uint64_t ignored_events = 0;                // not pose events (e.g. "end"), or not announced
+  // {"event":"dialogue","state":"begin"|"end"} marks (turncald --record) and the received bytes
+  // between them, which went to a configuration dialogue and are not decoded.
+  std::uint64_t dialogue_events = 0;
+  std::uint64_t dialogue_bytes = 0;
   std::vector<std::string> warnings;  // malformed events, bad device indices, truncation
 };
 

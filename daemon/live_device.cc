@@ -203,6 +203,7 @@ void LiveDevice::OnData(std::span<const std::uint8_t> bytes, std::int64_t t_host
 void LiveDevice::BeginConfigure() {
   JoinWorker();  // an earlier dialogue has ended (its result was dropped) or is told to end
   link_ = std::make_shared<TransportLink>(io_, transport_.get());
+  RecordEvent(R"({"event":"dialogue","state":"begin"})");
   const std::uint64_t generation = ++generation_;
   const drivers::Protocol protocol = spec_.protocol;
   const double rate_hz = settings_.rate_hz;
@@ -274,6 +275,7 @@ void LiveDevice::EndConfigure(bool ok, const std::string& error, nlohmann::json 
 }
 
 void LiveDevice::StartStreaming(std::optional<drivers::XbusLegacyLayout> layout) {
+  RecordEvent(R"({"event":"dialogue","state":"end"})");
   drivers::DecoderOptions options;
   options.device = spec_.name;
   if (layout) options.xbus_legacy = *layout;

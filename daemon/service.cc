@@ -55,6 +55,7 @@ Service::Service(ServiceOptions options)
 Service::~Service() {
   StopDevices();
   if (server_) server_->Stop();
+  DropStation();
 }
 
 bool Service::StartStation(std::string* error) {
@@ -63,8 +64,12 @@ bool Service::StartStation(std::string* error) {
   StationOptions so = options_.station;
   so.state_dir = options_.state_dir;
   if (!so.IsValid(error)) return false;
-  station_.reset();  // closes the journal before a new station opens it
+  DropStation();  // closes the journal before a new station opens it
   station_ = std::make_unique<Station>(names, so, [this](const nlohmann::json& e) { OnEvent(e); });
+  if (!worker_) worker_ = std::make_unique<SolveWorker>(io_);
+  station_->SetExecutor([this](std::function<void()> work, std::function<void()> done) {
+    worker_->Post(std::move(work), std::move(done));
+  });
   for (std::size_t i = 0; i < devices_.size(); ++i) {
     if (!devices_[i]->Status()["identity"].is_null()) {
       station_->SetDeviceIdentity(static_cast<int>(i), devices_[i]->Status()["identity"]);
@@ -76,6 +81,11 @@ bool Service::StartStation(std::string* error) {
         std::max(next_pose_index_, station_->Status(static_cast<int>(i))["poses"].get<int>());
   }
   return true;
+}
+
+void Service::DropStation() {
+  if (worker_) worker_->Drain();
+  station_.reset();
 }
 
 void Service::StartDevices() {
@@ -198,7 +208,7 @@ void Service::Stop() {
   signals_.cancel();
   StopDevices();
   if (server_) server_->Stop();
-  station_.reset();  // the journal is fsynced at every append; this closes it
+  DropStation();  // the journal is fsynced at every append; this closes it
   if (recorder_) {
     std::string error;
     if (!recorder_->Close(&error)) spdlog::error("recording: {}", error);
@@ -418,7 +428,13 @@ nlohmann::json Service::StatusJson() const {
           {"uptime_s", static_cast<double>(drivers::MonotonicNowNs() - started_ns_) / 1e9},
           {"state_dir", options_.state_dir},
           {"clients", server_ ? server_->sessions().size() : 0},
-          {"solve_ms", {{"last", solve_ms_last_}, {"max", solve_ms_max_}}},
+          // The loop's longest turn with a captured pose in it, and the solve worker's longest
+          // pose update (solve, observability, gate: off the loop).
+          {"loop_ms", {{"last", solve_ms_last_}, {"max", solve_ms_max_}}},
+          {"solve_ms",
+           {{"last", worker_ ? worker_->last_ms() : 0.0},
+            {"max", worker_ ? worker_->longest_ms() : 0.0},
+            {"queued", worker_ ? worker_->queued() : 0}}},
           {"summary", status_line_},
           {"devices", devices}};
 }
@@ -594,7 +610,7 @@ void Service::HandleWatch(const std::shared_ptr<ClientSession>& client,
 void Service::HandleReset(const std::shared_ptr<ClientSession>& client,
                           const nlohmann::json& request, const nlohmann::json& id) {
   std::string archived, error;
-  station_.reset();  // closes the journal
+  DropStation();  // closes the journal
   nlohmann::json reply;
   if (!options_.state_dir.empty() && !ArchiveSession(options_.state_dir, &archived, &error)) {
     reply = protocol::ErrorMessage("reset: " + error);

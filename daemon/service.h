@@ -19,6 +19,7 @@
 #include "daemon/config.h"
 #include "daemon/live_device.h"
 #include "daemon/socket_server.h"
+#include "daemon/solve_worker.h"
 #include "daemon/station.h"
 #include "drivers/capture/tcap.h"
 
@@ -48,6 +49,7 @@ class Service {
  private:
   bool StartStation(std::string* error);
   void StartDevices();
+  void DropStation();  // drains the solve worker, then destroys the station
   void StopDevices();
   void OnSample(std::size_t device, const Sample& sample);
   void OnEvent(const nlohmann::json& event);
@@ -71,6 +73,7 @@ class Service {
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;
   boost::asio::steady_timer tick_timer_;
+  std::unique_ptr<SolveWorker> worker_;  // before station_: the station's work drains first
   std::unique_ptr<Station> station_;
   std::vector<std::unique_ptr<LiveDevice>> devices_;
   std::unique_ptr<SocketServer> server_;

@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <ctime>
+#include <mutex>
 
 #include "core/pose_planner.h"
 #include "daemon/persistence.h"
@@ -26,6 +27,8 @@ struct Station::ModelState {
   int applied_version = 0;
   Eigen::VectorXd applied_theta;
   Eigen::MatrixXd applied_covariance;  // empty when unknown
+  // The calibrator is solved on the service's worker thread; this guards it.
+  std::unique_ptr<std::mutex> calibrator_mutex = std::make_unique<std::mutex>();
 };
 
 struct Station::DeviceState {
@@ -272,7 +275,9 @@ nlohmann::json Station::Status(int device) const {
           {"models", models}};
 }
 
-Station::~Station() = default;
+Station::~Station() { *alive_ = false; }
+
+void Station::SetExecutor(Executor executor) { executor_ = std::move(executor); }
 
 void Station::Publish(const nlohmann::json& event) {
   if (sink_) sink_(event);
@@ -359,17 +364,28 @@ void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
   }
   if (e.kind == SequencerEventKind::kNoiseMeasured && !options_.state_dir.empty() &&
       devices_[device]->sequencer->noise()) {
-    std::string error;
-    if (!WriteNoiseProfile(options_.state_dir, devices_[device]->name,
-                           *devices_[device]->sequencer->noise(), &error)) {
-      Publish({{"class", "ERROR"}, {"device", devices_[device]->name}, {"message", error}});
-    }
+    auto error = std::make_shared<std::string>();
+    const std::string name = devices_[device]->name;
+    Defer([dir = options_.state_dir, name, noise = *devices_[device]->sequencer->noise(),
+           error] { WriteNoiseProfile(dir, name, noise, error.get()); },
+          [this, name, error] {
+            if (!error->empty())
+              Publish({{"class", "ERROR"}, {"device", name}, {"message", *error}});
+          });
   }
   if (e.kind == SequencerEventKind::kCaptured && e.record) {
-    // Journaled before it is used: a crash after this line loses nothing.
-    std::string error;
-    if (journal_ && !journal_->Append(devices_[device]->name, *e.record, &error)) {
-      Publish({{"class", "ERROR"}, {"device", devices_[device]->name}, {"message", error}});
+    // Journaled (fsynced) before it is used: the worker runs in order, so the append precedes the
+    // update; a crash after the append loses nothing.
+    if (journal_) {
+      auto error = std::make_shared<std::string>();
+      const std::string name = devices_[device]->name;
+      Defer([journal = journal_.get(), name, record = *e.record,
+             error] { journal->Append(name, record, error.get()); },
+            [this, name, error] {
+              if (!error->empty()) {
+                Publish({{"class", "ERROR"}, {"device", name}, {"message", *error}});
+              }
+            });
     }
     Update(device, *e.record, e.t_s);
   }
@@ -411,62 +427,90 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
           {"provenance", {{"poses", poses}, {"device_identity", d.identity}}}};
 }
 
+// What one model's update computes (on the solve worker when there is one).
+struct Station::UpdateJob {
+  bool added = false;
+  std::string error;
+  Estimate estimate;
+  int rank = 0;
+  GateResult gate;
+};
+
 void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   DeviceState& d = *devices_[device];
   ++d.poses;
   d.poses_used.push_back(record.pose);
-  for (ModelState& m : d.models) {
+  for (std::size_t mi = 0; mi < d.models.size(); ++mi) {
+    ModelState& m = d.models[mi];
     const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
     if (accel ? !record.acc : !record.mag) continue;
-    std::string error;
-    if (!m.calibrator->add_pose(record, &error)) {
-      if (sink_) {
-        sink_({{"class", "ERROR"},
-               {"device", d.name},
-               {"model", m.model->name()},
-               {"message", "pose not used: " + error}});
+    auto job = std::make_shared<UpdateJob>();
+    // The calibrator is only touched under its lock (the worker solves; NextPose reads).
+    auto work = [&m, record, job, gate = d.gate] {
+      std::lock_guard lock(*m.calibrator_mutex);
+      job->added = m.calibrator->add_pose(record, &job->error);
+      if (!job->added) return;
+      job->estimate = m.calibrator->solve();
+      if (job->estimate.ok) {
+        const DataReport data = AnalyzeData(*m.model, job->estimate.theta,
+                                            m.calibrator->weighted_poses(), ObservabilityOptions{});
+        job->rank = data.analysis.rank;
+        job->gate = EvaluateGate(*m.model, job->estimate, data, gate);
+      } else {
+        job->gate.reasons.push_back("no estimate: " + job->estimate.error);
       }
-      continue;
-    }
-    m.estimate = m.calibrator->solve();
-    m.gate = GateResult{};
-    if (m.estimate.ok) {
-      const DataReport data = AnalyzeData(*m.model, m.estimate.theta,
-                                          m.calibrator->weighted_poses(), ObservabilityOptions{});
-      m.rank = data.analysis.rank;
-      m.gate = EvaluateGate(*m.model, m.estimate, data, d.gate);
-    } else {
-      m.gate.reasons.push_back("no estimate: " + m.estimate.error);
-    }
-    if (sink_ && !resuming_) {
-      // Every gated parameter's sigma against its tolerance (the watch view's bars).
-      nlohmann::json precision = nlohmann::json::object();
-      if (m.estimate.ok && m.estimate.sigma.size() == m.model->num_parameters()) {
-        const auto& params = m.model->parameters();
-        for (int j : GatedParameters(*m.model)) {
-          const double sigma = m.estimate.sigma[j];
-          precision[params[static_cast<std::size_t>(j)].name] = {
-              {"sigma", std::isfinite(sigma) ? nlohmann::json(sigma) : nlohmann::json()},
-              {"tolerance", ToleranceFor(params[static_cast<std::size_t>(j)], d.gate)}};
-        }
-      }
-      sink_({{"class", "ESTIMATE"},
-             {"t", t_s},
+    };
+    // The station may be replaced (reset, reload) before `done` runs: Defer guards it.
+    Defer(std::move(work), [this, device, mi, t_s, job, resuming = resuming_] {
+      Apply(device, mi, t_s, *job, resuming);
+    });
+  }
+}
+
+void Station::Apply(std::size_t device, std::size_t model, double t_s, const UpdateJob& job,
+                    bool resuming) {
+  DeviceState& d = *devices_[device];
+  ModelState& m = d.models[model];
+  if (!job.added) {
+    if (sink_) {
+      sink_({{"class", "ERROR"},
              {"device", d.name},
              {"model", m.model->name()},
-             {"poses", m.estimate.poses},
-             {"summary", m.estimate.BriefReport()},
-             {"precision", precision},
-             {"gate", ToJson(m.gate)}});
+             {"message", "pose not used: " + job.error}});
     }
-    if (m.gate.pass && !resuming_) {
-      Activate(d, m, t_s, nullptr);
-    } else if (m.gate.pass) {
-      m.active = m.estimate;
-      m.applied_version = m.active_version;
-      m.applied_theta = m.estimate.theta;
-      m.applied_covariance = m.estimate.covariance;
+    return;
+  }
+  m.estimate = job.estimate;
+  m.rank = job.rank;
+  m.gate = job.gate;
+  if (sink_ && !resuming) {
+    // Every gated parameter's sigma against its tolerance (the watch view's bars).
+    nlohmann::json precision = nlohmann::json::object();
+    if (m.estimate.ok && m.estimate.sigma.size() == m.model->num_parameters()) {
+      const auto& params = m.model->parameters();
+      for (int j : GatedParameters(*m.model)) {
+        const double sigma = m.estimate.sigma[j];
+        precision[params[static_cast<std::size_t>(j)].name] = {
+            {"sigma", std::isfinite(sigma) ? nlohmann::json(sigma) : nlohmann::json()},
+            {"tolerance", ToleranceFor(params[static_cast<std::size_t>(j)], d.gate)}};
+      }
     }
+    sink_({{"class", "ESTIMATE"},
+           {"t", t_s},
+           {"device", d.name},
+           {"model", m.model->name()},
+           {"poses", m.estimate.poses},
+           {"summary", m.estimate.BriefReport()},
+           {"precision", precision},
+           {"gate", ToJson(m.gate)}});
+  }
+  if (m.gate.pass && !resuming) {
+    Activate(d, m, t_s, nullptr);
+  } else if (m.gate.pass) {
+    m.active = m.estimate;
+    m.applied_version = m.active_version;
+    m.applied_theta = m.estimate.theta;
+    m.applied_covariance = m.estimate.covariance;
   }
 }
 
@@ -474,17 +518,8 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
                        const nlohmann::json& override_who) {
   ++m.active_version;
   m.active = m.estimate;
-  m.applied_version = m.active_version;
-  m.applied_theta = m.estimate.theta;
-  m.applied_covariance = m.estimate.covariance;
   nlohmann::json calibration = CalibrationJson(d, m);
   if (!override_who.is_null()) calibration["override"] = override_who;
-  std::string write_error;
-  if (!options_.state_dir.empty() &&
-      !WriteActiveCalibration(options_.state_dir, d.name, m.model->name(), calibration,
-                              &write_error)) {
-    Publish({{"class", "ERROR"}, {"device", d.name}, {"message", write_error}});
-  }
   nlohmann::json event = {{"class", "CALIBRATION_ACTIVE"},
                           {"t", t_s},
                           {"device", d.name},
@@ -492,7 +527,38 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
                           {"version", m.active_version},
                           {"poses", m.estimate.poses}};
   if (!override_who.is_null()) event["override"] = override_who;
-  Publish(event);
+  // Persisted (atomically, fsynced: off the loop), then applied and announced.
+  auto write_error = std::make_shared<std::string>();
+  Defer(
+      [dir = options_.state_dir, device = d.name, model = m.model->name(), calibration,
+       write_error] {
+        if (!dir.empty())
+          WriteActiveCalibration(dir, device, model, calibration, write_error.get());
+      },
+      [this, &d, &m, event, write_error, version = m.active_version, theta = m.estimate.theta,
+       covariance = m.estimate.covariance] {
+        if (!write_error->empty()) {
+          Publish({{"class", "ERROR"}, {"device", d.name}, {"message", *write_error}});
+        }
+        if (version > m.applied_version) {
+          m.applied_version = version;
+          m.applied_theta = theta;
+          m.applied_covariance = covariance;
+        }
+        Publish(event);
+      });
+}
+
+void Station::Defer(std::function<void()> work, std::function<void()> done) {
+  auto guarded = [alive = alive_, done = std::move(done)] {
+    if (*alive) done();
+  };
+  if (executor_ && !resuming_) {
+    executor_(std::move(work), std::move(guarded));
+  } else {
+    work();
+    guarded();
+  }
 }
 
 bool Station::PublishOverride(const std::string& device, const std::string& model,
@@ -533,7 +599,10 @@ nlohmann::json Station::NextPose(const std::string& device) const {
     const auto& opt = m.calibrator->options();
     t.sqrt_information = ExpectedSqrtInformation(opt.noise_density, opt.pose_offset_sigma,
                                                  options_.sequencer.dwell_s);
-    t.captured = m.calibrator->weighted_poses();
+    {
+      std::lock_guard lock(*m.calibrator_mutex);  // a solve in progress finishes first
+      t.captured = m.calibrator->weighted_poses();
+    }
     t.gate = d.gate;
     targets.push_back(std::move(t));
   }

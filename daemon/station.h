@@ -104,12 +104,23 @@ class Station : public ReplayTarget {
 
   int DeviceIndex(const std::string& name) const;  // -1 when unknown
 
+  // Where pose updates (calibrator solve, data observability, gate) run: `work` off the event
+  // loop, then `done` back on it, in order. Unset (replays, tests): both at once, inline. Work
+  // still queued when the station is destroyed must be drained first; its `done` is then a no-op.
+  using Executor = std::function<void(std::function<void()> work, std::function<void()> done)>;
+  void SetExecutor(Executor executor);
+
   struct ModelState;
   struct DeviceState;
 
  private:
   void OnSequencerEvent(std::size_t device, const SequencerEvent& event);
   void Update(std::size_t device, const PoseRecord& record, double t_s);
+  struct UpdateJob;
+  // `work` on the executor (inline without one), then `done` unless the station is gone.
+  void Defer(std::function<void()> work, std::function<void()> done);
+  void Apply(std::size_t device, std::size_t model, double t_s, const UpdateJob& job,
+             bool resuming);
   void Resume();
   void Publish(const nlohmann::json& event);
   nlohmann::json CalibrationJson(const DeviceState& d, const ModelState& m) const;
@@ -122,6 +133,8 @@ class Station : public ReplayTarget {
   std::vector<std::unique_ptr<DeviceState>> devices_;
   std::unique_ptr<class PoseJournal> journal_;
   bool resuming_ = false;
+  Executor executor_;
+  std::shared_ptr<bool> alive_ = std::make_shared<bool>(true);
 };
 
 }  // namespace turncal::daemon

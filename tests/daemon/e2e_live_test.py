@@ -178,6 +178,17 @@ def scenario_clean(d):
         check(s["counters"]["bad_checksums"] == 0 and s["identity"] is not None,
               f"status: {name} configured by its dialogue ({s['identity'].get('protocol')}), "
               f"0 bad checksums, {s['counters']['samples']} samples")
+    solve, loop = status["solve_ms"], status["loop_ms"]
+    check(loop["max"] < 50, f"pose updates run off the event loop: its longest turn with a pose "
+          f"was {loop['max']:.1f} ms; the worker's longest update (solve, observability, gate) "
+          f"{solve['max']:.1f} ms")
+    # Samples lost in the daemon's streams (device-clock or counter gaps after streaming began):
+    # only those the emulator withheld while the daemon had it idle may be missing.
+    sim_err = open(f"{d}/sim.err").read()
+    withheld = sum(int(w) for w in __import__("re").findall(r"(\d+) withheld", sim_err))
+    lost = sum(s["station"]["samples"]["lost"] for s in status["devices"].values())
+    check(lost <= withheld, f"{lost} samples lost in the streams (at most the {withheld} withheld "
+          f"during configuration): the daemon kept reading through every solve")
     daemon.send_signal(signal.SIGTERM)
     check(daemon.wait(timeout=20) == 0, "SIGTERM: turncald exits 0")
     r = subprocess.run([TURNCALD, "--replay", f"{d}/live.tcap", "--once", "--result-out",

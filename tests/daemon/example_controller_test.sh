@@ -5,7 +5,8 @@
 # configuration dialogue: the simulator only streams); the controller reads the poses CSV, runs
 # --table-cmd (a script that returns once the simulator's table is at that pose), announces the
 # pose on the socket and waits for POSE_CAPTURED. Passes when the controller exits 0, reports
-# every pose captured, and turncald's `result` holds that many poses.
+# every pose captured, turncald's `result` holds that many poses, and their fit is consistent
+# (p-value >= 1e-3 for every model: poses captured at other angles than announced are not).
 #
 # Why not a replayed capture (`--device imu=xbus:replay:FILE`): a replay delivers its samples with
 # the capture's recorded times, while a pose announced on the socket is stamped with
@@ -95,10 +96,18 @@ summary=$(tail -n 1 "$dir/controller.out")
 result=$("$turncal" result --json --socket "$dir/t.sock")
 poses=$(python3 -c 'import json, sys; print(json.loads(sys.argv[1])["devices"]["imu"]["poses"])' \
   "$result")
+# Poses announced at the wrong time are captured at the wrong table angles, or rejected: the fit
+# of such poses has a p-value of ~0. min_p_value is the gate's default.
+fit=$(python3 -c '
+import json, sys
+models = json.loads(sys.argv[1])["devices"]["imu"]["models"]
+print(" ".join(f"{m}:p={v['"'"'p_value'"'"']:.3g}" for m, v in sorted(models.items())))
+sys.exit(0 if all(v["ok"] and v["p_value"] >= 1e-3 for v in models.values()) else 1)' "$result") \
+  && fit_ok=1 || fit_ok=0
 captured=$(python3 -c 'import json, sys; print(json.loads(sys.argv[1])["captured"])' "$summary" \
   2> /dev/null || echo "?")
-echo "controller exit $status, $captured of $n_poses poses captured by its count, $poses in turncald's result"
-if [[ $status != 0 || $captured != "$n_poses" || $poses != "$n_poses" ]]; then
+echo "controller exit $status, $captured of $n_poses poses captured by its count, $poses in turncald's result; fit $fit"
+if [[ $status != 0 || $captured != "$n_poses" || $poses != "$n_poses" || $fit_ok != 1 ]]; then
   echo "--- controller stderr"; cat "$dir/controller.err"
   echo "--- turncald log"; cat "$dir/turncald.log"
   echo "--- simulator"; cat "$dir/sim.err" "$dir/events.jsonl"
