@@ -142,6 +142,7 @@ void LiveDevice::SetState(const std::string& level, std::string state, std::stri
 
 void LiveDevice::OnTransportStatus(drivers::TransportStatus status, const std::string& message) {
   if (stopping_) return;
+  attempted_ = true;
   switch (status) {
     case drivers::TransportStatus::kOpened:
       if (spec_.protocol == drivers::Protocol::kGx2 || !settings_.configure ||

@@ -77,6 +77,8 @@ class LiveDevice {
   // Called once a second by the service: measures the sample rate.
   void UpdateRate(std::int64_t now_ns);
   std::uint64_t samples() const { return samples_; }
+  // The first open attempt has finished (opened, or failed and retrying): for READY=1.
+  bool attempted() const { return attempted_; }
 
  private:
   class Sink;
@@ -116,6 +118,7 @@ class LiveDevice {
   std::int64_t rate_t_ns_ = 0;
   double rate_hz_ = 0.0;
   bool stopping_ = false;
+  bool attempted_ = false;
 };
 
 }  // namespace turncal::daemon

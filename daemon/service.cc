@@ -193,9 +193,8 @@ int Service::Run() {
   if (auto w = WatchdogInterval()) {
     watchdog_interval_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(*w).count() / 2;
   }
-  UpdateStatusLine();
-  Notify("READY=1\nSTATUS=" + status_line_);
-  Tick();
+  ready_deadline_ns_ = drivers::MonotonicNowNs() + 5000 * kNsPerMs;
+  Tick();  // READY=1 once every device's first open attempt has finished (Tick)
   io_.run();
   return 0;
 }
@@ -234,6 +233,16 @@ void Service::Tick() {
     std::string error;
     recorder_->Flush(&error);  // a kill -9 loses at most a second of the recording
     last_flush_ns_ = now;
+  }
+  if (!ready_sent_) {
+    bool all = true;
+    for (const auto& d : devices_) all = all && d->attempted();
+    if (all || now >= ready_deadline_ns_) {
+      UpdateStatusLine();
+      Notify("READY=1\nSTATUS=" + status_line_);
+      spdlog::info("turncald: ready ({})", status_line_);
+      ready_sent_ = true;
+    }
   }
   if (watchdog_interval_ns_ > 0 && now - last_watchdog_ns_ >= watchdog_interval_ns_) {
     Notify("WATCHDOG=1");

@@ -80,6 +80,8 @@ class Service {
   std::unique_ptr<drivers::CaptureWriter> recorder_;
   std::int64_t started_ns_ = 0;
   std::int64_t last_flush_ns_ = 0;
+  std::int64_t ready_deadline_ns_ = 0;
+  bool ready_sent_ = false;
   std::int64_t record_start_ns_ = -1;  // time 0 of every device's records
   std::int64_t last_rate_ns_ = 0, last_watchdog_ns_ = 0, last_status_ns_ = 0;
   std::int64_t watchdog_interval_ns_ = 0;

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include "daemon/config.h"
+#include "daemon/journal_log.h"
 #include "daemon/notify.h"
 #include "daemon/options.h"
 #include "daemon/replay_once.h"
@@ -12,6 +13,7 @@
 #include "turncal/version.h"
 
 int main(int argc, char** argv) {
+  turncal::daemon::ConfigureLogging();
   CLI::App app{"turncald — turntable calibration service for inertial sensors", "turncald"};
   app.set_version_flag("--version", std::string("turncald ") + turncal::kVersion);
   turncal::daemon::Options options;
