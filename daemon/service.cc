@@ -55,7 +55,7 @@ Service::Service(ServiceOptions options)
 Service::~Service() {
   StopDevices();
   if (server_) server_->Stop();
-  DropStation();
+  DropStation("");
 }
 
 bool Service::StartStation(std::string* error) {
@@ -64,7 +64,7 @@ bool Service::StartStation(std::string* error) {
   StationOptions so = options_.station;
   so.state_dir = options_.state_dir;
   if (!so.IsValid(error)) return false;
-  DropStation();  // closes the journal before a new station opens it
+  DropStation(drop_reason_);  // closes the journal before a new station opens it
   station_ = std::make_unique<Station>(names, so, [this](const nlohmann::json& e) { OnEvent(e); });
   if (!worker_) worker_ = std::make_unique<SolveWorker>(io_);
   station_->SetExecutor([this](std::function<void()> work, std::function<void()> done) {
@@ -83,9 +83,23 @@ bool Service::StartStation(std::string* error) {
   return true;
 }
 
-void Service::DropStation() {
+void Service::DropStation(const std::string& why) {
   if (worker_) worker_->Drain();
   station_.reset();
+  // Poses still being collected are never answered by the old station: say so.
+  if (!server_ || why.empty()) return;
+  auto sessions = server_->sessions();
+  for (auto& [id, s] : sessions) {
+    for (const auto& [index, devices] : s->pending_poses) {
+      for (const auto& device : devices) {
+        s->Reply({{"class", "POSE_REJECTED"},
+                  {"device", device},
+                  {"index", index},
+                  {"reason", why + " while the pose was being collected; announce it again"}});
+      }
+    }
+    s->pending_poses.clear();
+  }
 }
 
 void Service::StartDevices() {
@@ -207,7 +221,7 @@ void Service::Stop() {
   signals_.cancel();
   StopDevices();
   if (server_) server_->Stop();
-  DropStation();  // the journal is fsynced at every append; this closes it
+  DropStation("turncald stopped");  // the journal is fsynced at every append; this closes it
   if (recorder_) {
     std::string error;
     if (!recorder_->Close(&error)) spdlog::error("recording: {}", error);
@@ -293,12 +307,20 @@ void Service::Reload() {
   // Devices and station are rebuilt; the station resumes from its journal, so every captured
   // pose is kept (a pose being collected is lost and must be announced again).
   StopDevices();
-  next.socket = options_.socket;  // the socket stays as it is
+  if (next.socket.path != options_.socket.path || next.socket.group != options_.socket.group) {
+    spdlog::warn("turncald: SIGHUP: socket and socket_group take effect at the next start");
+  }
+  server_->SetControlUids(next.socket.control_uids);  // control_users: from now on
+  next.socket.path = options_.socket.path;
+  next.socket.group = options_.socket.group;
+  next.socket.activated_fd = options_.socket.activated_fd;
   next.reload = options_.reload;
   options_ = std::move(next);
+  drop_reason_ = "the configuration was reloaded";
   if (!StartStation(&error)) {
     spdlog::error("turncald: SIGHUP: {}", error);
   }
+  drop_reason_.clear();
   StartDevices();
   spdlog::info("turncald: configuration reloaded ({} devices)", devices_.size());
   OnEvent({{"class", "RELOADED"}, {"devices", options_.devices.size()}});
@@ -349,6 +371,9 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
           if (c.acc_frame)
             fmt::format_to(std::back_inserter(text), ",\"acc_frame\":\"{}\"", c.acc_frame);
           if (c.mag) AppendTriad(&text, "mag", *c.mag);
+          if (c.mag_frame) {
+            fmt::format_to(std::back_inserter(text), ",\"mag_frame\":\"{}\"", c.mag_frame);
+          }
           if (w.uncertainty && c.acc_sigma) AppendTriad(&text, "acc_sigma", *c.acc_sigma);
           if (w.uncertainty && c.mag_sigma) AppendTriad(&text, "mag_sigma", *c.mag_sigma);
           if (sample.gyr_radps) AppendTriad(&text, "gyr", *sample.gyr_radps);  // not calibrated
@@ -532,6 +557,10 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
   nlohmann::json skipped = nlohmann::json::object();
   for (std::size_t i = 0; i < devices_.size(); ++i) {
     if (!only.empty() && devices_[i]->spec().name != only) continue;
+    if (devices_[i]->spec().port.rfind("replay:", 0) == 0) {
+      skipped[devices_[i]->spec().name] = "replays a capture: its poses come from the capture";
+      continue;
+    }
     if (devices_[i]->state() != "streaming") {
       skipped[devices_[i]->spec().name] = devices_[i]->state();
       continue;
@@ -548,16 +577,18 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
   }
   nlohmann::json names = nlohmann::json::array();
   std::set<std::string> waiting;
+  for (std::size_t i : targets) waiting.insert(devices_[i]->spec().name);
+  // Registered before announcing: POSE_STARTED comes out of the announcement itself.
+  client->pending_poses[a.index] = waiting;
   for (std::size_t i : targets) {
     if (!station_->AnnounceTo(static_cast<int>(i), a, &why)) {
+      client->pending_poses.erase(a.index);
       error("pose: " + devices_[i]->spec().name + ": " + why);
       return;
     }
     names.push_back(devices_[i]->spec().name);
-    waiting.insert(devices_[i]->spec().name);
   }
   next_pose_index_ = std::max(next_pose_index_, a.index + 1);
-  client->pending_poses[a.index] = waiting;
   if (recorder_) {
     // The pose as a capture event (replays announce it to every device of the capture).
     nlohmann::json event = {{"event", "pose"},
@@ -619,7 +650,7 @@ void Service::HandleWatch(const std::shared_ptr<ClientSession>& client,
 void Service::HandleReset(const std::shared_ptr<ClientSession>& client,
                           const nlohmann::json& request, const nlohmann::json& id) {
   std::string archived, error;
-  DropStation();  // closes the journal
+  DropStation("the session was reset");  // closes the journal
   nlohmann::json reply;
   if (!options_.state_dir.empty() && !ArchiveSession(options_.state_dir, &archived, &error)) {
     reply = protocol::ErrorMessage("reset: " + error);

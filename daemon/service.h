@@ -49,7 +49,9 @@ class Service {
  private:
   bool StartStation(std::string* error);
   void StartDevices();
-  void DropStation();  // drains the solve worker, then destroys the station
+  // Drains the solve worker, then destroys the station; clients still waiting for a pose get a
+  // POSE_REJECTED saying `why` (nothing when empty).
+  void DropStation(const std::string& why);
   void StopDevices();
   void OnSample(std::size_t device, const Sample& sample);
   void OnEvent(const nlohmann::json& event);
@@ -82,6 +84,7 @@ class Service {
   std::int64_t last_flush_ns_ = 0;
   std::int64_t ready_deadline_ns_ = 0;
   bool ready_sent_ = false;
+  std::string drop_reason_;            // why StartStation replaces a station (reload)
   std::int64_t record_start_ns_ = -1;  // time 0 of every device's records
   std::int64_t last_rate_ns_ = 0, last_watchdog_ns_ = 0, last_status_ns_ = 0;
   std::int64_t watchdog_interval_ns_ = 0;

@@ -124,6 +124,14 @@ void SocketServer::Accept() {
 
 void SocketServer::Remove(std::uint64_t id) { sessions_.erase(id); }
 
+void SocketServer::SetControlUids(std::set<unsigned> uids) {
+  options_.control_uids = std::move(uids);
+}
+
+bool SocketServer::IsControl(unsigned uid) const {
+  return uid == 0 || uid == ::geteuid() || options_.control_uids.count(uid) > 0;
+}
+
 ClientSession::ClientSession(SocketServer* server, local::stream_protocol::socket socket,
                              std::uint64_t id)
     : server_(server), socket_(std::move(socket)), id_(id) {
@@ -132,8 +140,7 @@ ClientSession::ClientSession(SocketServer* server, local::stream_protocol::socke
   if (::getsockopt(socket_.native_handle(), SOL_SOCKET, SO_PEERCRED, &cred, &size) == 0) {
     uid_ = cred.uid;
     pid_ = cred.pid;
-    control_ = cred.uid == 0 || cred.uid == ::geteuid() ||
-               server_->options_.control_uids.count(cred.uid) > 0;
+    known_ = true;
   }
 }
 
@@ -176,7 +183,10 @@ void ClientSession::OnBytes(std::size_t n) {
     } else {
       line_.append(buffer_.data() + start, i - start);
       if (!line_.empty() && line_.back() == '\r') line_.pop_back();
-      if (line_.find_first_not_of(" \t") != std::string::npos) {
+      if (line_.size() > protocol::kMaxRequestBytes) {
+        Reply(protocol::ErrorMessage(
+            fmt::format("request longer than {} bytes: discarded", protocol::kMaxRequestBytes)));
+      } else if (line_.find_first_not_of(" \t") != std::string::npos) {
         nlohmann::json request = nlohmann::json::parse(line_, nullptr, false);
         if (request.is_discarded()) {
           Reply(protocol::ErrorMessage("malformed request: not JSON (one object per line)"));

@@ -62,6 +62,9 @@ class SocketServer {
     return sessions_;
   }
   std::uint64_t accepted() const { return accepted_; }
+  // SIGHUP: who may send mutating commands, for connections from now on and open ones alike.
+  void SetControlUids(std::set<unsigned> uids);
+  bool IsControl(unsigned uid) const;
 
  private:
   friend class ClientSession;
@@ -94,7 +97,7 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
   std::uint64_t id() const { return id_; }
   unsigned uid() const { return uid_; }
   int pid() const { return pid_; }
-  bool control() const { return control_; }
+  bool control() const { return known_ && server_->IsControl(uid_); }
   bool open() const { return open_; }
   std::uint64_t dropped_total() const { return dropped_total_; }
   std::size_t queued_bytes() const { return queued_bytes_; }
@@ -116,7 +119,7 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
   std::uint64_t id_;
   unsigned uid_ = 0;
   int pid_ = 0;
-  bool control_ = false;
+  bool known_ = false;  // SO_PEERCRED answered
   bool open_ = true;
   std::array<char, 8192> buffer_{};
   std::string line_;

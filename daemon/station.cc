@@ -248,7 +248,7 @@ bool Station::Correct(int device, const Sample& sample, Corrected* out, bool wit
       (accel ? out->acc_sigma : out->mag_sigma) =
           CorrectionSigma(*m.model, m.applied_theta, m.applied_covariance, *raw);
     }
-    if (accel) out->acc_frame = ToString(m.model->corrected_frame());
+    (accel ? out->acc_frame : out->mag_frame) = ToString(m.model->corrected_frame());
     out->versions.emplace_back(m.model->name(), m.applied_version);
   }
   return !out->versions.empty();

@@ -84,6 +84,7 @@ class Station : public ReplayTarget {
     // (J Sigma J^T, J = d correction / d theta by central differences; noise not included).
     std::optional<Eigen::Vector3d> acc_sigma, mag_sigma;
     const char* acc_frame = nullptr;  // "case" or "table"
+    const char* mag_frame = nullptr;
     std::vector<std::pair<std::string, int>> versions;
   };
   bool Correct(int device, const Sample& sample, Corrected* out, bool with_sigma = false) const;

@@ -27,6 +27,13 @@ int main(int argc, char** argv) {
   turncal::tools::AddPlanCompareCommand(&app);
   turncal::tools::AddSequenceCommand(&app);
   turncal::tools::AddClientCommands(&app);
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::RuntimeError& e) {
+    return e.get_exit_code();  // a subcommand's own exit code
+  } catch (const CLI::ParseError& e) {
+    // --help and --version exit 0; every command-line mistake exits 2.
+    return app.exit(e) == 0 ? 0 : 2;
+  }
   return 0;
 }
