@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <csignal>
+#include <ctime>
 
 #include "daemon/notify.h"
 #include "daemon/persistence.h"
@@ -38,6 +39,12 @@ void AppendRaw(std::string* out, const Sample& s) {
   if (s.mag) AppendTriad(out, "mag", *s.mag);
   if (s.temp_c) fmt::format_to(std::back_inserter(*out), ",\"temp\":{:.4g}", *s.temp_c);
   if (s.flags) fmt::format_to(std::back_inserter(*out), ",\"flags\":{}", s.flags);
+}
+
+std::int64_t ThreadCpuNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
 // Mutating commands need a peer the configuration allows.
@@ -330,10 +337,11 @@ void Service::Reload() {
 
 void Service::OnSample(std::size_t device, const Sample& sample) {
   if (!station_) return;
-  const auto t0 = std::chrono::steady_clock::now();
+  // CPU time of this thread (not wall time, which a loaded machine stretches by preemption): what
+  // the loop itself spends on a sample, and on a captured pose.
+  const std::int64_t t0 = ThreadCpuNs();
   station_->OnSample(static_cast<int>(device), sample);
-  const double ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  const double ms = static_cast<double>(ThreadCpuNs() - t0) * 1e-6;
   if (ms > 1.0) {  // a pose was captured and the calibrations were solved
     solve_ms_last_ = ms;
     solve_ms_max_ = std::max(solve_ms_max_, ms);
@@ -462,8 +470,8 @@ nlohmann::json Service::StatusJson() const {
           {"uptime_s", static_cast<double>(drivers::MonotonicNowNs() - started_ns_) / 1e9},
           {"state_dir", options_.state_dir},
           {"clients", server_ ? server_->sessions().size() : 0},
-          // The loop's longest turn with a captured pose in it, and the solve worker's longest
-          // pose update (solve, observability, gate: off the loop).
+          // The loop's longest sample turn (CPU ms; a captured pose's bookkeeping included), and
+          // the solve worker's longest pose update (wall ms: solve, observability, gate).
           {"loop_ms", {{"last", solve_ms_last_}, {"max", solve_ms_max_}}},
           {"solve_ms",
            {{"last", worker_ ? worker_->last_ms() : 0.0},
@@ -579,10 +587,11 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
   std::set<std::string> waiting;
   for (std::size_t i : targets) waiting.insert(devices_[i]->spec().name);
   // Registered before announcing: POSE_STARTED comes out of the announcement itself.
-  client->pending_poses[a.index] = waiting;
+  // Merged with a request for the same index still waiting (a retry on another device).
+  client->pending_poses[a.index].insert(waiting.begin(), waiting.end());
   for (std::size_t i : targets) {
     if (!station_->AnnounceTo(static_cast<int>(i), a, &why)) {
-      client->pending_poses.erase(a.index);
+      for (std::size_t j : targets) client->pending_poses[a.index].erase(devices_[j]->spec().name);
       error("pose: " + devices_[i]->spec().name + ": " + why);
       return;
     }

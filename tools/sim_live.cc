@@ -219,6 +219,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
   double shift_s = 0;      // session seconds of holds so far
   bool announced = false;  // pose p announced and not yet fully answered
   std::set<std::string> waiting, rejected_by;
+  std::set<std::string> retry_devices;  // a retry goes to these only (empty: every device)
   int retries_left = options.retries;
   bool holding = false;
   double hold_start_s = 0;
@@ -238,6 +239,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     announced = false;
     waiting.clear();
     rejected_by.clear();
+    retry_devices.clear();
     retries_left = options.retries;
     ++p;
   };
@@ -270,7 +272,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
       }
       for (const auto& m : messages) {
         const std::string kind = m.value("class", "");
-        if (kind == "POSE_ACCEPTED" && m.value("index", -1) == static_cast<int>(p)) {
+        if (kind == "POSE_ACCEPTED" && m.value("index", -1) == static_cast<int>(p) && announced) {
           for (const auto& name : m["devices"]) waiting.insert(name.get<std::string>());
         } else if ((kind == "POSE_CAPTURED" || kind == "POSE_REJECTED") &&
                    m.value("index", -1) == static_cast<int>(p) && announced) {
@@ -287,7 +289,9 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
               ++report->captured;
               end_hold(vt);
             } else if (retries_left-- > 0) {
-              announced = false;  // once more (the table holds still)
+              // Once more (the table holds still), to the devices that rejected it only.
+              announced = false;
+              retry_devices = rejected_by;
               rejected_by.clear();
             } else {
               ++report->unanswered;
@@ -306,11 +310,22 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     if (p < events.size() && !announced && controller.connected() && Clock::now() >= retry_at &&
         vt >= events[p].t_s + shift_s) {
       const TablePose& pose = events[p].pose;
-      if (controller.Send({{"cmd", "pose"},
-                           {"index", p},
-                           {"phi_deg", pose.phi_rad * kRadToDeg},
-                           {"gamma_deg", pose.gamma_rad * kRadToDeg},
-                           {"psi_deg", pose.psi_rad * kRadToDeg}})) {
+      const nlohmann::json request = {{"cmd", "pose"},
+                                      {"index", p},
+                                      {"phi_deg", pose.phi_rad * kRadToDeg},
+                                      {"gamma_deg", pose.gamma_rad * kRadToDeg},
+                                      {"psi_deg", pose.psi_rad * kRadToDeg}};
+      bool sent = true;
+      if (retry_devices.empty()) {
+        sent = controller.Send(request);
+      } else {
+        for (const auto& device : retry_devices) {
+          nlohmann::json one = request;
+          one["device"] = device;
+          sent = sent && controller.Send(one);
+        }
+      }
+      if (sent) {
         announced = true;
         waiting.clear();
         rejected_by.clear();

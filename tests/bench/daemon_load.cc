@@ -9,7 +9,7 @@
 //
 //   daemon_load measure --socket PATH --seconds N [--clients 4] [--devices 8] [--rate 1000]
 //                       [--interval 10] [--daemon-pid P] [--sim-pid P] [--warmup-timeout 180]
-//                       [--settle 2] [--json-out FILE]
+//                       [--settle 2] [--quiet-other 25] [--quiet-steal 10] [--json-out FILE]
 //       Connects --clients subscribers, each sending {"cmd":"watch","events":false,
 //       "corrected":true}, one thread each (blocking reads; a thread costs far less than the
 //       daemon's side of the stream). Waits until every subscriber has CORRECTED lines from
@@ -18,7 +18,11 @@
 //       CLOCK_MONOTONIC at receipt (the read() that returned it) minus its t_host_ns (the time
 //       turncald read the bytes from the pty), DROPPED notes, and every --interval seconds the
 //       CPU (utime+stime) and VmRSS of the daemon, of the simulator and of this process, the
-//       machine's busy time (/proc/stat) and load average. Device counters come from the
+//       machine's busy time (/proc/stat) and load average. This machine is shared: an interval in
+//       which the rest of the machine (busy time minus daemon, simulator and subscribers) used
+//       --quiet-other % of a core or more, or the hypervisor took --quiet-steal % of a core (steal
+//       time: the host ran somebody else on our virtual CPUs), is marked "disturbed"; the summary gives the latency of
+//       the undisturbed intervals separately. Device counters come from the
 //       daemon's status before and after. Prints one row per interval, a summary, and a final
 //       line {"class":"LOAD_RESULT",...}; exit 0 when the run completed (targets are reported,
 //       not enforced), 1 when it could not measure (no corrected output, a subscriber lost).
@@ -177,9 +181,27 @@ ProcSample ReadProc(const std::string& pid) {
 }
 
 struct SystemSample {
-  double busy_s = 0, total_s = 0;
+  double busy_s = 0, total_s = 0, steal_s = 0;  // busy: user, nice, system, irq, softirq
   double load1 = 0;
+  double kworker_s = 0;  // kernel workers (the tty layer moves pty bytes in them)
 };
+
+// CPU time of every kworker thread so far (threads that ended since are lost: an estimate).
+double KworkerSeconds() {
+  namespace fs = std::filesystem;
+  double sum = 0;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator("/proc", ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream comm(entry.path() / "comm");
+    std::string c;
+    if (!std::getline(comm, c) || c.rfind("kworker", 0) != 0) continue;
+    const ProcSample p = ReadProc(name);
+    if (p.ok) sum += p.cpu_s;
+  }
+  return sum;
+}
 
 SystemSample ReadSystem() {
   SystemSample s;
@@ -192,13 +214,16 @@ SystemSample ReadSystem() {
     stat >> x;
     v.push_back(x);
   }
-  // user nice system idle iowait irq softirq steal
+  // user nice system idle iowait irq softirq steal; steal is time the hypervisor gave our
+  // virtual CPUs to somebody else.
   double total = 0;
   for (double x : v) total += x;
   s.total_s = total / static_cast<double>(ClockTicks());
-  s.busy_s = (total - v[3] - v[4]) / static_cast<double>(ClockTicks());
+  s.busy_s = (total - v[3] - v[4] - v[7]) / static_cast<double>(ClockTicks());
+  s.steal_s = v[7] / static_cast<double>(ClockTicks());
   std::ifstream load("/proc/loadavg");
   load >> s.load1;
+  s.kworker_s = KworkerSeconds();
   return s;
 }
 
@@ -463,6 +488,9 @@ class Subscriber {
 struct Row {
   double t_s = 0;
   double daemon_cpu = -1, daemon_rss = -1, sim_cpu = -1, self_cpu = -1, busy = 0, load1 = 0;
+  double kworker = 0, steal = 0;
+  double other = 0;  // machine busy time that is none of daemon, simulator, subscribers, kworkers
+  bool quiet = false;
   std::uint64_t lines = 0;
   double p99_ms = 0, p999_ms = 0;
   std::uint64_t dropped = 0;
@@ -530,6 +558,10 @@ int Measure(const Args& args) {
   const double settle_s = args.Number("settle", 2);
   const std::string daemon_pid = args.Get("daemon-pid"), sim_pid = args.Get("sim-pid");
   const std::string json_out = args.Get("json-out");
+  // An interval is undisturbed when the rest of the machine (other builds, tests) used less than
+  // this (% of one core): its latencies also go into a separate histogram.
+  const double quiet_other = args.Number("quiet-other", 25);
+  const double quiet_steal = args.Number("quiet-steal", 10);  // and the hypervisor took less
   if (socket_path.empty() || !(seconds > 0) || n_clients < 0 || n_devices < 1) {
     std::fprintf(stderr, "daemon_load measure: --socket PATH and --seconds N > 0 are required\n");
     return 2;
@@ -625,8 +657,12 @@ int Measure(const Args& args) {
     rss_t.push_back(0);
     rss_mb.push_back(first.daemon.rss_mb);
   }
-  std::printf("%8s %9s %9s %8s %8s %8s %6s %9s %9s %9s %8s\n", "t_s", "daemon%", "rss_MB",
-              "sim%", "subs%", "busy%", "load1", "lines/s", "p99_ms", "p99.9_ms", "dropped");
+  Histogram quiet;
+  int quiet_intervals = 0;
+  double quiet_wall = 0, quiet_daemon_cpu_s = 0;
+  std::printf("%7s %8s %7s %6s %6s %6s %6s %6s %6s %6s %8s %8s %8s %7s\n", "t_s", "daemon%",
+              "rss_MB", "sim%", "subs%", "kwork%", "busy%", "other%", "steal%", "load1", "lines/s",
+              "p99_ms", "p99.9_ms", "dropped");
   std::fflush(stdout);
   const std::int64_t end_ns = first.t_ns + static_cast<std::int64_t>(seconds * 1e9);
   std::uint64_t dropped_before = 0, lines_before = 0;
@@ -657,6 +693,17 @@ int Measure(const Args& args) {
     const double total = now.system.total_s - last.system.total_s;
     r.busy = total > 0 ? 100.0 * (now.system.busy_s - last.system.busy_s) / total * ncpu : 0;
     r.load1 = now.system.load1;
+    r.kworker = 100.0 * (now.system.kworker_s - last.system.kworker_s) / wall;
+    r.steal = total > 0 ? 100.0 * (now.system.steal_s - last.system.steal_s) / total * ncpu : 0;
+    r.other = r.busy - std::max(0.0, r.daemon_cpu) - std::max(0.0, r.sim_cpu) -
+              std::max(0.0, r.self_cpu) - std::max(0.0, r.kworker);
+    r.quiet = r.other < quiet_other && r.steal < quiet_steal;
+    if (r.quiet) {
+      quiet.Merge(interval);
+      ++quiet_intervals;
+      quiet_wall += wall;
+      quiet_daemon_cpu_s += std::max(0.0, r.daemon_cpu) / 100.0 * wall;
+    }
     r.lines = lines - lines_before;
     r.p99_ms = interval.Quantile(0.99);
     r.p999_ms = interval.Quantile(0.999);
@@ -668,10 +715,12 @@ int Measure(const Args& args) {
       rss_t.push_back(r.t_s);
       rss_mb.push_back(now.daemon.rss_mb);
     }
-    std::printf("%8.1f %9.2f %9.1f %8.2f %8.2f %8.1f %6.2f %9.0f %9.3f %9.3f %8llu\n", r.t_s,
-                r.daemon_cpu, r.daemon_rss, r.sim_cpu, r.self_cpu, r.busy, r.load1,
+    std::printf(
+        "%7.1f %8.2f %7.1f %6.2f %6.2f %6.2f %6.1f %6.1f %6.1f %6.2f %8.0f %8.3f %8.3f %7llu%s\n",
+        r.t_s, r.daemon_cpu, r.daemon_rss, r.sim_cpu, r.self_cpu, r.kworker, r.busy, r.other,
+        r.steal, r.load1,
                 static_cast<double>(r.lines) / wall, r.p99_ms, r.p999_ms,
-                static_cast<unsigned long long>(r.dropped));
+                static_cast<unsigned long long>(r.dropped), r.quiet ? "" : "  (disturbed)");
     std::fflush(stdout);
     last = now;
   }
@@ -706,9 +755,14 @@ int Measure(const Args& args) {
   const double daemon_cpu = Percent(first.daemon, final_snapshot.daemon, wall);
   const double sim_cpu = Percent(first.sim, final_snapshot.sim, wall);
   const double self_cpu = Percent(first.self, final_snapshot.self, wall);
+  const double kworker_cpu =
+      100.0 * (final_snapshot.system.kworker_s - first.system.kworker_s) / wall;
   const double total = final_snapshot.system.total_s - first.system.total_s;
   const double busy =
       total > 0 ? 100.0 * (final_snapshot.system.busy_s - first.system.busy_s) / total * ncpu : 0;
+  const double steal =
+      total > 0 ? 100.0 * (final_snapshot.system.steal_s - first.system.steal_s) / total * ncpu
+                : 0;
   double cpu_max = 0, rss_max = 0, busy_max = 0, load_max = 0;
   for (const Row& r : rows) {
     cpu_max = std::max(cpu_max, r.daemon_cpu);
@@ -749,8 +803,10 @@ int Measure(const Args& args) {
       {"daemon_cpu_pct_max_interval", cpu_max},
       {"sim_cpu_pct", sim_cpu},
       {"subscribers_cpu_pct", self_cpu},
+      {"kworker_cpu_pct", kworker_cpu},
       {"machine_busy_pct_of_one_core", busy},
       {"machine_busy_pct_max_interval", busy_max},
+      {"steal_pct_of_one_core", steal},
       {"load1_max", load_max},
       {"latency_ms",
        {{"count", all.count()},
@@ -762,6 +818,19 @@ int Measure(const Args& args) {
         {"max", all.max_ms()},
         {"above_2ms_fraction", all.FractionAbove(2.0)},
         {"negative", all.negative()}}},
+      {"undisturbed",
+       {{"other_below_pct", quiet_other},
+        {"steal_below_pct", quiet_steal},
+        {"intervals", quiet_intervals},
+        {"of", rows.size()},
+        {"daemon_cpu_pct", quiet_wall > 0 ? 100.0 * quiet_daemon_cpu_s / quiet_wall : -1.0},
+        {"latency_ms",
+         {{"count", quiet.count()},
+          {"p50", quiet.Quantile(0.5)},
+          {"p90", quiet.Quantile(0.9)},
+          {"p99", quiet.Quantile(0.99)},
+          {"p999", quiet.Quantile(0.999)},
+          {"above_2ms_fraction", quiet.FractionAbove(2.0)}}}}},
       {"corrected_lines", corrected},
       {"corrected_lines_expected", expected},
       {"dropped", dropped},
@@ -788,6 +857,10 @@ int Measure(const Args& args) {
                         {"rss_mb", r.daemon_rss},
                         {"sim_cpu_pct", r.sim_cpu},
                         {"busy_pct", r.busy},
+                        {"kworker_pct", r.kworker},
+                        {"other_pct", r.other},
+                        {"steal_pct", r.steal},
+                        {"undisturbed", r.quiet},
                         {"load1", r.load1},
                         {"lines", r.lines},
                         {"p99_ms", r.p99_ms},
@@ -819,9 +892,18 @@ int Measure(const Args& args) {
               expected > 0 ? 100.0 * static_cast<double>(corrected) / expected : 0.0,
               static_cast<unsigned long long>(dropped), samples_per_s,
               static_cast<unsigned long long>(lost), static_cast<unsigned long long>(bad));
-  std::printf("  other processes   simulator %.2f %%, subscribers (this tool) %.2f %%; machine "
-              "busy %.1f %% of one core (of %u), load1 max %.2f\n",
-              sim_cpu, self_cpu, busy, std::thread::hardware_concurrency(), load_max);
+  std::printf("  other processes   simulator %.2f %%, subscribers (this tool) %.2f %%, kernel "
+              "workers %.2f %%; machine busy %.1f %% of one core (of %u), hypervisor steal %.1f %%, load1 "
+              "max %.2f\n",
+              sim_cpu, self_cpu, kworker_cpu, busy, std::thread::hardware_concurrency(), steal,
+              load_max);
+  std::printf("  undisturbed       %d of %zu intervals with the rest of the machine below %.0f %% "
+              "of a core and steal below %.0f %%: daemon CPU %.2f %%, latency p50 %.3f  p90 %.3f  p99 %.3f  p99.9 %.3f ms "
+              "(%llu lines)\n",
+              quiet_intervals, rows.size(), quiet_other, quiet_steal,
+              quiet_wall > 0 ? 100.0 * quiet_daemon_cpu_s / quiet_wall : -1.0, quiet.Quantile(0.5),
+              quiet.Quantile(0.9), quiet.Quantile(0.99), quiet.Quantile(0.999),
+              static_cast<unsigned long long>(quiet.count()));
   if (status_after.is_object()) {
     std::printf("  daemon status     loop_ms %s, solve_ms %s\n",
                 status_after.value("loop_ms", json()).dump().c_str(),
@@ -849,7 +931,9 @@ int main(int argc, char** argv) {
                  "       daemon_load measure --socket PATH --seconds N [--clients 4] "
                  "[--devices 8] [--rate 1000]\n"
                  "                   [--interval 10] [--daemon-pid P] [--sim-pid P] "
-                 "[--warmup-timeout 180] [--settle 2] [--json-out FILE]\n"
+                 "[--warmup-timeout 180] [--settle 2] [--quiet-other 25]\n"
+                 "                   [--quiet-steal 10]
+                 "                   [--json-out FILE]\n"
                  "(tests/bench/daemon_load.sh sets everything up; docs/PERFORMANCE.md)\n");
     return 2;
   }

@@ -22,6 +22,8 @@
 # Environment (defaults): DEVICES=8 RATE=1000 CLIENTS=4 PROTOCOL=mip BAUD=921600 INTERVAL=10
 #   SEED=1 SETTLE=5 (seconds between the first corrected sample of every device and the window:
 #   the daemon first drains what the ptys buffered while it started); KEEP=1 keeps the work directory (logs, result.json); WORK=DIR uses DIR (created);
+#   NICE=N runs simulator, turncald and subscribers under `nice -n N` (e.g. -10 as root: on a
+#   shared machine, other people's builds then take the CPU only when these do not need it).
 #   CLIENTS=0 measures the daemon without subscribers. PERF=1 records `perf record $PERF_ARGS`
 #   (default -g) of the daemon for the first min(SECONDS, 30) s of the window (perf.data in the
 #   work directory, which is then kept; PERF_ARGS="--call-graph dwarf" for usable call chains).
@@ -40,6 +42,9 @@ SEED=${SEED:-1}
 SETTLE=${SETTLE:-5}
 KEEP=${KEEP:-0}
 PERF=${PERF:-0}
+NICE=${NICE:-}
+RUN=()
+[[ -n $NICE ]] && RUN=(nice -n "$NICE")
 PERF_ARGS=${PERF_ARGS:--g}
 
 BUILD=$(cd "$BUILD" && pwd)
@@ -97,10 +102,10 @@ LIVES=()
 for i in $(seq 1 "$DEVICES"); do LIVES+=(--live "$WORK/imu$i"); done
 
 echo "daemon_load.sh: $DEVICES x $PROTOCOL at $RATE Hz ($BAUD baud), $CLIENTS subscribers, ${DURATION} s window;" \
-     "session $POSES poses x (4 + $DWELL) s; work $WORK"
+     "session $POSES poses x (4 + $DWELL) s; work $WORK${NICE:+; nice $NICE}"
 echo "daemon_load.sh: machine: $(nproc) cores, $(lscpu | sed -n 's/^Model name: *//p'); before: $(uptime)"
 
-"$TURNCAL" sim --protocol "$PROTOCOL" "${LIVES[@]}" --controller "$WORK/t.sock" --rate "$RATE" \
+"${RUN[@]}" "$TURNCAL" sim --protocol "$PROTOCOL" "${LIVES[@]}" --controller "$WORK/t.sock" --rate "$RATE" \
   --baud "$BAUD" --poses "$WORK/poses.csv" --dwell "$DWELL" --seed "$SEED" \
   --truth-out "$WORK/truth.json" --answer-timeout 60 --live-speed 1 \
   > "$WORK/sim.out" 2> "$WORK/sim.err" &
@@ -115,7 +120,7 @@ done
 [[ -s $WORK/truth.json ]] || { echo "daemon_load.sh: no truth file from the simulator" >&2; exit 1; }
 "$LOAD" seed --truth "$WORK/truth.json" --state-dir "$WORK/state"
 
-"$TURNCALD" --config "$WORK/turncald.toml" --socket "$WORK/t.sock" --state-dir "$WORK/state" \
+"${RUN[@]}" "$TURNCALD" --config "$WORK/turncald.toml" --socket "$WORK/t.sock" --state-dir "$WORK/state" \
   > "$WORK/daemon.log" 2>&1 &
 DAEMON_PID=$!
 
@@ -133,7 +138,7 @@ if [[ $PERF == 1 ]]; then
 fi
 
 set +e
-"$LOAD" measure --socket "$WORK/t.sock" --seconds "$DURATION" --clients "$CLIENTS" \
+"${RUN[@]}" "$LOAD" measure --socket "$WORK/t.sock" --seconds "$DURATION" --clients "$CLIENTS" \
   --devices "$DEVICES" --rate "$RATE" --interval "$INTERVAL" --settle "$SETTLE" --daemon-pid "$DAEMON_PID" \
   --sim-pid "$SIM_PID" --json-out "$WORK/result.json" | tee "$WORK/measure.out"
 STATUS=${PIPESTATUS[0]}
