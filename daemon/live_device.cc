@@ -55,6 +55,16 @@ drivers::xbus::OutputConfiguration XbusOutputs(double rate_hz) {
           {x::kStatusWord, rate}};
 }
 
+// The counters of a decoder replaced after a reconfiguration, kept in the device's totals.
+void AddCounters(drivers::DecoderCounters* into, const drivers::DecoderCounters& c) {
+  into->bytes_in += c.bytes_in;
+  into->frames += c.frames;
+  into->bad_checksums += c.bad_checksums;
+  into->bytes_skipped += c.bytes_skipped;
+  into->lost_samples += c.lost_samples;
+  into->samples += c.samples;
+}
+
 }  // namespace
 
 double DefaultRateHz(drivers::Protocol protocol) {
@@ -166,13 +176,7 @@ void LiveDevice::OnTransportStatus(drivers::TransportStatus status, const std::s
       if (link_) link_->Close(message);
       if (decoder_) {
         decoder_->Finish();
-        const auto& c = decoder_->counters();
-        retired_.bytes_in += c.bytes_in;
-        retired_.frames += c.frames;
-        retired_.bad_checksums += c.bad_checksums;
-        retired_.bytes_skipped += c.bytes_skipped;
-        retired_.lost_samples += c.lost_samples;
-        retired_.samples += c.samples;
+        AddCounters(&retired_, decoder_->counters());
         decoder_.reset();
       }
       SetState("error", "disconnected", message);
@@ -296,15 +300,7 @@ void LiveDevice::UpdateRate(std::int64_t now_ns) {
 
 nlohmann::json LiveDevice::Status() const {
   drivers::DecoderCounters c = retired_;
-  if (decoder_) {
-    const auto& d = decoder_->counters();
-    c.bytes_in += d.bytes_in;
-    c.frames += d.frames;
-    c.bad_checksums += d.bad_checksums;
-    c.bytes_skipped += d.bytes_skipped;
-    c.lost_samples += d.lost_samples;
-    c.samples += d.samples;
-  }
+  if (decoder_) AddCounters(&c, decoder_->counters());
   const drivers::TransportCounters t =
       transport_ ? transport_->counters() : drivers::TransportCounters{};
   return {{"name", spec_.name},

@@ -28,10 +28,10 @@ struct LiveSimDevice {
 
 struct LiveSimOptions {
   double speed = 1.0;
-  std::string controller;          // turncald's socket; empty: pose events on stdout only
-  double connect_timeout_s = 60;   // real seconds to wait for the daemon's socket
-  double answer_timeout_s = 120;   // session seconds the table waits for an answer
-  int retries = 2;                 // a rejected pose is announced again this often
+  std::string controller;         // turncald's socket; empty: pose events on stdout only
+  double connect_timeout_s = 60;  // real seconds to wait for the daemon's socket
+  double answer_timeout_s = 120;  // session seconds the table waits for an answer
+  int retries = 2;                // a rejected pose is announced again this often
 };
 
 struct LiveSimReport {
@@ -39,7 +39,7 @@ struct LiveSimReport {
   int captured = 0;    // poses every device captured
   int unanswered = 0;  // poses given up (rejected after the retries, or no answer)
   int reconnects = 0;
-  double held_s = 0;   // session seconds the table waited past the planned dwells
+  double held_s = 0;  // session seconds the table waited past the planned dwells
   std::vector<std::uint64_t> frames_sent, frames_withheld, frames_dropped;
 };
 
