@@ -21,8 +21,8 @@
 //       machine's busy time (/proc/stat) and load average. This machine is shared: an interval in
 //       which the rest of the machine (busy time minus daemon, simulator and subscribers) used
 //       --quiet-other % of a core or more, or the hypervisor took --quiet-steal % of a core (steal
-//       time: the host ran somebody else on our virtual CPUs), is marked "disturbed"; the summary gives the latency of
-//       the undisturbed intervals separately. Device counters come from the
+//       time: the host ran somebody else on our virtual CPUs), is marked "disturbed"; the summary
+//       gives the latency of the undisturbed intervals separately. Device counters come from the
 //       daemon's status before and after. Prints one row per interval, a summary, and a final
 //       line {"class":"LOAD_RESULT",...}; exit 0 when the run completed (targets are reported,
 //       not enforced), 1 when it could not measure (no corrected output, a subscriber lost).
@@ -183,13 +183,14 @@ ProcSample ReadProc(const std::string& pid) {
 struct SystemSample {
   double busy_s = 0, total_s = 0, steal_s = 0;  // busy: user, nice, system, irq, softirq
   double load1 = 0;
-  double kworker_s = 0;  // kernel workers (the tty layer moves pty bytes in them)
+  std::map<std::string, double> kworker_s;  // kernel workers (the tty layer moves pty bytes)
 };
 
-// CPU time of every kworker thread so far (threads that ended since are lost: an estimate).
-double KworkerSeconds() {
+// CPU time of every kworker thread so far, by pid (threads that end between two samples lose
+// their last part: an estimate).
+std::map<std::string, double> KworkerSeconds() {
   namespace fs = std::filesystem;
-  double sum = 0;
+  std::map<std::string, double> out;
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator("/proc", ec)) {
     const std::string name = entry.path().filename().string();
@@ -198,7 +199,18 @@ double KworkerSeconds() {
     std::string c;
     if (!std::getline(comm, c) || c.rfind("kworker", 0) != 0) continue;
     const ProcSample p = ReadProc(name);
-    if (p.ok) sum += p.cpu_s;
+    if (p.ok) out[name] = p.cpu_s;
+  }
+  return out;
+}
+
+// Seconds the kworkers of `now` ran since `before` (new ones: all of their time).
+double KworkerDelta(const std::map<std::string, double>& before,
+                    const std::map<std::string, double>& now) {
+  double sum = 0;
+  for (const auto& [pid, t] : now) {
+    const auto it = before.find(pid);
+    sum += std::max(0.0, t - (it == before.end() ? 0.0 : it->second));
   }
   return sum;
 }
@@ -290,7 +302,7 @@ json Request(const std::string& path, const std::string& cmd, const std::string&
 
 class Histogram {
  public:
-  static constexpr std::size_t kFine = 100'000;  // 1 us each
+  static constexpr std::size_t kFine = 100'000;            // 1 us each
   static constexpr std::size_t kBuckets = kFine + 99'000;  // then 100 us each
   static std::size_t Bucket(std::int64_t us) {
     const auto u = static_cast<std::size_t>(us);
@@ -378,7 +390,9 @@ class Subscriber {
     if (thread_.joinable()) thread_.join();
     if (fd_ >= 0) ::close(fd_);
   }
-  void Start() { thread_ = std::thread([this] { Run(); }); }
+  void Start() {
+    thread_ = std::thread([this] { Run(); });
+  }
   void Join() {
     if (thread_.joinable()) thread_.join();
   }
@@ -389,8 +403,8 @@ class Subscriber {
     return hist_;
   }
   struct Counters {
-    std::uint64_t lines = 0, corrected = 0, dropped_notes = 0, dropped = 0, bytes = 0,
-                  errors = 0, unparsed = 0;
+    std::uint64_t lines = 0, corrected = 0, dropped_notes = 0, dropped = 0, bytes = 0, errors = 0,
+                  unparsed = 0;
     std::set<std::string> devices;  // seen before the measurement (warm-up)
     bool closed = false;
     std::string last_error;
@@ -601,8 +615,8 @@ int Measure(const Args& args) {
     int streaming = 0;
     if (status.is_object()) {
       for (const auto& [name, d] : status["devices"].items()) {
-        streaming += d.value("state", "") == "streaming" &&
-                     d["counters"].value("samples", 0ULL) > 0;
+        streaming +=
+            d.value("state", "") == "streaming" && d["counters"].value("samples", 0ULL) > 0;
       }
     }
     if (streaming >= n_devices) break;
@@ -658,6 +672,7 @@ int Measure(const Args& args) {
     rss_mb.push_back(first.daemon.rss_mb);
   }
   Histogram quiet;
+  double kworker_total_s = 0;
   int quiet_intervals = 0;
   double quiet_wall = 0, quiet_daemon_cpu_s = 0;
   std::printf("%7s %8s %7s %6s %6s %6s %6s %6s %6s %6s %8s %8s %8s %7s\n", "t_s", "daemon%",
@@ -693,7 +708,8 @@ int Measure(const Args& args) {
     const double total = now.system.total_s - last.system.total_s;
     r.busy = total > 0 ? 100.0 * (now.system.busy_s - last.system.busy_s) / total * ncpu : 0;
     r.load1 = now.system.load1;
-    r.kworker = 100.0 * (now.system.kworker_s - last.system.kworker_s) / wall;
+    r.kworker = 100.0 * KworkerDelta(last.system.kworker_s, now.system.kworker_s) / wall;
+    kworker_total_s += r.kworker / 100.0 * wall;
     r.steal = total > 0 ? 100.0 * (now.system.steal_s - last.system.steal_s) / total * ncpu : 0;
     r.other = r.busy - std::max(0.0, r.daemon_cpu) - std::max(0.0, r.sim_cpu) -
               std::max(0.0, r.self_cpu) - std::max(0.0, r.kworker);
@@ -718,9 +734,8 @@ int Measure(const Args& args) {
     std::printf(
         "%7.1f %8.2f %7.1f %6.2f %6.2f %6.2f %6.1f %6.1f %6.1f %6.2f %8.0f %8.3f %8.3f %7llu%s\n",
         r.t_s, r.daemon_cpu, r.daemon_rss, r.sim_cpu, r.self_cpu, r.kworker, r.busy, r.other,
-        r.steal, r.load1,
-                static_cast<double>(r.lines) / wall, r.p99_ms, r.p999_ms,
-                static_cast<unsigned long long>(r.dropped), r.quiet ? "" : "  (disturbed)");
+        r.steal, r.load1, static_cast<double>(r.lines) / wall, r.p99_ms, r.p999_ms,
+        static_cast<unsigned long long>(r.dropped), r.quiet ? "" : "  (disturbed)");
     std::fflush(stdout);
     last = now;
   }
@@ -755,14 +770,12 @@ int Measure(const Args& args) {
   const double daemon_cpu = Percent(first.daemon, final_snapshot.daemon, wall);
   const double sim_cpu = Percent(first.sim, final_snapshot.sim, wall);
   const double self_cpu = Percent(first.self, final_snapshot.self, wall);
-  const double kworker_cpu =
-      100.0 * (final_snapshot.system.kworker_s - first.system.kworker_s) / wall;
+  const double kworker_cpu = 100.0 * kworker_total_s / wall;
   const double total = final_snapshot.system.total_s - first.system.total_s;
   const double busy =
       total > 0 ? 100.0 * (final_snapshot.system.busy_s - first.system.busy_s) / total * ncpu : 0;
   const double steal =
-      total > 0 ? 100.0 * (final_snapshot.system.steal_s - first.system.steal_s) / total * ncpu
-                : 0;
+      total > 0 ? 100.0 * (final_snapshot.system.steal_s - first.system.steal_s) / total * ncpu : 0;
   double cpu_max = 0, rss_max = 0, busy_max = 0, load_max = 0;
   for (const Row& r : rows) {
     cpu_max = std::max(cpu_max, r.daemon_cpu);
@@ -777,9 +790,7 @@ int Measure(const Args& args) {
   std::uint64_t lost = 0, bad = 0;
   for (const auto& [name, a] : after.items()) {
     const json b = before.value(name, json::object());
-    const auto delta = [&](const char* key) {
-      return a.value(key, 0ULL) - b.value(key, 0ULL);
-    };
+    const auto delta = [&](const char* key) { return a.value(key, 0ULL) - b.value(key, 0ULL); };
     devices[name] = {{"samples", delta("samples")},
                      {"lost_samples", delta("lost_samples")},
                      {"bad_checksums", delta("bad_checksums")},
@@ -871,39 +882,45 @@ int Measure(const Args& args) {
        }()}};
 
   auto verdict = [](bool ok) { return ok ? "meets" : "MISSES"; };
-  std::printf("\nturncald under load: %d devices x %.0f Hz, %d subscribers to corrected output, "
-              "%.1f s\n",
-              n_devices, rate_hz, n_clients, wall);
-  std::printf("  daemon CPU        %6.2f %% of one core (max interval %.2f %%)   target <= 10 %%: %s\n",
-              daemon_cpu, cpu_max, verdict(daemon_cpu >= 0 && daemon_cpu <= 10.0));
-  std::printf("  latency           p50 %.3f  p90 %.3f  p99 %.3f  p99.9 %.3f  max %.3f ms "
-              "(%llu lines, %.4f %% > 2 ms)   target p99 <= 2 ms: %s\n",
-              all.Quantile(0.5), all.Quantile(0.9), p99, all.Quantile(0.999), all.max_ms(),
-              static_cast<unsigned long long>(all.count()), 100.0 * all.FractionAbove(2.0),
-              verdict(all.count() > 0 && p99 <= 2.0));
-  std::printf("  daemon RSS        start %.1f  max %.1f  end %.1f MB, slope %+.3f MB/min, "
-              "VmHWM %.1f MB   target <= 50 MB, flat: %s\n",
-              rss_mb.empty() ? -1.0 : rss_mb.front(), rss_max,
-              rss_mb.empty() ? -1.0 : rss_mb.back(), rss_slope, final_snapshot.daemon.hwm_mb,
-              verdict(rss_max > 0 && rss_max <= 50.0));
-  std::printf("  delivered         %llu corrected lines of %.0f expected (%.2f %%), %llu dropped; "
-              "daemon decoded %.0f samples/s, %llu lost, %llu bad checksums\n",
-              static_cast<unsigned long long>(corrected), expected,
-              expected > 0 ? 100.0 * static_cast<double>(corrected) / expected : 0.0,
-              static_cast<unsigned long long>(dropped), samples_per_s,
-              static_cast<unsigned long long>(lost), static_cast<unsigned long long>(bad));
-  std::printf("  other processes   simulator %.2f %%, subscribers (this tool) %.2f %%, kernel "
-              "workers %.2f %%; machine busy %.1f %% of one core (of %u), hypervisor steal %.1f %%, load1 "
-              "max %.2f\n",
-              sim_cpu, self_cpu, kworker_cpu, busy, std::thread::hardware_concurrency(), steal,
-              load_max);
-  std::printf("  undisturbed       %d of %zu intervals with the rest of the machine below %.0f %% "
-              "of a core and steal below %.0f %%: daemon CPU %.2f %%, latency p50 %.3f  p90 %.3f  p99 %.3f  p99.9 %.3f ms "
-              "(%llu lines)\n",
-              quiet_intervals, rows.size(), quiet_other, quiet_steal,
-              quiet_wall > 0 ? 100.0 * quiet_daemon_cpu_s / quiet_wall : -1.0, quiet.Quantile(0.5),
-              quiet.Quantile(0.9), quiet.Quantile(0.99), quiet.Quantile(0.999),
-              static_cast<unsigned long long>(quiet.count()));
+  std::printf(
+      "\nturncald under load: %d devices x %.0f Hz, %d subscribers to corrected output, "
+      "%.1f s\n",
+      n_devices, rate_hz, n_clients, wall);
+  std::printf(
+      "  daemon CPU        %6.2f %% of one core (max interval %.2f %%)   target <= 10 %%: %s\n",
+      daemon_cpu, cpu_max, verdict(daemon_cpu >= 0 && daemon_cpu <= 10.0));
+  std::printf(
+      "  latency           p50 %.3f  p90 %.3f  p99 %.3f  p99.9 %.3f  max %.3f ms "
+      "(%llu lines, %.4f %% > 2 ms)   target p99 <= 2 ms: %s\n",
+      all.Quantile(0.5), all.Quantile(0.9), p99, all.Quantile(0.999), all.max_ms(),
+      static_cast<unsigned long long>(all.count()), 100.0 * all.FractionAbove(2.0),
+      verdict(all.count() > 0 && p99 <= 2.0));
+  std::printf(
+      "  daemon RSS        start %.1f  max %.1f  end %.1f MB, slope %+.3f MB/min, "
+      "VmHWM %.1f MB   target <= 50 MB, flat: %s\n",
+      rss_mb.empty() ? -1.0 : rss_mb.front(), rss_max, rss_mb.empty() ? -1.0 : rss_mb.back(),
+      rss_slope, final_snapshot.daemon.hwm_mb, verdict(rss_max > 0 && rss_max <= 50.0));
+  std::printf(
+      "  delivered         %llu corrected lines of %.0f expected (%.2f %%), %llu dropped; "
+      "daemon decoded %.0f samples/s, %llu lost, %llu bad checksums\n",
+      static_cast<unsigned long long>(corrected), expected,
+      expected > 0 ? 100.0 * static_cast<double>(corrected) / expected : 0.0,
+      static_cast<unsigned long long>(dropped), samples_per_s,
+      static_cast<unsigned long long>(lost), static_cast<unsigned long long>(bad));
+  std::printf(
+      "  other processes   simulator %.2f %%, subscribers (this tool) %.2f %%, kernel "
+      "workers %.2f %%; machine busy %.1f %% of one core (of %u), hypervisor steal %.1f %%, load1 "
+      "max %.2f\n",
+      sim_cpu, self_cpu, kworker_cpu, busy, std::thread::hardware_concurrency(), steal, load_max);
+  std::printf(
+      "  undisturbed       %d of %zu intervals with the rest of the machine below %.0f %% "
+      "of a core and steal below %.0f %%: daemon CPU %.2f %%, latency p50 %.3f  p90 %.3f  p99 %.3f "
+      " p99.9 %.3f ms "
+      "(%llu lines)\n",
+      quiet_intervals, rows.size(), quiet_other, quiet_steal,
+      quiet_wall > 0 ? 100.0 * quiet_daemon_cpu_s / quiet_wall : -1.0, quiet.Quantile(0.5),
+      quiet.Quantile(0.9), quiet.Quantile(0.99), quiet.Quantile(0.999),
+      static_cast<unsigned long long>(quiet.count()));
   if (status_after.is_object()) {
     std::printf("  daemon status     loop_ms %s, solve_ms %s\n",
                 status_after.value("loop_ms", json()).dump().c_str(),
@@ -932,8 +949,7 @@ int main(int argc, char** argv) {
                  "[--devices 8] [--rate 1000]\n"
                  "                   [--interval 10] [--daemon-pid P] [--sim-pid P] "
                  "[--warmup-timeout 180] [--settle 2] [--quiet-other 25]\n"
-                 "                   [--quiet-steal 10]
-                 "                   [--json-out FILE]\n"
+                 "                   [--quiet-steal 10] [--json-out FILE]\n"
                  "(tests/bench/daemon_load.sh sets everything up; docs/PERFORMANCE.md)\n");
     return 2;
   }

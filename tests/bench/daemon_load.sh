@@ -114,7 +114,13 @@ SIM_PID=$!
 # The truth file is written once every device's session is built, just before the ptys stream.
 for _ in $(seq 1 3000); do
   [[ -s $WORK/truth.json ]] && break
-  kill -0 "$SIM_PID" 2>/dev/null || { echo "daemon_load.sh: the simulator stopped:" >&2; cat "$WORK/sim.err" >&2; exit 1; }
+  if ! kill -0 "$SIM_PID" 2>/dev/null; then
+    wait "$SIM_PID" && code=0 || code=$?
+    SIM_PID=
+    echo "daemon_load.sh: the simulator stopped (exit $code):" >&2
+    cat "$WORK/sim.err" >&2
+    exit 1
+  fi
   sleep 0.1
 done
 [[ -s $WORK/truth.json ]] || { echo "daemon_load.sh: no truth file from the simulator" >&2; exit 1; }
