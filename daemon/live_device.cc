@@ -129,8 +129,8 @@ bool LiveDevice::Start(std::string* error) {
   return true;
 }
 
-void LiveDevice::RecordEvent(const std::string& json) {
-  if (recording_) recording_->RecordEvent(json);
+void LiveDevice::RecordEvent(const std::string& json, std::int64_t t_host_ns) {
+  if (recording_) recording_->RecordEvent(json, t_host_ns);
 }
 
 void LiveDevice::Stop() {

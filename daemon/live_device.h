@@ -65,7 +65,7 @@ class LiveDevice {
     record_start_ns_ = start_ns;
   }
   // An event (a pose command) into the recording, at the device's recording clock.
-  void RecordEvent(const std::string& json);
+  void RecordEvent(const std::string& json, std::int64_t t_host_ns = -1);
   // False with a message when the port cannot be used at all (a malformed tcp:// address).
   bool Start(std::string* error);
   void Stop();

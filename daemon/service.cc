@@ -606,7 +606,9 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
                             {"gamma_deg", request["gamma_deg"]},
                             {"psi_deg", request["psi_deg"]}};
     if (a.dwell_s) event["dwell_s"] = *a.dwell_s;
-    devices_[targets.front()]->RecordEvent(event.dump());
+    // Recorded at the announcement's own time: the replay's sequencer then starts the pose's
+    // window at the same sample as live (it takes only samples received after the command).
+    devices_[targets.front()]->RecordEvent(event.dump(), a.t_host_ns);
   }
   nlohmann::json accepted = {
       {"class", "POSE_ACCEPTED"}, {"index", a.index}, {"devices", names}, {"skipped", skipped}};

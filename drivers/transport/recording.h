@@ -27,13 +27,16 @@ class RecordingTransport final : public Transport {
   std::string Describe() const override { return inner_->Describe() + " (recording)"; }
   const TransportCounters& counters() const override { return inner_->counters(); }
 
-  // An event (JSON) into the capture, e.g. a pose command.
-  void RecordEvent(const std::string& json);
+  // An event (JSON) into the capture, e.g. a pose command. `t_host_ns` (MonotonicNowNs() clock) is
+  // the time the event took effect, so that a replay sees it at the same point relative to the
+  // samples as the live pipeline did; < 0: now.
+  void RecordEvent(const std::string& json, std::int64_t t_host_ns = -1);
   std::uint64_t record_failures() const { return failures_; }
 
  private:
-  std::uint64_t Since() const;
-  void Append(RecordType type, std::span<const std::uint8_t> payload);
+  // Received bytes are recorded with the time the transport handed to the pipeline (not a second
+  // reading of the clock): a replay then decodes every sample with the host time it had live.
+  void Append(RecordType type, std::span<const std::uint8_t> payload, std::int64_t t_host_ns);
 
   std::unique_ptr<Transport> inner_;
   CaptureWriter* writer_;

@@ -204,7 +204,7 @@ def scenario_clean(d):
                 w = replay["devices"][name]["models"][model]["params"][p]
                 if v["sigma"]:
                     worst = max(worst, (abs(w["value"] - v["value"]) / v["sigma"], f"{name} {model} {p}"))
-    check(worst[0] <= 1e-3, f"replay vs live: largest difference {worst[0]:.2e} sigma ({worst[1]})")
+    check(worst[0] <= 1e-6, f"replay vs live: largest difference {worst[0]:.2e} sigma ({worst[1]})")
 
 
 def scenario_kill(d):
