@@ -17,6 +17,17 @@ enum SampleFlag : std::uint32_t {
   kClipping = 1u << 4,     // the device reports clipping without saying which sensor
 };
 
+// The flags' names in JSON output (`turncal decode --json`, the socket's SAMPLE), in bit order.
+struct SampleFlagName {
+  SampleFlag flag;
+  const char* name;
+};
+inline constexpr SampleFlagName kSampleFlagNames[] = {{kAccSaturated, "acc_saturated"},
+                                                      {kGyrSaturated, "gyr_saturated"},
+                                                      {kMagSaturated, "mag_saturated"},
+                                                      {kStatusError, "status_error"},
+                                                      {kClipping, "clipping"}};
+
 // The frame a device expressed its vectors in, when it says (Xbus XDI bits 2-3). Values are
 // stored as the device sent them; the frame is recorded so nothing is silently rotated.
 enum class VectorFrame : std::uint8_t { kUnknown, kEnu, kNed, kNwu };

@@ -144,8 +144,10 @@ class StillnessDetector {
   StillnessDetector(const NoiseProfile& profile, const StillnessOptions& options);
 
   int window() const { return w_; }
-  // True when `sample` lies more than outlier_k robust sigmas from the full window's median on
-  // any axis of a profiled triad (false while the window fills).
+  // True when `sample` lies more than outlier_k robust sigmas from the window's median on any
+  // axis of a profiled triad (false while the window fills). Median and MAD are taken over at
+  // most kMedianSamples samples evenly spread over the window, every window/8 pushes.
+  static constexpr std::size_t kMedianSamples = 128;
   bool IsOutlier(const StillSample& sample);
   // Adds the sample and evaluates the window ending at it; true when the window is full and
   // still. When the window was full, *evicted receives the sample that left and *has_evicted

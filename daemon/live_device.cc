@@ -295,7 +295,8 @@ void LiveDevice::UpdateRate(std::int64_t now_ns) {
   }
   rate_t_ns_ = now_ns;
   rate_samples_ = 0;
-  if (decoder_) decoder_->CheckTimeout(now_ns);
+  // No decoder->CheckTimeout(now) here: the decoder judges timeouts on the bytes' arrival times
+  // (a loop that is late to read must not drop a frame whose rest waits in the kernel).
 }
 
 nlohmann::json LiveDevice::Status() const {

@@ -3,7 +3,10 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <charconv>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <ctime>
 
@@ -21,24 +24,97 @@ namespace {
 constexpr std::int64_t kNsPerMs = 1'000'000;
 constexpr auto kTick = std::chrono::milliseconds(50);
 
-// The triad as JSON text with enough digits for a 24-bit ADC.
+// Sample lines are written for every sample and subscriber shape (8 devices at 1000 Hz), so they
+// are built with std::to_chars rather than a format string.
+void AppendNumber(std::string* out, double v, std::chars_format format, int precision) {
+  if (!std::isfinite(v)) {
+    *out += "null";  // JSON has no inf or nan
+    return;
+  }
+  char buffer[40];
+  const auto r = std::to_chars(buffer, buffer + sizeof(buffer), v, format, precision);
+  out->append(buffer, r.ptr);
+}
+
+void AppendInteger(std::string* out, std::int64_t v) {
+  char buffer[24];
+  const auto r = std::to_chars(buffer, buffer + sizeof(buffer), v);
+  out->append(buffer, r.ptr);
+}
+
+void AppendString(std::string* out, const std::string& text) {
+  const bool plain = std::all_of(text.begin(), text.end(), [](char c) {
+    return c != '"' && c != '\\' && static_cast<unsigned char>(c) >= 0x20;
+  });
+  if (plain) {
+    *out += '"';
+    *out += text;
+    *out += '"';
+  } else {
+    *out += nlohmann::json(text).dump();
+  }
+}
+
+// A measured value: the shortest text that reads back to the same 32-bit float (at most 9
+// significant digits, relative resolution 6e-8: finer than the 24-bit converters and the float32
+// values the devices send).
+void AppendMeasured(std::string* out, double v) {
+  if (!std::isfinite(v)) {
+    *out += "null";
+    return;
+  }
+  char buffer[24];
+  const auto r = std::to_chars(buffer, buffer + sizeof(buffer), static_cast<float>(v));
+  out->append(buffer, r.ptr);
+}
+
 void AppendTriad(std::string* out, const char* key, const Eigen::Vector3d& v) {
-  fmt::format_to(std::back_inserter(*out), ",\"{}\":[{:.9g},{:.9g},{:.9g}]", key, v[0], v[1], v[2]);
+  *out += ",\"";
+  *out += key;
+  *out += "\":[";
+  for (int i = 0; i < 3; ++i) {
+    if (i) *out += ',';
+    AppendMeasured(out, v[i]);
+  }
+  *out += ']';
 }
 
 void AppendSampleTime(std::string* out, const Sample& s) {
-  fmt::format_to(std::back_inserter(*out), ",\"device\":\"{}\",\"t_host_ns\":{}", s.device,
-                 s.t_host_ns);
-  if (s.t_device_s) fmt::format_to(std::back_inserter(*out), ",\"t_device\":{:.9f}", *s.t_device_s);
-  if (s.counter) fmt::format_to(std::back_inserter(*out), ",\"counter\":{}", *s.counter);
+  *out += ",\"device\":";
+  AppendString(out, s.device);
+  *out += ",\"t_host_ns\":";
+  AppendInteger(out, s.t_host_ns);
+  if (s.t_device_s) {
+    *out += ",\"t_device\":";
+    AppendNumber(out, *s.t_device_s, std::chars_format::fixed, 9);
+  }
+  if (s.counter) {
+    *out += ",\"counter\":";
+    AppendInteger(out, *s.counter);
+  }
 }
 
 void AppendRaw(std::string* out, const Sample& s) {
   if (s.acc_mps2) AppendTriad(out, "acc", *s.acc_mps2);
   if (s.gyr_radps) AppendTriad(out, "gyr", *s.gyr_radps);
   if (s.mag) AppendTriad(out, "mag", *s.mag);
-  if (s.temp_c) fmt::format_to(std::back_inserter(*out), ",\"temp\":{:.4g}", *s.temp_c);
-  if (s.flags) fmt::format_to(std::back_inserter(*out), ",\"flags\":{}", s.flags);
+  if (s.temp_c) {
+    *out += ",\"temp\":";
+    AppendNumber(out, *s.temp_c, std::chars_format::general, 4);
+  }
+  if (s.flags) {  // names, as turncal decode --json writes them
+    *out += ",\"flags\":[";
+    bool first = true;
+    for (const auto& f : kSampleFlagNames) {
+      if (!(s.flags & f.flag)) continue;
+      if (!first) *out += ',';
+      first = false;
+      *out += '"';
+      *out += f.name;
+      *out += '"';
+    }
+    *out += ']';
+  }
 }
 
 std::int64_t ThreadCpuNs() {
@@ -352,9 +428,13 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
   std::shared_ptr<const std::string> corrected_lines[4], raw;
   Station::Corrected c;
   bool have_correction = false, tried = false;
-  auto sessions = server_->sessions();  // a send may close a session
-  for (auto& [id, s] : sessions) {
-    if (!s->watch || (!s->watch->corrected && !s->watch->raw)) continue;
+  // The watching sessions, in a vector kept between samples (a send may close a session, which
+  // leaves the server's map; the references keep it alive until this sample is done).
+  sample_watchers_.clear();
+  for (const auto& [id, s] : server_->sessions()) {
+    if (s->watch && (s->watch->corrected || s->watch->raw)) sample_watchers_.push_back(s);
+  }
+  for (const auto& s : sample_watchers_) {
     const WatchSpec& w = *s->watch;
     if (!w.device.empty() && w.device != sample.device) continue;
     if (w.max_rate_hz > 0) {
@@ -376,19 +456,26 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
           std::string text = "{\"class\":\"CORRECTED\"";
           AppendSampleTime(&text, sample);
           if (c.acc_mps2) AppendTriad(&text, "acc", *c.acc_mps2);
-          if (c.acc_frame)
-            fmt::format_to(std::back_inserter(text), ",\"acc_frame\":\"{}\"", c.acc_frame);
+          if (c.acc_frame) {
+            text += ",\"acc_frame\":\"";
+            text += c.acc_frame;
+            text += '"';
+          }
           if (c.mag) AppendTriad(&text, "mag", *c.mag);
           if (c.mag_frame) {
-            fmt::format_to(std::back_inserter(text), ",\"mag_frame\":\"{}\"", c.mag_frame);
+            text += ",\"mag_frame\":\"";
+            text += c.mag_frame;
+            text += '"';
           }
           if (w.uncertainty && c.acc_sigma) AppendTriad(&text, "acc_sigma", *c.acc_sigma);
           if (w.uncertainty && c.mag_sigma) AppendTriad(&text, "mag_sigma", *c.mag_sigma);
           if (sample.gyr_radps) AppendTriad(&text, "gyr", *sample.gyr_radps);  // not calibrated
           text += ",\"versions\":{";
           for (std::size_t k = 0; k < c.versions.size(); ++k) {
-            fmt::format_to(std::back_inserter(text), "{}\"{}\":{}", k ? "," : "",
-                           c.versions[k].first, c.versions[k].second);
+            if (k) text += ',';
+            AppendString(&text, c.versions[k].first);
+            text += ':';
+            AppendInteger(&text, c.versions[k].second);
           }
           text += "}";
           if (w.raw) {
@@ -412,6 +499,7 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
     }
     s->Stream(raw);
   }
+  sample_watchers_.clear();
 }
 
 void Service::OnEvent(const nlohmann::json& event) {

@@ -78,6 +78,7 @@ class Service {
   std::unique_ptr<SolveWorker> worker_;  // before station_: the station's work drains first
   std::unique_ptr<Station> station_;
   std::vector<std::unique_ptr<LiveDevice>> devices_;
+  std::vector<std::shared_ptr<ClientSession>> sample_watchers_;  // OnSample's, reused
   std::unique_ptr<SocketServer> server_;
   std::unique_ptr<drivers::CaptureWriter> recorder_;
   std::int64_t started_ns_ = 0;

@@ -7,6 +7,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <boost/asio/post.hpp>
 #include <boost/asio/write.hpp>
 #include <cerrno>
 #include <cstring>
@@ -34,7 +35,7 @@ bool ResolveUser(const std::string& name_or_uid, unsigned* uid, std::string* err
 
 SocketServer::SocketServer(boost::asio::io_context& io, SocketOptions options,
                            RequestHandler on_request)
-    : io_(io), options_(std::move(options)), on_request_(std::move(on_request)) {}
+    : io_(io), options_(std::move(options)), on_request_(std::move(on_request)), batch_timer_(io) {}
 
 SocketServer::~SocketServer() { Stop(); }
 
@@ -123,6 +124,28 @@ void SocketServer::Accept() {
 }
 
 void SocketServer::Remove(std::uint64_t id) { sessions_.erase(id); }
+
+void SocketServer::ScheduleFlush(const std::shared_ptr<ClientSession>& session) {
+  batch_.push_back(session);
+  if (batch_armed_) return;
+  batch_armed_ = true;
+  batch_timer_.expires_after(options_.stream_batch);
+  batch_timer_.async_wait([this](const boost::system::error_code& ec) {
+    batch_armed_ = false;
+    if (ec || stopped_) return;
+    FlushBatch();
+  });
+}
+
+void SocketServer::FlushBatch() {
+  auto batch = std::move(batch_);
+  batch_.clear();
+  for (auto& s : batch) {
+    if (!s->in_batch_) continue;  // written meanwhile (a reply)
+    s->in_batch_ = false;
+    if (!s->writing_ && !s->flush_posted_) s->Write();
+  }
+}
 
 void SocketServer::SetControlUids(std::set<unsigned> uids) {
   options_.control_uids = std::move(uids);
@@ -238,32 +261,59 @@ void ClientSession::Enqueue(std::shared_ptr<const std::string> line, bool droppa
   }
   queued_bytes_ += line->size();
   queue_.push_back(std::move(line));
-  if (!writing_) Write();
+  if (writing_ || flush_posted_) return;  // the running write takes this line too
+  if (droppable && server_->options_.stream_batch.count() > 0) {
+    // A stream message waits for the server's batch timer, with those of the next samples.
+    if (!in_batch_) {
+      in_batch_ = true;
+      server_->ScheduleFlush(shared_from_this());
+    }
+    return;
+  }
+  // Written after the loop's current handlers (with any stream messages waiting): what this turn
+  // produced goes out in one send.
+  in_batch_ = false;
+  flush_posted_ = true;
+  boost::asio::post(socket_.get_executor(), [self = shared_from_this()] {
+    self->flush_posted_ = false;
+    self->Write();
+  });
 }
 
 void ClientSession::Write() {
-  if (!open_ || queue_.empty()) {
-    writing_ = false;
+  while (open_ && !queue_.empty()) {
+    out_.clear();
+    // Several queued lines in one send (up to 64 KiB).
+    while (!queue_.empty() && (out_.empty() || out_.size() + queue_.front()->size() <= 65536)) {
+      out_ += *queue_.front();
+      queued_bytes_ -= queue_.front()->size();
+      queue_.pop_front();
+    }
+    // A non-blocking send first: a reading client takes the bytes now, without a trip through the
+    // reactor. What the socket does not take is written asynchronously.
+    const ssize_t n =
+        ::send(socket_.native_handle(), out_.data(), out_.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+    if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
+      Close();
+      return;
+    }
+    const std::size_t sent = n > 0 ? static_cast<std::size_t>(n) : 0;
+    if (sent == out_.size()) continue;
+    out_.erase(0, sent);
+    writing_ = true;
+    auto self = shared_from_this();
+    boost::asio::async_write(socket_, boost::asio::buffer(out_),
+                             [self](const boost::system::error_code& ec, std::size_t) {
+                               self->writing_ = false;
+                               if (!self->open_) return;
+                               if (ec) {
+                                 self->Close();
+                                 return;
+                               }
+                               self->Write();
+                             });
     return;
   }
-  writing_ = true;
-  out_.clear();
-  // Several queued lines in one write (up to 64 KiB).
-  while (!queue_.empty() && (out_.empty() || out_.size() + queue_.front()->size() <= 65536)) {
-    out_ += *queue_.front();
-    queued_bytes_ -= queue_.front()->size();
-    queue_.pop_front();
-  }
-  auto self = shared_from_this();
-  boost::asio::async_write(socket_, boost::asio::buffer(out_),
-                           [self](const boost::system::error_code& ec, std::size_t) {
-                             if (!self->open_) return;
-                             if (ec) {
-                               self->Close();
-                               return;
-                             }
-                             self->Write();
-                           });
 }
 
 }  // namespace turncal::daemon

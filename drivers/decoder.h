@@ -54,7 +54,10 @@ class Decoder {
   virtual void Push(std::span<const std::uint8_t> bytes, std::int64_t t_host_ns) = 0;
   // Drops an incomplete frame whose first byte arrived more than the protocol's timeout before
   // `now_ns` (a corrupted length byte must not stall the stream) and releases a sample waiting
-  // for more of its parts.
+  // for more of its parts. For a link known to be quiet (a simulated clock): turncald does not call
+  // it, because a loop that is late to read would drop frames whose rest waits unread in the
+  // kernel, and a replay could not know when the live loop had looked. A stale candidate does no
+  // harm anyway: when bytes come again its checksum fails and the bytes inside it are rescanned.
   virtual void CheckTimeout(std::int64_t now_ns) = 0;
   // End of input: rescans the pending bytes one start position at a time (frames inside an
   // incomplete false candidate are recovered), counts what is left as skipped, and emits a

@@ -40,11 +40,9 @@ const char* ToString(VectorFrame f) {
 
 std::vector<std::string> FlagNames(std::uint32_t flags) {
   std::vector<std::string> out;
-  if (flags & kAccSaturated) out.push_back("acc_saturated");
-  if (flags & kGyrSaturated) out.push_back("gyr_saturated");
-  if (flags & kMagSaturated) out.push_back("mag_saturated");
-  if (flags & kStatusError) out.push_back("status_error");
-  if (flags & kClipping) out.push_back("clipping");
+  for (const auto& f : kSampleFlagNames) {
+    if (flags & f.flag) out.push_back(f.name);
+  }
   return out;
 }
 

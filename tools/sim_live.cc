@@ -224,17 +224,39 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
   bool holding = false;
   double hold_start_s = 0;
   auto retry_at = start;
+  // The table rests at home until the daemon has measured every device's noise (a real
+  // controller waits for NOISE_MEASURED before it moves the table the first time).
+  bool start_rest = !events.empty();
+  bool start_holding = false;
+  auto status_at = start;
+  const double start_s = devices[0].capture->session_options.start_s;
+  // The samples of [t0, t1) are streamed again (forwards, then backwards: no step at the seams).
+  auto begin_hold = [&](double t0_s, double t1_s, double at_vt) {
+    for (Device& d : devices) {
+      d.hold_samples.clear();
+      const auto& samples = d.capture->session.samples;
+      for (std::size_t k = 0; k < samples.size(); ++k) {
+        const double t = static_cast<double>(samples[k].t_host_ns) * 1e-9;
+        if (t >= t0_s && t < t1_s) d.hold_samples.push_back(k);
+      }
+      d.clones = 0;
+      d.clone_due_s = at_vt;
+    }
+    hold_start_s = at_vt;
+  };
+  auto shift_past_hold = [&](double vt) {
+    for (Device& d : devices) {
+      d.shift_s += static_cast<double>(d.clones) * d.period_s;
+      d.device_shift_s += static_cast<double>(d.clones) * d.period_s;
+      d.counter_shift += static_cast<std::uint32_t>(d.clones);
+      d.clones = 0;
+    }
+    report->held_s += vt - hold_start_s;
+    shift_s += vt - hold_start_s;
+  };
 
   auto end_hold = [&](double vt) {
-    if (holding) {
-      for (Device& d : devices) {
-        d.shift_s += static_cast<double>(d.clones) * d.period_s;
-        d.device_shift_s += static_cast<double>(d.clones) * d.period_s;
-        d.counter_shift += static_cast<std::uint32_t>(d.clones);
-      }
-      report->held_s += vt - hold_start_s;
-      shift_s += vt - hold_start_s;
-    }
+    if (holding) shift_past_hold(vt);
     holding = false;
     announced = false;
     waiting.clear();
@@ -272,6 +294,18 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
       }
       for (const auto& m : messages) {
         const std::string kind = m.value("class", "");
+        if (kind == "STATUS" && start_rest && m.contains("devices") && m["devices"].is_object() &&
+            !m["devices"].empty()) {
+          bool measured = true;
+          for (const auto& [name, dev] : m["devices"].items()) {
+            measured = measured && dev.contains("station") && dev["station"].is_object() &&
+                       dev["station"].value("noise", "") == "measured";
+          }
+          if (measured) {
+            start_rest = false;
+            Say({{"event", "start_rest"}, {"state", "noise measured"}, {"after_s", vt}});
+          }
+        }
         if (kind == "POSE_ACCEPTED" && m.value("index", -1) == static_cast<int>(p) && announced) {
           for (const auto& name : m["devices"]) waiting.insert(name.get<std::string>());
         } else if ((kind == "POSE_CAPTURED" || kind == "POSE_REJECTED") &&
@@ -306,9 +340,26 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
         }
       }
     }
+    // At rest at home: ask the daemon whether every device's noise is measured.
+    if (start_rest && controller.connected() && Clock::now() >= status_at) {
+      status_at = Clock::now() + std::chrono::milliseconds(250);
+      controller.Send({{"cmd", "status"}});
+    }
+    if (start_rest && !start_holding && vt >= start_s + shift_s) {
+      start_holding = true;
+      begin_hold(0.0, start_s, start_s + shift_s);
+    }
+    if (start_holding && start_rest && vt - hold_start_s > options.answer_timeout_s) {
+      Say({{"event", "start_rest"}, {"state", "gave up waiting for the noise"}, {"after_s", vt}});
+      start_rest = false;
+    }
+    if (start_holding && !start_rest) {
+      start_holding = false;
+      shift_past_hold(vt);
+    }
     // Announce the pose once the table has settled there.
-    if (p < events.size() && !announced && controller.connected() && Clock::now() >= retry_at &&
-        vt >= events[p].t_s + shift_s) {
+    if (p < events.size() && !announced && !start_holding && controller.connected() &&
+        Clock::now() >= retry_at && vt >= events[p].t_s + shift_s) {
       const TablePose& pose = events[p].pose;
       const nlohmann::json request = {{"cmd", "pose"},
                                       {"index", p},
@@ -337,19 +388,9 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
       }
     }
     // The table holds while the pose is not answered.
-    if (p < events.size() && !holding && vt >= events[p].dwell_end_s + shift_s) {
+    if (p < events.size() && !holding && !start_holding && vt >= events[p].dwell_end_s + shift_s) {
       holding = true;
-      hold_start_s = events[p].dwell_end_s + shift_s;
-      for (Device& d : devices) {
-        d.hold_samples.clear();
-        const auto& samples = d.capture->session.samples;
-        for (std::size_t k = 0; k < samples.size(); ++k) {
-          const double t = static_cast<double>(samples[k].t_host_ns) * 1e-9;
-          if (t >= events[p].t_s && t < events[p].dwell_end_s) d.hold_samples.push_back(k);
-        }
-        d.clones = 0;
-        d.clone_due_s = hold_start_s;
-      }
+      begin_hold(events[p].t_s, events[p].dwell_end_s, events[p].dwell_end_s + shift_s);
     }
     if (holding && vt - hold_start_s > options.answer_timeout_s) {
       Say({{"event", "gave_up"}, {"index", p}, {"after_s", vt - hold_start_s}});
@@ -360,9 +401,11 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     bool done = p >= events.size();
     for (Device& d : devices) {
       const auto& samples = d.capture->session.samples;
-      if (holding) {
+      if (holding || start_holding) {
         while (d.clone_due_s <= vt && !d.hold_samples.empty()) {
-          Sample s = samples[d.hold_samples[d.clones % d.hold_samples.size()]];
+          const std::size_t n = d.hold_samples.size();
+          const std::size_t at = d.clones % (2 * n);
+          Sample s = samples[d.hold_samples[at < n ? at : 2 * n - 1 - at]];
           s.t_device_s = d.last_device_s + d.period_s;
           if (s.counter) s.counter = d.last_counter + 1;
           Emit(&d, s);

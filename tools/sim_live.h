@@ -6,7 +6,11 @@
 // has it idle or in config state. The controller announces every pose on the daemon's socket
 // when the table has settled and -- like a real controller -- holds the table there until every
 // device has answered: while it waits past the planned dwell, the devices keep streaming the
-// pose's stationary samples again (device time and counters advancing). A rejected pose is
+// pose's stationary samples again (device time and counters advancing; forwards, then backwards,
+// so the bias wander has no step where the loop closes). Before the first move the table rests
+// at home, streaming the start's samples the same way, until the daemon's status says every
+// device has measured its noise (or `answer_timeout_s` passed), as a controller that waits for
+// NOISE_MEASURED would. A rejected pose is
 // announced again (up to `retries` times). A daemon that goes away (kill -9) is reconnected,
 // and the pose it did not answer is announced again.
 //

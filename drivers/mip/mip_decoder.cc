@@ -16,8 +16,8 @@ Eigen::Vector3d Vector3(const std::uint8_t* p, double scale) {
 
 }  // namespace
 
-MipDecoder::MipDecoder(std::string device, DecoderSink* sink, std::int64_t timeout_ns)
-    : ScanningDecoder(kMipMaxFrame, timeout_ns, sink), device_(std::move(device)) {
+MipDecoder::MipDecoder(std::string device, DecoderSink* sink, std::int64_t timeout_ns, bool early)
+    : ScanningDecoder(kMipMaxFrame, timeout_ns, sink), device_(std::move(device)), early_(early) {
   pending_.device = device_;
 }
 
@@ -125,6 +125,13 @@ bool MipDecoder::Accept(std::span<const std::uint8_t> frame, std::int64_t t_host
   sink_->OnFrame(view);
   if (!has_data) return true;
 
+  const std::uint8_t mask = FieldMask(s);
+  if (early_t_device_s_) {
+    // A packet that would have joined the sample emitted early: wait for the next packet again.
+    const bool would_join = has_time ? *early_t_device_s_ == *s.t_device_s : false;
+    if (would_join && (mask & early_mask_) == 0) early_ = false;
+    early_t_device_s_.reset();
+  }
   if (has_pending_) {
     const bool overlap = (s.acc_mps2 && pending_.acc_mps2) || (s.gyr_radps && pending_.gyr_radps) ||
                          (s.mag && pending_.mag);
@@ -137,6 +144,7 @@ bool MipDecoder::Accept(std::span<const std::uint8_t> frame, std::int64_t t_host
       if (s.mag) pending_.mag = s.mag;
       if (s.temp_c) pending_.temp_c = s.temp_c;
       pending_.flags |= s.flags;
+      ReleaseIfWhole();
       return true;
     }
     Release();
@@ -145,12 +153,29 @@ bool MipDecoder::Accept(std::span<const std::uint8_t> frame, std::int64_t t_host
   s.t_host_ns = t_host_ns;
   pending_ = std::move(s);
   has_pending_ = true;
+  ReleaseIfWhole();
   return true;
+}
+
+std::uint8_t MipDecoder::FieldMask(const Sample& s) {
+  return static_cast<std::uint8_t>((s.acc_mps2 ? 1 : 0) | (s.gyr_radps ? 2 : 0) | (s.mag ? 4 : 0) |
+                                   (s.temp_c ? 8 : 0));
+}
+
+void MipDecoder::ReleaseIfWhole() {
+  const std::uint8_t mask = FieldMask(pending_);
+  if (!early_ || whole_mask_ == 0 || (mask & whole_mask_) != whole_mask_) return;
+  // Only a timestamped sample: without one, the next packet is the only sign of its end.
+  if (!pending_.t_device_s) return;
+  early_t_device_s_ = pending_.t_device_s;
+  early_mask_ = mask;
+  Release();
 }
 
 void MipDecoder::Release() {
   if (!has_pending_) return;
   has_pending_ = false;
+  whole_mask_ |= FieldMask(pending_);
   ++counters_.samples;
   sink_->OnSample(pending_);
 }
