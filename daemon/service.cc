@@ -36,6 +36,24 @@ void AppendNumber(std::string* out, double v, std::chars_format format, int prec
   out->append(buffer, r.ptr);
 }
 
+// Seconds with 9 decimals (nanoseconds), from the integer nanoseconds.
+void AppendFixed9(std::string* out, double seconds) {
+  if (!std::isfinite(seconds) || std::abs(seconds) >= 9e9) {
+    AppendNumber(out, seconds, std::chars_format::fixed, 9);
+    return;
+  }
+  const auto ns = static_cast<std::int64_t>(std::llround(seconds * 1e9));
+  const std::uint64_t magnitude = static_cast<std::uint64_t>(ns < 0 ? -ns : ns);
+  if (ns < 0) *out += '-';
+  char buffer[24];
+  auto r = std::to_chars(buffer, buffer + sizeof(buffer), magnitude / 1'000'000'000u);
+  out->append(buffer, r.ptr);
+  *out += '.';
+  r = std::to_chars(buffer, buffer + sizeof(buffer), magnitude % 1'000'000'000u);
+  out->append(static_cast<std::size_t>(9 - (r.ptr - buffer)), '0');
+  out->append(buffer, r.ptr);
+}
+
 void AppendInteger(std::string* out, std::int64_t v) {
   char buffer[24];
   const auto r = std::to_chars(buffer, buffer + sizeof(buffer), v);
@@ -86,7 +104,7 @@ void AppendSampleTime(std::string* out, const Sample& s) {
   AppendInteger(out, s.t_host_ns);
   if (s.t_device_s) {
     *out += ",\"t_device\":";
-    AppendNumber(out, *s.t_device_s, std::chars_format::fixed, 9);
+    AppendFixed9(out, *s.t_device_s);
   }
   if (s.counter) {
     *out += ",\"counter\":";

@@ -35,7 +35,7 @@ bool ResolveUser(const std::string& name_or_uid, unsigned* uid, std::string* err
 
 SocketServer::SocketServer(boost::asio::io_context& io, SocketOptions options,
                            RequestHandler on_request)
-    : io_(io), options_(std::move(options)), on_request_(std::move(on_request)), batch_timer_(io) {}
+    : io_(io), options_(std::move(options)), on_request_(std::move(on_request)) {}
 
 SocketServer::~SocketServer() { Stop(); }
 
@@ -125,28 +125,6 @@ void SocketServer::Accept() {
 
 void SocketServer::Remove(std::uint64_t id) { sessions_.erase(id); }
 
-void SocketServer::ScheduleFlush(const std::shared_ptr<ClientSession>& session) {
-  batch_.push_back(session);
-  if (batch_armed_) return;
-  batch_armed_ = true;
-  batch_timer_.expires_after(options_.stream_batch);
-  batch_timer_.async_wait([this](const boost::system::error_code& ec) {
-    batch_armed_ = false;
-    if (ec || stopped_) return;
-    FlushBatch();
-  });
-}
-
-void SocketServer::FlushBatch() {
-  auto batch = std::move(batch_);
-  batch_.clear();
-  for (auto& s : batch) {
-    if (!s->in_batch_) continue;  // written meanwhile (a reply)
-    s->in_batch_ = false;
-    if (!s->writing_ && !s->flush_posted_) s->Write();
-  }
-}
-
 void SocketServer::SetControlUids(std::set<unsigned> uids) {
   options_.control_uids = std::move(uids);
 }
@@ -178,8 +156,7 @@ void ClientSession::Close() {
   boost::system::error_code ignored;
   socket_.shutdown(local::stream_protocol::socket::shutdown_both, ignored);
   socket_.close(ignored);
-  queue_.clear();
-  queued_bytes_ = 0;
+  pending_.clear();
   server_->Remove(id_);
 }
 
@@ -234,45 +211,35 @@ void ClientSession::OnBytes(std::size_t n) {
 }
 
 void ClientSession::Reply(const nlohmann::json& message) {
-  Enqueue(std::make_shared<const std::string>(message.dump() + "\n"), false);
+  std::string line = message.dump();
+  line += '\n';
+  Enqueue(line, false);
 }
 
-void ClientSession::Stream(const std::shared_ptr<const std::string>& line) { Enqueue(line, true); }
+void ClientSession::Stream(const std::shared_ptr<const std::string>& line) { Enqueue(*line, true); }
 
-void ClientSession::Enqueue(std::shared_ptr<const std::string> line, bool droppable) {
+void ClientSession::Enqueue(const std::string& line, bool droppable) {
   if (!open_) return;
-  if (droppable && queued_bytes_ + line->size() > server_->options_.stream_queue_bytes) {
+  if (droppable && pending_.size() + line.size() > server_->options_.stream_queue_bytes) {
     ++dropped_;
     ++dropped_total_;
     return;
   }
-  if (queued_bytes_ + line->size() > server_->options_.max_queue_bytes) {
+  if (pending_.size() + line.size() > server_->options_.max_queue_bytes) {
     Close();  // it reads nothing and keeps asking: the only bound left is to let it go
     return;
   }
   if (dropped_ > 0 && droppable) {
-    auto note = std::make_shared<const std::string>(
-        nlohmann::json{{"class", "DROPPED"}, {"count", dropped_}, {"total", dropped_total_}}
-            .dump() +
-        "\n");
+    pending_ +=
+        nlohmann::json{{"class", "DROPPED"}, {"count", dropped_}, {"total", dropped_total_}}.dump();
+    pending_ += '\n';
     dropped_ = 0;
-    queued_bytes_ += note->size();
-    queue_.push_back(std::move(note));
   }
-  queued_bytes_ += line->size();
-  queue_.push_back(std::move(line));
+  pending_ += line;
   if (writing_ || flush_posted_) return;  // the running write takes this line too
-  if (droppable && server_->options_.stream_batch.count() > 0) {
-    // A stream message waits for the server's batch timer, with those of the next samples.
-    if (!in_batch_) {
-      in_batch_ = true;
-      server_->ScheduleFlush(shared_from_this());
-    }
-    return;
-  }
-  // Written after the loop's current handlers (with any stream messages waiting): what this turn
-  // produced goes out in one send.
-  in_batch_ = false;
+  // Written after the loop's current handlers: what this turn produced (the samples of every
+  // device that was ready) goes out in one send. (A timer that waited 0.5 ms to gather more
+  // samples a send cost more CPU than the sends it saved: docs/PERFORMANCE.md.)
   flush_posted_ = true;
   boost::asio::post(socket_.get_executor(), [self = shared_from_this()] {
     self->flush_posted_ = false;
@@ -281,14 +248,10 @@ void ClientSession::Enqueue(std::shared_ptr<const std::string> line, bool droppa
 }
 
 void ClientSession::Write() {
-  while (open_ && !queue_.empty()) {
-    out_.clear();
-    // Several queued lines in one send (up to 64 KiB).
-    while (!queue_.empty() && (out_.empty() || out_.size() + queue_.front()->size() <= 65536)) {
-      out_ += *queue_.front();
-      queued_bytes_ -= queue_.front()->size();
-      queue_.pop_front();
-    }
+  while (open_ && !pending_.empty()) {
+    // Everything waiting goes out in one send; the two buffers keep their capacity.
+    out_.swap(pending_);
+    pending_.clear();
     // A non-blocking send first: a reading client takes the bytes now, without a trip through the
     // reactor. What the socket does not take is written asynchronously.
     const ssize_t n =
@@ -314,6 +277,9 @@ void ClientSession::Write() {
                              });
     return;
   }
+  // A client that was far behind leaves large buffers; give the memory back once it caught up.
+  if (out_.capacity() > (256u << 10)) std::string().swap(out_);
+  if (pending_.capacity() > (256u << 10)) std::string().swap(pending_);
 }
 
 }  // namespace turncal::daemon

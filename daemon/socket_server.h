@@ -11,9 +11,6 @@
 
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/local/stream_protocol.hpp>
-#include <boost/asio/steady_timer.hpp>
-#include <chrono>
-#include <deque>
 #include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -30,10 +27,6 @@ struct SocketOptions {
   std::set<unsigned> control_uids;  // besides root and our own uid
   std::size_t stream_queue_bytes = 1 << 20;
   std::size_t max_queue_bytes = 8 << 20;
-  // Stream messages (samples, events) wait up to this long so that those of several samples go
-  // out in one send (8 devices at 1000 Hz: a few samples a send instead of one); replies go out
-  // at once. 0: every loop turn's messages in one send.
-  std::chrono::microseconds stream_batch{500};
   std::optional<int> activated_fd;  // a listening socket from systemd (socket activation)
 };
 
@@ -76,9 +69,6 @@ class SocketServer {
   friend class ClientSession;
   void Accept();
   void Remove(std::uint64_t id);
-  // A session has stream messages waiting for the batch timer.
-  void ScheduleFlush(const std::shared_ptr<ClientSession>& session);
-  void FlushBatch();
 
   boost::asio::io_context& io_;
   SocketOptions options_;
@@ -89,9 +79,6 @@ class SocketServer {
   std::uint64_t accepted_ = 0;
   bool created_file_ = false;
   bool stopped_ = false;
-  boost::asio::steady_timer batch_timer_;
-  bool batch_armed_ = false;
-  std::vector<std::shared_ptr<ClientSession>> batch_;  // sessions waiting for the timer
 };
 
 class ClientSession : public std::enable_shared_from_this<ClientSession> {
@@ -112,7 +99,7 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
   bool control() const { return known_ && server_->IsControl(uid_); }
   bool open() const { return open_; }
   std::uint64_t dropped_total() const { return dropped_total_; }
-  std::size_t queued_bytes() const { return queued_bytes_; }
+  std::size_t queued_bytes() const { return pending_.size(); }
 
   std::optional<WatchSpec> watch;
   // The last sample time sent per device (rate limit), host ns.
@@ -121,10 +108,9 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
   std::unordered_map<int, std::set<std::string>> pending_poses;
 
  private:
-  friend class SocketServer;  // its batch timer flushes sessions
   void Read();
   void OnBytes(std::size_t n);
-  void Enqueue(std::shared_ptr<const std::string> line, bool droppable);
+  void Enqueue(const std::string& line, bool droppable);
   void Write();
 
   SocketServer* server_;
@@ -136,12 +122,10 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
   bool open_ = true;
   std::array<char, 8192> buffer_{};
   std::string line_;
-  bool discarding_ = false;  // inside an oversized request, up to its newline
-  std::deque<std::shared_ptr<const std::string>> queue_;
-  std::size_t queued_bytes_ = 0;
+  bool discarding_ = false;    // inside an oversized request, up to its newline
+  std::string pending_;        // queued bytes, whole lines, not yet handed to the socket
   bool writing_ = false;       // an asynchronous write is in flight
   bool flush_posted_ = false;  // a Write() is posted to the loop
-  bool in_batch_ = false;      // waits for the server's batch timer
   std::string out_;            // the bytes being written
   std::uint64_t dropped_ = 0, dropped_total_ = 0;
 };

@@ -27,6 +27,27 @@ struct Station::ModelState {
   int applied_version = 0;
   Eigen::VectorXd applied_theta;
   Eigen::MatrixXd applied_covariance;  // empty when unknown
+  // The correction as y = A raw + c, when the model's correction is affine in the raw sample (all
+  // four models are: checked numerically when the calibration is applied). Live samples are
+  // corrected with it, without the model's per-sample matrix solves.
+  bool applied_affine = false;
+  Eigen::Matrix3d applied_A = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d applied_c = Eigen::Vector3d::Zero();
+
+  void Apply(int version, const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance) {
+    applied_version = version;
+    applied_theta = theta;
+    applied_covariance = covariance;
+    applied_c = model->Correct(theta, Eigen::Vector3d::Zero());
+    for (int i = 0; i < 3; ++i) {
+      applied_A.col(i) = model->Correct(theta, Eigen::Vector3d::Unit(i)) - applied_c;
+    }
+    // Affine when a point away from the probes maps the same both ways.
+    const Eigen::Vector3d probe(0.83, -1.37, 2.11);
+    const Eigen::Vector3d exact = model->Correct(theta, probe);
+    const Eigen::Vector3d affine = applied_A * probe + applied_c;
+    applied_affine = exact.allFinite() && (exact - affine).norm() <= 1e-12 * (1.0 + exact.norm());
+  }
   // The calibrator is solved on the service's worker thread; this guards it.
   std::unique_ptr<std::mutex> calibrator_mutex = std::make_unique<std::mutex>();
 };
@@ -164,9 +185,7 @@ void Station::LoadApplied() {
                  {"message", "the stored calibration is unreadable and is not applied"}});
         continue;
       }
-      m.applied_version = stored["version"].get<int>();
-      m.applied_theta = theta;
-      m.applied_covariance.resize(0, 0);
+      m.Apply(stored["version"].get<int>(), theta, Eigen::MatrixXd());
       const auto& cov = stored.value("covariance", nlohmann::json());
       if (cov.is_array() && cov.size() == params.size()) {
         Eigen::MatrixXd c(theta.size(), theta.size());
@@ -243,7 +262,8 @@ bool Station::Correct(int device, const Sample& sample, Corrected* out, bool wit
     if (!raw) continue;
     std::optional<Eigen::Vector3d>& target = accel ? out->acc_mps2 : out->mag;
     if (target) continue;  // the first model of a sensor in the configured order wins
-    target = m.model->Correct(m.applied_theta, *raw);
+    target = m.applied_affine ? Eigen::Vector3d(m.applied_A * *raw + m.applied_c)
+                              : m.model->Correct(m.applied_theta, *raw);
     if (with_sigma) {
       (accel ? out->acc_sigma : out->mag_sigma) =
           CorrectionSigma(*m.model, m.applied_theta, m.applied_covariance, *raw);
@@ -508,9 +528,7 @@ void Station::Apply(std::size_t device, std::size_t model, double t_s, const Upd
     Activate(d, m, t_s, nullptr);
   } else if (m.gate.pass) {
     m.active = m.estimate;
-    m.applied_version = m.active_version;
-    m.applied_theta = m.estimate.theta;
-    m.applied_covariance = m.estimate.covariance;
+    m.Apply(m.active_version, m.estimate.theta, m.estimate.covariance);
   }
 }
 
@@ -540,11 +558,7 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
         if (!write_error->empty()) {
           Publish({{"class", "ERROR"}, {"device", d.name}, {"message", *write_error}});
         }
-        if (version > m.applied_version) {
-          m.applied_version = version;
-          m.applied_theta = theta;
-          m.applied_covariance = covariance;
-        }
+        if (version > m.applied_version) m.Apply(version, theta, covariance);
         Publish(event);
       });
 }
