@@ -372,7 +372,10 @@ void Station::OnFinish(std::int64_t now_ns) {
 }
 
 void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
-  if (sink_ || e.kind == SequencerEventKind::kPoseStarted ||
+  // A captured pose is answered once its record is in the journal (below): a controller that
+  // moves the table on POSE_CAPTURED must not lose the pose to a crash right after.
+  const bool journaled_answer = e.kind == SequencerEventKind::kCaptured && e.record && journal_;
+  if ((sink_ && !journaled_answer) || e.kind == SequencerEventKind::kPoseStarted ||
       e.kind == SequencerEventKind::kCollecting || e.kind == SequencerEventKind::kProgress) {
     nlohmann::json j = protocol::ToJson(e);
     j["device"] = devices_[device]->name;
@@ -399,12 +402,15 @@ void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
     if (journal_) {
       auto error = std::make_shared<std::string>();
       const std::string name = devices_[device]->name;
+      nlohmann::json answer = protocol::ToJson(e);
+      answer["device"] = name;
       Defer([journal = journal_.get(), name, record = *e.record,
              error] { journal->Append(name, record, error.get()); },
-            [this, name, error] {
+            [this, name, error, answer = std::move(answer)] {
               if (!error->empty()) {
                 Publish({{"class", "ERROR"}, {"device", name}, {"message", *error}});
               }
+              Publish(answer);
             });
     }
     Update(device, *e.record, e.t_s);

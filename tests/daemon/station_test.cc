@@ -187,6 +187,60 @@ TEST(StationPersistence, ResumesAfterACrashWithEveryCapturedPose) {
 }
 
 // A torn last journal line (kill -9 during a write) is skipped and reported, not fatal.
+// Issue "The daemon" (nothing lost): a pose is answered POSE_CAPTURED only once its record is in
+// the journal on disk. The station's work goes to a queue here (the daemon's worker thread): while
+// the journal appends wait, no pose is answered; each answer comes after its own append.
+TEST(StationPersistence, PoseIsAnsweredOnlyOnceItsRecordIsJournaled) {
+  tools::SimCaptureOptions o;
+  o.protocol = drivers::Protocol::kXbus;
+  o.poses = CubePoses26();
+  o.session.seed = 5;
+  tools::SimCapture c;
+  std::string error;
+  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  const std::string dir = ::testing::TempDir() + "station_answer_" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  daemon::StationOptions so;
+  so.state_dir = dir;
+  auto journal_lines = [&] {
+    std::ifstream in(dir + "/journal.jsonl");
+    int n = 0;
+    for (std::string line; std::getline(in, line);) n += !line.empty();
+    return n;
+  };
+  int captured = 0, started = 0;
+  bool answered_before_journal = false;
+  daemon::Station station({"imu"}, so, [&](const nlohmann::json& e) {
+    if (e["class"] == "POSE_STARTED") ++started;
+    if (e["class"] == "POSE_CAPTURED") {
+      ++captured;
+      answered_before_journal = answered_before_journal || journal_lines() < captured;
+    }
+  });
+  std::vector<std::pair<std::function<void()>, std::function<void()>>> queue;
+  station.SetExecutor([&](std::function<void()> work, std::function<void()> done) {
+    queue.emplace_back(std::move(work), std::move(done));
+  });
+  const std::string path = WriteCapture(c, "answer");
+  drivers::CaptureReader reader;
+  ASSERT_TRUE(reader.Open(path, &error)) << error;
+  daemon::ReplayStats stats;
+  ASSERT_TRUE(daemon::ReplayInto(&reader, &station, true, {}, &stats, &error)) << error;
+  EXPECT_EQ(started, 26);
+  EXPECT_EQ(captured, 0) << "answered while the journal appends still waited";
+  EXPECT_EQ(journal_lines(), 0);
+  for (std::size_t i = 0; i < queue.size(); ++i) {  // the worker, in order
+    auto [work, done] = std::move(queue[i]);  // running them may queue more
+    work();
+    done();
+  }
+  EXPECT_EQ(captured, 26);
+  EXPECT_EQ(journal_lines(), 26);
+  EXPECT_FALSE(answered_before_journal);
+  std::remove(path.c_str());
+  std::filesystem::remove_all(dir);
+}
+
 TEST(StationPersistence, TornJournalLineIsSkipped) {
   const std::string dir = ::testing::TempDir() + "station_torn_" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
