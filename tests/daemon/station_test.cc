@@ -230,7 +230,7 @@ TEST(StationPersistence, PoseIsAnsweredOnlyOnceItsRecordIsJournaled) {
   EXPECT_EQ(captured, 0) << "answered while the journal appends still waited";
   EXPECT_EQ(journal_lines(), 0);
   for (std::size_t i = 0; i < queue.size(); ++i) {  // the worker, in order
-    auto [work, done] = std::move(queue[i]);  // running them may queue more
+    auto [work, done] = std::move(queue[i]);        // running them may queue more
     work();
     done();
   }
