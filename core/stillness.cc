@@ -401,7 +401,7 @@ void StillnessDetector::UpdateMedians() {
 
 bool StillnessDetector::IsOutlier(const StillSample& s) {
   if (size_ < static_cast<std::size_t>(w_)) return false;
-  if (!medians_valid_ || pushes_since_median_ >= std::max(1, w_ / 8)) UpdateMedians();
+  if (!medians_valid_ || pushes_since_median_ >= std::max(1, w_ / 4)) UpdateMedians();
   for (int t = 0; t < 3; ++t) {
     if (!use_[t] || !s.has(t)) continue;
     for (int a = 0; a < 3; ++a) {

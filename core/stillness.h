@@ -146,7 +146,7 @@ class StillnessDetector {
   int window() const { return w_; }
   // True when `sample` lies more than outlier_k robust sigmas from the window's median on any
   // axis of a profiled triad (false while the window fills). Median and MAD are taken over at
-  // most kMedianSamples samples evenly spread over the window, every window/8 pushes.
+  // most kMedianSamples samples evenly spread over the window, every window/4 pushes.
   static constexpr std::size_t kMedianSamples = 128;
   bool IsOutlier(const StillSample& sample);
   // Adds the sample and evaluates the window ending at it; true when the window is full and

@@ -8,7 +8,6 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
-#include <ctime>
 
 #include "daemon/notify.h"
 #include "daemon/persistence.h"
@@ -133,12 +132,6 @@ void AppendRaw(std::string* out, const Sample& s) {
     }
     *out += ']';
   }
-}
-
-std::int64_t ThreadCpuNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
 // Mutating commands need a peer the configuration allows.
@@ -431,19 +424,23 @@ void Service::Reload() {
 
 void Service::OnSample(std::size_t device, const Sample& sample) {
   if (!station_) return;
-  // CPU time of this thread (not wall time, which a loaded machine stretches by preemption): what
-  // the loop itself spends on a sample, and on a captured pose.
-  const std::int64_t t0 = ThreadCpuNs();
+  // What the loop spends on a sample, and on a captured pose: wall time of the steady clock (a
+  // vDSO read; a loaded machine stretches it by preemption). The thread's CPU clock would need
+  // two system calls per sample, 0.5 % of a core at 8 x 1000 Hz (docs/PERFORMANCE.md).
+  const auto t0 = std::chrono::steady_clock::now();
   station_->OnSample(static_cast<int>(device), sample);
-  const double ms = static_cast<double>(ThreadCpuNs() - t0) * 1e-6;
+  const double ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   if (ms > 1.0) {  // a pose was captured and the calibrations were solved
     solve_ms_last_ = ms;
     solve_ms_max_ = std::max(solve_ms_max_, ms);
   }
   if (server_->sessions().empty()) return;
   // The lines are built once, when somebody wants them, and shared by every subscriber.
-  // Four shapes of corrected line: with or without raw, with or without sigma.
-  std::shared_ptr<const std::string> corrected_lines[4], raw;
+  // Four shapes of corrected line: with or without raw, with or without sigma. The lines are
+  // built in buffers kept between samples (no allocation per sample; a send copies the line into
+  // the client's pending buffer).
+  bool built[4] = {false, false, false, false}, raw_built = false;
   Station::Corrected c;
   bool have_correction = false, tried = false;
   // The watching sessions, in a vector kept between samples (a send may close a session, which
@@ -468,10 +465,12 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
       if (!have_correction) {
         if (!w.raw) continue;  // nothing to correct with yet; raw samples still go out
       } else {
-        std::shared_ptr<const std::string>& line =
-            corrected_lines[(w.raw ? 1 : 0) + (w.uncertainty ? 2 : 0)];
-        if (!line) {
-          std::string text = "{\"class\":\"CORRECTED\"";
+        const int shape = (w.raw ? 1 : 0) + (w.uncertainty ? 2 : 0);
+        std::string& text = corrected_text_[shape];
+        if (!built[shape]) {
+          built[shape] = true;
+          text.clear();
+          text += "{\"class\":\"CORRECTED\"";
           AppendSampleTime(&text, sample);
           if (c.acc_mps2) AppendTriad(&text, "acc", *c.acc_mps2);
           if (c.acc_frame) {
@@ -502,20 +501,20 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
             text += "}";
           }
           text += "}\n";
-          line = std::make_shared<const std::string>(std::move(text));
         }
-        s->Stream(line);
+        s->Stream(text);
         continue;
       }
     }
-    if (!raw) {
-      std::string text = "{\"class\":\"SAMPLE\"";
-      AppendSampleTime(&text, sample);
-      AppendRaw(&text, sample);
-      text += "}\n";
-      raw = std::make_shared<const std::string>(std::move(text));
+    if (!raw_built) {
+      raw_built = true;
+      raw_text_.clear();
+      raw_text_ += "{\"class\":\"SAMPLE\"";
+      AppendSampleTime(&raw_text_, sample);
+      AppendRaw(&raw_text_, sample);
+      raw_text_ += "}\n";
     }
-    s->Stream(raw);
+    s->Stream(raw_text_);
   }
   sample_watchers_.clear();
 }
@@ -534,7 +533,7 @@ void Service::OnEvent(const nlohmann::json& event) {
                  event.value("poses", 0), event["gate"].value("pass", false) ? "pass" : "fail");
   }
   if (!server_) return;
-  std::shared_ptr<const std::string> line;
+  std::string line;
   const bool pose_event = kind.rfind("POSE_", 0) == 0;
   const std::string device = event.value("device", "");
   const int index = event.value("index", -1);
@@ -555,7 +554,7 @@ void Service::OnEvent(const nlohmann::json& event) {
       }
     }
     if (!send) continue;
-    if (!line) line = std::make_shared<const std::string>(event.dump() + "\n");
+    if (line.empty()) line = event.dump() + "\n";
     if (answers) {
       s->Reply(event);  // the answer to a pose is never dropped
     } else {
@@ -576,7 +575,7 @@ nlohmann::json Service::StatusJson() const {
           {"uptime_s", static_cast<double>(drivers::MonotonicNowNs() - started_ns_) / 1e9},
           {"state_dir", options_.state_dir},
           {"clients", server_ ? server_->sessions().size() : 0},
-          // The loop's longest sample turn (CPU ms; a captured pose's bookkeeping included), and
+          // The loop's longest sample turn (wall ms; a captured pose's bookkeeping included), and
           // the solve worker's longest pose update (wall ms: solve, observability, gate).
           {"loop_ms", {{"last", solve_ms_last_}, {"max", solve_ms_max_}}},
           {"solve_ms",

@@ -79,6 +79,7 @@ class Service {
   std::unique_ptr<Station> station_;
   std::vector<std::unique_ptr<LiveDevice>> devices_;
   std::vector<std::shared_ptr<ClientSession>> sample_watchers_;  // OnSample's, reused
+  std::string corrected_text_[4], raw_text_;                     // OnSample's line buffers
   std::unique_ptr<SocketServer> server_;
   std::unique_ptr<drivers::CaptureWriter> recorder_;
   std::int64_t started_ns_ = 0;

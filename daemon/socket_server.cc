@@ -216,7 +216,7 @@ void ClientSession::Reply(const nlohmann::json& message) {
   Enqueue(line, false);
 }
 
-void ClientSession::Stream(const std::shared_ptr<const std::string>& line) { Enqueue(*line, true); }
+void ClientSession::Stream(const std::string& line) { Enqueue(line, true); }
 
 void ClientSession::Enqueue(const std::string& line, bool droppable) {
   if (!open_) return;

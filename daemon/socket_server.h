@@ -91,7 +91,7 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
   // A reply (never dropped; a client that lets replies pile up past the limit is disconnected).
   void Reply(const nlohmann::json& message);
   // A stream message: dropped and counted when the client is behind.
-  void Stream(const std::shared_ptr<const std::string>& line);
+  void Stream(const std::string& line);
 
   std::uint64_t id() const { return id_; }
   unsigned uid() const { return uid_; }

@@ -180,7 +180,7 @@ def scenario_clean(d):
               f"0 bad checksums, {s['counters']['samples']} samples")
     solve, loop = status["solve_ms"], status["loop_ms"]
     check(loop["max"] < 100, f"pose updates run off the event loop: its longest sample turn took "
-          f"{loop['max']:.1f} ms of CPU; the worker's longest update (solve, observability, gate) "
+          f"{loop['max']:.1f} ms (wall); the worker's longest update (solve, observability, gate) "
           f"{solve['max']:.1f} ms")
     # Samples lost in the daemon's streams (device-clock or counter gaps after streaming began):
     # only those the emulator withheld while the daemon had it idle may be missing.
