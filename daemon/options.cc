@@ -44,7 +44,9 @@ void AddCommandLine(CLI::App* app, Options* options) {
       ->type_name("SPEC");
   app->add_option("--socket", options->socket_path, "Unix socket for clients")
       ->capture_default_str();
-  app->add_option("--state-dir", options->state_dir, "where calibrations and journals live")
+  app->add_option("--state-dir", options->state_dir,
+                  "where calibrations and journals live (with --once: only when given here, and "
+                  "a journal already there is resumed)")
       ->capture_default_str();
   app->add_option("--replay", options->replay_path, "run the pipeline on a capture (.tcap or .bin)")
       ->check(CLI::ExistingFile);

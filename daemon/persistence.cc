@@ -11,6 +11,7 @@
 #include <fstream>
 
 #include "drivers/atomic_file.h"
+#include "protocol/report_html.h"
 #include "protocol/sequencer_json.h"
 
 namespace turncal::daemon {
@@ -138,6 +139,36 @@ bool WriteActiveCalibration(const std::string& state_dir, const std::string& dev
     }
   }
   return drivers::WriteFileAtomically(path.string(), calibration.dump(2) + "\n", error);
+}
+
+bool WriteDeviceReport(const std::string& state_dir, const std::string& device,
+                       const std::vector<std::string>& models, const std::string& generated_utc,
+                       std::string* error) {
+  std::vector<nlohmann::json> calibrations;
+  for (const auto& model : models) {
+    nlohmann::json c;
+    if (ReadActiveCalibration(state_dir, device, model, &c)) calibrations.push_back(std::move(c));
+  }
+  if (calibrations.empty()) {
+    *error = fmt::format("report of {}: no active calibration in {}", device, state_dir);
+    return false;
+  }
+  std::string html, why;
+  protocol::ReportOptions options;
+  options.source = state_dir;
+  options.generated_utc = generated_utc;
+  if (!protocol::RenderReportHtml(calibrations, options, &html, &why)) {
+    *error = fmt::format("report of {}: {}", device, why);
+    return false;
+  }
+  const fs::path dir = fs::path(state_dir) / "reports";
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) {
+    *error = fmt::format("report of {}: cannot create {}: {}", device, dir.string(), ec.message());
+    return false;
+  }
+  return drivers::WriteFileAtomically((dir / (device + ".html")).string(), html, error);
 }
 
 bool ArchiveSession(const std::string& state_dir, std::string* archived, std::string* error) {

@@ -59,4 +59,11 @@ bool WriteActiveCalibration(const std::string& state_dir, const std::string& dev
                             const std::string& model, const nlohmann::json& calibration,
                             std::string* error);
 
+// reports/DEVICE.html: the calibration report (protocol/report_html.h) of the device's active
+// calibrations of `models`, written atomically. `generated_utc` is shown in its header. False
+// with a message (no calibration of those models, a render or write failure).
+bool WriteDeviceReport(const std::string& state_dir, const std::string& device,
+                       const std::vector<std::string>& models, const std::string& generated_utc,
+                       std::string* error);
+
 }  // namespace turncal::daemon

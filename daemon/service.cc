@@ -178,6 +178,7 @@ bool Service::StartStation(std::string* error) {
 }
 
 void Service::DropStation(const std::string& why) {
+  if (station_) station_->WriteDueReports();  // queued on the worker, written by the drain
   if (worker_) worker_->Drain();
   station_.reset();
   // Poses still being collected are never answered by the old station: say so.
@@ -424,17 +425,7 @@ void Service::Reload() {
 
 void Service::OnSample(std::size_t device, const Sample& sample) {
   if (!station_) return;
-  // What the loop spends on a sample, and on a captured pose: wall time of the steady clock (a
-  // vDSO read; a loaded machine stretches it by preemption). The thread's CPU clock would need
-  // two system calls per sample, 0.5 % of a core at 8 x 1000 Hz (docs/PERFORMANCE.md).
-  const auto t0 = std::chrono::steady_clock::now();
   station_->OnSample(static_cast<int>(device), sample);
-  const double ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  if (ms > 1.0) {  // a pose was captured and the calibrations were solved
-    solve_ms_last_ = ms;
-    solve_ms_max_ = std::max(solve_ms_max_, ms);
-  }
   if (server_->sessions().empty()) return;
   // The lines are built once, when somebody wants them, and shared by every subscriber.
   // Four shapes of corrected line: with or without raw, with or without sigma. The lines are
@@ -575,9 +566,11 @@ nlohmann::json Service::StatusJson() const {
           {"uptime_s", static_cast<double>(drivers::MonotonicNowNs() - started_ns_) / 1e9},
           {"state_dir", options_.state_dir},
           {"clients", server_ ? server_->sessions().size() : 0},
-          // The loop's longest sample turn (wall ms; a captured pose's bookkeeping included), and
-          // the solve worker's longest pose update (wall ms: solve, observability, gate).
-          {"loop_ms", {{"last", solve_ms_last_}, {"max", solve_ms_max_}}},
+          // The loop's CPU ms per captured pose (its answer, journal append and update queued),
+          // and the solve worker's longest pose update (wall ms: solve, observability, gate).
+          {"loop_ms",
+           {{"last", station_ ? station_->capture_cpu_ms_last() : 0.0},
+            {"max", station_ ? station_->capture_cpu_ms_max() : 0.0}}},
           {"solve_ms",
            {{"last", worker_ ? worker_->last_ms() : 0.0},
             {"max", worker_ ? worker_->longest_ms() : 0.0},

@@ -91,7 +91,6 @@ class Service {
   std::int64_t last_rate_ns_ = 0, last_watchdog_ns_ = 0, last_status_ns_ = 0;
   std::int64_t watchdog_interval_ns_ = 0;
   int next_pose_index_ = 0;
-  double solve_ms_max_ = 0.0, solve_ms_last_ = 0.0;
   std::string status_line_;
   bool stopping_ = false;
 };

@@ -4,10 +4,12 @@
 
 #include <chrono>
 #include <ctime>
+#include <limits>
 #include <mutex>
 
 #include "core/pose_planner.h"
 #include "daemon/persistence.h"
+#include "protocol/calibration_json.h"
 #include "protocol/observability_json.h"
 #include "protocol/sequencer_json.h"
 #include "turncal/version.h"
@@ -57,11 +59,16 @@ struct Station::DeviceState {
   std::unique_ptr<Sequencer> sequencer;
   std::vector<ModelState> models;
   std::vector<TablePose> poses_used;
+  std::vector<PoseRecord> records_used;  // the same poses' records (a calibration's evidence)
   int poses = 0;
   bool noise_stored = false;  // the sequencer uses the profile kept in the state directory
   GateOptions gate;           // the station's, or the device's own
   nlohmann::json identity;    // from the device dialogue (null in replays)
   nlohmann::json current;     // the pose being collected: its last sequencer event
+  // reports/NAME.html is rewritten after an activation, at most every kReportIntervalNs (the
+  // render re-solves the calibration pose by pose: tens of ms on the worker).
+  bool report_due = false;
+  std::int64_t report_written_ns = std::numeric_limits<std::int64_t>::min() / 2;
 };
 
 namespace {
@@ -351,6 +358,29 @@ void Station::OnSample(int device, const Sample& sample) {
 
 void Station::TickDevice(int device, std::int64_t now_ns) {
   devices_[static_cast<std::size_t>(device)]->sequencer->Tick(now_ns);
+  WriteReport(static_cast<std::size_t>(device), now_ns, false);
+}
+
+void Station::WriteDueReports() {
+  for (std::size_t i = 0; i < devices_.size(); ++i) WriteReport(i, 0, true);
+}
+
+void Station::WriteReport(std::size_t device, std::int64_t now_ns, bool now) {
+  DeviceState& d = *devices_[device];
+  if (!d.report_due || options_.state_dir.empty()) return;
+  if (!now && now_ns - d.report_written_ns < kReportIntervalNs) return;
+  d.report_due = false;
+  d.report_written_ns = now_ns;
+  std::vector<std::string> models;
+  for (const auto& m : d.models) {
+    if (m.active_version > 0) models.push_back(m.model->name());
+  }
+  auto error = std::make_shared<std::string>();
+  Defer([dir = options_.state_dir, name = d.name, models,
+         error] { WriteDeviceReport(dir, name, models, UtcNow(), error.get()); },
+        [this, name = d.name, error] {
+          if (!error->empty()) Publish({{"class", "ERROR"}, {"device", name}, {"message", *error}});
+        });
 }
 
 bool Station::AnnounceTo(int device, const Announcement& a, std::string* error) {
@@ -364,14 +394,36 @@ bool Station::OnAnnounce(const Announcement& a, std::string* error) {
 }
 
 void Station::OnTick(std::int64_t now_ns) {
-  for (auto& d : devices_) d->sequencer->Tick(now_ns);
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    devices_[i]->sequencer->Tick(now_ns);
+    WriteReport(i, now_ns, false);
+  }
 }
 
 void Station::OnFinish(std::int64_t now_ns) {
   for (auto& d : devices_) d->sequencer->Finish(now_ns);
+  WriteDueReports();
 }
 
+namespace {
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
+}  // namespace
+
 void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
+  const bool captured = e.kind == SequencerEventKind::kCaptured && e.record;
+  const double cpu0_ms = captured ? ThreadCpuMs() : 0.0;
+  HandleSequencerEvent(device, e);
+  if (captured) {
+    capture_cpu_ms_last_ = ThreadCpuMs() - cpu0_ms;
+    capture_cpu_ms_max_ = std::max(capture_cpu_ms_max_, capture_cpu_ms_last_);
+  }
+}
+
+void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) {
   // A captured pose is answered once its record is in the journal (below): a controller that
   // moves the table on POSE_CAPTURED must not lose the pose to a crash right after.
   const bool journaled_answer = e.kind == SequencerEventKind::kCaptured && e.record && journal_;
@@ -432,6 +484,22 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
   }
   nlohmann::json poses = nlohmann::json::array();
   for (const auto& p : d.poses_used) poses.push_back(ToJson(p));
+  // The records themselves, with the model's triad only, so that the calibration can be
+  // re-evaluated (the report's residuals and convergence) without the journal, which `reset`
+  // archives.
+  const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
+  nlohmann::json records = nlohmann::json::array();
+  for (PoseRecord r : d.records_used) {
+    r.gyr.reset();
+    (accel ? r.mag : r.acc).reset();
+    records.push_back(protocol::ToJson(r));
+  }
+  const nlohmann::json calibrator =
+      protocol::CalibratorJson(m.calibrator->options(), options_.sensor_class);
+  // Device identity and the device-side stored calibration come from the device dialogue of a
+  // live station (SetDeviceIdentity); a replay does not have them (null).
+  const nlohmann::json provenance = {
+      {"poses", poses}, {"records", records}, {"device_identity", d.identity}};
   return {{"schema", 1},
           {"class", "CALIBRATION"},
           {"device", d.name},
@@ -448,9 +516,10 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
           {"dof", e.dof},
           {"p_value", e.p_value},
           {"gate", ToJson(m.gate)},
-          // Device identity and the device-side stored calibration come from the device
-          // dialogue of a live station (SetDeviceIdentity); a replay does not have them (null).
-          {"provenance", {{"poses", poses}, {"device_identity", d.identity}}}};
+          {"tolerances", protocol::TolerancesJson(*m.model, d.gate)},
+          {"context", protocol::ToJson(options_.context)},
+          {"calibrator", calibrator},
+          {"provenance", provenance}};
 }
 
 // What one model's update computes (on the solve worker when there is one).
@@ -466,6 +535,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   DeviceState& d = *devices_[device];
   ++d.poses;
   d.poses_used.push_back(record.pose);
+  d.records_used.push_back(record);
   for (std::size_t mi = 0; mi < d.models.size(); ++mi) {
     ModelState& m = d.models[mi];
     const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
@@ -565,6 +635,7 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
           Publish({{"class", "ERROR"}, {"device", d.name}, {"message", *write_error}});
         }
         if (version > m.applied_version) m.Apply(version, theta, covariance);
+        if (write_error->empty()) d.report_due = true;  // TickDevice/OnTick write it
         Publish(event);
       });
 }

@@ -111,11 +111,25 @@ class Station : public ReplayTarget {
   using Executor = std::function<void(std::function<void()> work, std::function<void()> done)>;
   void SetExecutor(Executor executor);
 
+  // Writes reports/DEVICE.html now for every device with an activation not yet in its report
+  // (the service calls it before it stops; OnFinish does for replays). Reports are otherwise
+  // written from TickDevice/OnTick, at most every kReportIntervalNs per device.
+  void WriteDueReports();
+  static constexpr std::int64_t kReportIntervalNs = 10'000'000'000;
+
+  // CPU time of this thread (ms) that the loop spent handling a captured pose (its answer, the
+  // journal append queued, the update queued; with no executor also the solve): the last one and
+  // the longest. Taken with the thread's CPU clock only when a pose is captured.
+  double capture_cpu_ms_last() const { return capture_cpu_ms_last_; }
+  double capture_cpu_ms_max() const { return capture_cpu_ms_max_; }
+
   struct ModelState;
   struct DeviceState;
 
  private:
-  void OnSequencerEvent(std::size_t device, const SequencerEvent& event);
+  void OnSequencerEvent(std::size_t device, const SequencerEvent& event);  // timed captures
+  void HandleSequencerEvent(std::size_t device, const SequencerEvent& event);
+  void WriteReport(std::size_t device, std::int64_t now_ns, bool now);
   void Update(std::size_t device, const PoseRecord& record, double t_s);
   struct UpdateJob;
   // `work` on the executor (inline without one), then `done` unless the station is gone.
@@ -136,6 +150,7 @@ class Station : public ReplayTarget {
   bool resuming_ = false;
   Executor executor_;
   std::shared_ptr<bool> alive_ = std::make_shared<bool>(true);
+  double capture_cpu_ms_last_ = 0.0, capture_cpu_ms_max_ = 0.0;
 };
 
 }  // namespace turncal::daemon

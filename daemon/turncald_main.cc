@@ -18,6 +18,32 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("turncald ") + turncal::kVersion);
   turncal::daemon::Options options;
   turncal::daemon::AddCommandLine(&app, &options);
+  app.footer(R"(
+DESCRIPTION
+  Runs beside a turntable: reads the IMUs of the configuration (serial ports, ptys, TCP serial
+  servers), collects stationary samples at every pose a controller announces on the socket,
+  re-estimates the calibrations after each pose, and makes a calibration active (persisted in the
+  state directory, announced, applied to the corrected output) once its gate passes. Flags
+  override the configuration file; SIGHUP reloads it; SIGTERM stops cleanly. Under systemd it
+  is Type=notify with a watchdog (systemd/turncald.service).
+  --replay FILE --once runs the same pipeline on a capture at full speed and exits.
+
+EXAMPLES
+  $ turncald --config /etc/turncal/turncald.toml
+  $ turncald --device imu=mip:/dev/ttyUSB0@921600 --socket /tmp/t.sock --state-dir /tmp/state
+  $ turncald --device a=mip:/dev/ttyUSB0 --device b=xbus:/dev/ttyUSB1@115200 --record s.tcap
+  $ turncald --replay session.tcap --once --result-out result.json
+  $ turncald --replay session.tcap --once --state-dir /tmp/replayed && \
+    turncal report --state-dir /tmp/replayed -o report.html
+
+EXIT STATUS
+  0 stopped by SIGTERM/SIGINT, or --once finished; 1 the service could not start (socket,
+  state directory); 2 a command-line or configuration mistake (systemd does not restart it).
+
+SEE ALSO
+  systemd/turncald.toml.example (every configuration key), systemd/README.md (installing the
+  service), docs/protocol.md (the socket), docs/TROUBLESHOOTING.md, turncal --help
+)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -49,7 +75,11 @@ int main(int argc, char** argv) {
   if (options.once) {
     // The whole pipeline on a capture at full speed: events to stderr, the result to
     // --result-out (and a summary line per model).
-    const turncal::daemon::StationOptions& station = config.station;
+    turncal::daemon::StationOptions station = config.station;
+    // An explicit --state-dir makes the replay persist like the service (journal, noise, active
+    // calibrations: what `turncal report --state-dir` reads); the configuration's state_dir and
+    // the default are not used, so a replay never writes into the service's directory unasked.
+    if (app.count("--state-dir") > 0) station.state_dir = options.state_dir;
     turncal::daemon::ReplayOnceOutcome outcome;
     if (options.replay_protocol) {
       spdlog::error(

@@ -1,0 +1,300 @@
+#include "protocol/calibration_json.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+
+#include "core/synthetic.h"
+#include "protocol/sequencer_json.h"
+
+namespace turncal::protocol {
+namespace {
+
+constexpr double kDegToRad = M_PI / 180.0;
+
+nlohmann::json Vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+bool ReadVec(const nlohmann::json& j, Eigen::Vector3d* v) {
+  if (!j.is_array() || j.size() != 3) return false;
+  for (std::size_t i = 0; i < 3; ++i) {
+    if (!j[i].is_number()) return false;
+    (*v)[static_cast<Eigen::Index>(i)] = j[i].get<double>();
+  }
+  return v->allFinite();
+}
+
+// A number, or NaN for null (an undetermined sigma or covariance entry).
+bool ReadNumberOrNull(const nlohmann::json& j, double* v) {
+  if (j.is_null()) {
+    *v = std::nan("");
+    return true;
+  }
+  if (!j.is_number()) return false;
+  *v = j.get<double>();
+  return true;
+}
+
+bool ReadStrings(const nlohmann::json& j, std::vector<std::string>* out) {
+  if (!j.is_array()) return false;
+  out->clear();
+  for (const auto& s : j) {
+    if (!s.is_string()) return false;
+    out->push_back(s.get<std::string>());
+  }
+  return true;
+}
+
+bool ReadGate(const nlohmann::json& j, GateResult* gate) {
+  if (!j.is_object() || !j.contains("pass") || !j["pass"].is_boolean()) return false;
+  gate->pass = j["pass"].get<bool>();
+  const std::pair<const char*, std::vector<std::string>*> lists[] = {
+      {"reasons", &gate->reasons}, {"missing", &gate->missing}, {"notes", &gate->notes}};
+  for (const auto& [key, list] : lists) {
+    if (j.contains(key) && !ReadStrings(j[key], list)) return false;
+  }
+  return true;
+}
+
+bool ReadCalibrator(const nlohmann::json& j, CalibratorOptions* o, std::string* sensor_class) {
+  if (!j.is_object()) return false;
+  for (const char* key : {"noise_density", "pose_offset_sigma", "loss_scale"}) {
+    if (j.contains(key) && (!j[key].is_number() || !std::isfinite(j[key].get<double>()))) {
+      return false;
+    }
+  }
+  o->noise_density = j.value("noise_density", o->noise_density);
+  o->pose_offset_sigma = j.value("pose_offset_sigma", o->pose_offset_sigma);
+  o->loss_scale = j.value("loss_scale", o->loss_scale);
+  if (j.contains("loss")) {
+    if (!j["loss"].is_string()) return false;
+    const std::string loss = j["loss"].get<std::string>();
+    bool known = false;
+    for (RobustLoss l : {RobustLoss::kNone, RobustLoss::kHuber, RobustLoss::kCauchy}) {
+      if (loss == ToString(l)) {
+        o->loss = l;
+        known = true;
+      }
+    }
+    if (!known) return false;
+  }
+  if (j.contains("sensor_class")) {
+    if (!j["sensor_class"].is_string()) return false;
+    *sensor_class = j["sensor_class"].get<std::string>();
+  }
+  return o->IsValid(nullptr);
+}
+
+}  // namespace
+
+nlohmann::json ToJson(const ModelContext& c) {
+  nlohmann::json mounting = nlohmann::json::array();
+  for (int r = 0; r < 3; ++r) mounting.push_back(Vec(c.mounting.row(r).transpose()));
+  return {{"g_ned", Vec(c.reference.g_ned)},
+          {"B_ned", Vec(c.reference.B_ned)},
+          {"mounting", mounting},
+          {"accel_output_frame", turncal::ToString(c.accel_output_frame)}};
+}
+
+bool ParseModelContext(const nlohmann::json& j, ModelContext* out, std::string* error) {
+  auto fail = [&](const std::string& what) {
+    if (error) *error = "context: " + what;
+    return false;
+  };
+  if (!j.is_object()) return fail("not an object");
+  ModelContext c = *out;
+  if (j.contains("g_ned") && !ReadVec(j["g_ned"], &c.reference.g_ned)) {
+    return fail("g_ned must be 3 finite numbers");
+  }
+  if (j.contains("B_ned") && !ReadVec(j["B_ned"], &c.reference.B_ned)) {
+    return fail("B_ned must be 3 finite numbers");
+  }
+  if (j.contains("mounting")) {
+    const auto& m = j["mounting"];
+    if (!m.is_array() || m.size() != 3) return fail("mounting must be 3 rows of 3 numbers");
+    for (std::size_t r = 0; r < 3; ++r) {
+      Eigen::Vector3d row;
+      if (!ReadVec(m[r], &row)) return fail("mounting must be 3 rows of 3 numbers");
+      c.mounting.row(static_cast<Eigen::Index>(r)) = row.transpose();
+    }
+  }
+  if (j.contains("accel_output_frame")) {
+    const auto& f = j["accel_output_frame"];
+    if (f == turncal::ToString(OutputFrame::kCase)) {
+      c.accel_output_frame = OutputFrame::kCase;
+    } else if (f == turncal::ToString(OutputFrame::kTable)) {
+      c.accel_output_frame = OutputFrame::kTable;
+    } else {
+      return fail("accel_output_frame must be \"case\" or \"table\"");
+    }
+  }
+  std::string why;
+  if (!c.IsValid(&why)) return fail(why);
+  *out = c;
+  return true;
+}
+
+nlohmann::json CalibratorJson(const CalibratorOptions& o, const std::string& sensor_class) {
+  return {{"sensor_class", sensor_class},
+          {"noise_density", o.noise_density},
+          {"pose_offset_sigma", o.pose_offset_sigma},
+          {"loss", ToString(o.loss)},
+          {"loss_scale", o.loss_scale}};
+}
+
+nlohmann::json TolerancesJson(const MeasurementModel& model, const GateOptions& gate) {
+  nlohmann::json out = nlohmann::json::object();
+  for (int i : GatedParameters(model)) {
+    const ParameterInfo& p = model.parameters()[static_cast<std::size_t>(i)];
+    out[p.name] = ToleranceFor(p, gate);
+  }
+  return out;
+}
+
+bool ParseCalibrationDocument(const nlohmann::json& j, CalibrationDocument* out,
+                              std::string* error) {
+  auto fail = [&](const std::string& what) {
+    if (error) *error = what;
+    return false;
+  };
+  if (!j.is_object()) return fail("a calibration must be a JSON object");
+  for (const char* key : {"device", "model"}) {
+    if (!j.contains(key) || !j[key].is_string() || j[key].get<std::string>().empty()) {
+      return fail(fmt::format("'{}' is missing or not a non-empty string", key));
+    }
+  }
+  CalibrationDocument d;
+  d.device = j["device"].get<std::string>();
+  d.model = j["model"].get<std::string>();
+  const std::string where = d.device + " " + d.model + ": ";
+  auto bad = [&](const std::string& what) { return fail(where + what); };
+  if (j.contains("schema") && j["schema"] != 1) {
+    return bad("schema " + j["schema"].dump() + " is not supported (1 is)");
+  }
+  if (j.contains("context")) {
+    std::string why;
+    if (!ParseModelContext(j["context"], &d.context, &why)) return bad(why);
+    d.context_recorded = true;
+  }
+  std::string why;
+  d.measurement_model = MakeModel(d.model, d.context, &why);
+  if (!d.measurement_model) return bad(why);
+  const MeasurementModel& model = *d.measurement_model;
+  const auto& params = model.parameters();
+  const auto n = static_cast<Eigen::Index>(params.size());
+
+  if (j.contains("parameter_order")) {
+    std::vector<std::string> order;
+    if (!ReadStrings(j["parameter_order"], &order)) return bad("parameter_order is malformed");
+    for (std::size_t i = 0; i < order.size() || i < params.size(); ++i) {
+      if (i >= order.size() || i >= params.size() || order[i] != params[i].name) {
+        return bad("parameter_order differs from the model's");
+      }
+    }
+  }
+  if (!j.contains("params") || !j["params"].is_object()) return bad("'params' is missing");
+  d.theta.resize(n);
+  d.sigma.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const std::string& name = params[static_cast<std::size_t>(i)].name;
+    const auto it = j["params"].find(name);
+    if (it == j["params"].end() || !it->is_object() || !it->contains("value") ||
+        !(*it)["value"].is_number() || !std::isfinite((*it)["value"].get<double>())) {
+      return bad("parameter '" + name + "' has no finite value");
+    }
+    d.theta[i] = (*it)["value"].get<double>();
+    if (!ReadNumberOrNull(it->value("sigma", nlohmann::json()), &d.sigma[i])) {
+      return bad("parameter '" + name + "': sigma is not a number");
+    }
+  }
+  if (j.contains("covariance") && !j["covariance"].empty()) {
+    const auto& c = j["covariance"];
+    if (!c.is_array() || c.size() != params.size()) return bad("covariance is not N x N");
+    d.covariance.resize(n, n);
+    for (Eigen::Index r = 0; r < n; ++r) {
+      const auto& row = c[static_cast<std::size_t>(r)];
+      if (!row.is_array() || row.size() != params.size()) return bad("covariance is not N x N");
+      for (Eigen::Index k = 0; k < n; ++k) {
+        if (!ReadNumberOrNull(row[static_cast<std::size_t>(k)], &d.covariance(r, k))) {
+          return bad("covariance holds a non-number");
+        }
+      }
+    }
+  }
+  if (j.contains("version") && !j["version"].is_number_integer()) return bad("bad version");
+  d.version = j.value("version", 0);
+  for (auto [key, target] : {std::pair{"software", &d.software}, std::pair{"time", &d.time},
+                             std::pair{"gauge", &d.gauge}}) {
+    if (j.contains(key) && !j[key].is_string()) return bad(fmt::format("'{}' is not text", key));
+    *target = j.value(key, std::string());
+  }
+  if ((j.contains("rank") && !j["rank"].is_number_integer()) ||
+      (j.contains("dof") && !j["dof"].is_number_integer()) ||
+      (j.contains("chi2") && !j["chi2"].is_number()) ||
+      (j.contains("p_value") && !j["p_value"].is_number())) {
+    return bad("rank, dof, chi2 or p_value is not a number");
+  }
+  d.rank = j.value("rank", 0);
+  d.dof = j.value("dof", 0);
+  d.chi2 = j.value("chi2", 0.0);
+  d.p_value = j.value("p_value", 1.0);
+  if (!j.contains("gate") || !ReadGate(j["gate"], &d.gate)) {
+    return bad("'gate' is missing or malformed");
+  }
+  d.override_who = j.value("override", nlohmann::json());
+
+  const nlohmann::json provenance = j.value("provenance", nlohmann::json::object());
+  if (!provenance.is_object()) return bad("provenance is not an object");
+  d.identity = provenance.value("device_identity", nlohmann::json());
+  if (provenance.contains("poses")) {
+    if (!provenance["poses"].is_array()) return bad("provenance.poses is not a list");
+    for (const auto& p : provenance["poses"]) {
+      double a[3];
+      const char* const keys[] = {"phi_deg", "gamma_deg", "psi_deg"};
+      for (int i = 0; i < 3; ++i) {
+        if (!p.is_object() || !p.contains(keys[i]) || !p[keys[i]].is_number()) {
+          return bad("provenance.poses holds a pose without angles");
+        }
+        a[i] = p[keys[i]].get<double>() * kDegToRad;
+      }
+      d.poses.push_back(TablePose{a[0], a[1], a[2]});
+    }
+  }
+  if (provenance.contains("records")) {
+    if (!provenance["records"].is_array()) return bad("provenance.records is not a list");
+    for (std::size_t i = 0; i < provenance["records"].size(); ++i) {
+      PoseRecord r;
+      if (!ParsePoseRecord(provenance["records"][i], &r, &why)) {
+        return bad(fmt::format("provenance.records[{}]: {}", i, why));
+      }
+      d.records.push_back(r);
+    }
+  }
+
+  SensorClass industrial = IndustrialClass();
+  d.calibrator = OptionsForClass(model, industrial);
+  if (j.contains("calibrator") &&
+      !ReadCalibrator(j["calibrator"], &d.calibrator, &d.sensor_class)) {
+    return bad("'calibrator' is malformed");
+  }
+  GateOptions gate;
+  GateTolerancesForClass(d.sensor_class.empty() ? "industrial" : d.sensor_class, &gate.tolerances);
+  for (int i : GatedParameters(model)) {
+    const ParameterInfo& p = params[static_cast<std::size_t>(i)];
+    d.tolerances[p.name] = ToleranceFor(p, gate);
+  }
+  if (j.contains("tolerances")) {
+    if (!j["tolerances"].is_object()) return bad("'tolerances' is not an object");
+    d.tolerances.clear();
+    for (const auto& [name, v] : j["tolerances"].items()) {
+      if (!v.is_number() || !(v.get<double>() > 0) || model.index_of(name) < 0) {
+        return bad("tolerance of '" + name + "' is not a positive number of a parameter");
+      }
+      d.tolerances[name] = v.get<double>();
+    }
+    d.tolerances_recorded = true;
+  }
+  *out = std::move(d);
+  return true;
+}
+
+}  // namespace turncal::protocol

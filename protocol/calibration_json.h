@@ -1,0 +1,70 @@
+#pragma once
+// The active calibration document (daemon/persistence.h: calibrations/DEVICE.MODEL.json, schema
+// 1) as the report reads it, and the keys the station writes so that a calibration can be
+// re-evaluated offline without the daemon's configuration:
+//
+//   "context":    {"g_ned":[3], "B_ned":[3], "mounting":[[3]x3], "accel_output_frame":"case"}
+//   "calibrator": {"sensor_class", "noise_density", "pose_offset_sigma", "loss", "loss_scale"}
+//   "tolerances": {NAME: 1-sigma tolerance} for every gated parameter, in the parameter's units
+//   "provenance": {"poses":[...], "records":[pose record, as ToJson(PoseRecord)], ...}
+//
+// Documents written before these keys existed still parse: the defaults are used (and said so).
+
+#include <Eigen/Core>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/calibrator.h"
+#include "core/measurement_model.h"
+#include "core/pose_record.h"
+#include "core/publish_gate.h"
+
+namespace turncal::protocol {
+
+nlohmann::json ToJson(const ModelContext& context);
+// False with a message when a key is malformed or the context is invalid; absent keys keep *out's.
+bool ParseModelContext(const nlohmann::json& j, ModelContext* out, std::string* error);
+
+// The calibrator's noise model and loss, with the sensor class it came from.
+nlohmann::json CalibratorJson(const CalibratorOptions& options, const std::string& sensor_class);
+
+// Every gated parameter's tolerance (GatedParameters, ToleranceFor).
+nlohmann::json TolerancesJson(const MeasurementModel& model, const GateOptions& gate);
+
+// One calibration document, parsed and checked against its model.
+struct CalibrationDocument {
+  std::string device;
+  std::string model;
+  int version = 0;
+  std::string software;
+  std::string time;
+  std::unique_ptr<MeasurementModel> measurement_model;  // with `context`
+  ModelContext context;
+  bool context_recorded = false;
+  Eigen::VectorXd theta;       // in the model's order
+  Eigen::VectorXd sigma;       // NaN where the document has null
+  Eigen::MatrixXd covariance;  // empty when absent; NaN where null
+  std::string gauge;
+  int rank = 0;
+  double chi2 = 0.0;
+  int dof = 0;
+  double p_value = 1.0;
+  GateResult gate;
+  nlohmann::json override_who;  // null unless published by operator override
+  nlohmann::json identity;      // provenance.device_identity (null in replays)
+  std::vector<TablePose> poses;
+  std::vector<PoseRecord> records;           // provenance.records; empty when not recorded
+  CalibratorOptions calibrator;              // recorded, else the industrial class's for the model
+  std::string sensor_class;                  // "" when not recorded
+  std::map<std::string, double> tolerances;  // recorded, else the industrial class's
+  bool tolerances_recorded = false;
+};
+
+// False with a message naming the key when the document is not a calibration of a known model
+// with a finite value for each of its parameters, or a present key has the wrong shape.
+bool ParseCalibrationDocument(const nlohmann::json& j, CalibrationDocument* out,
+                              std::string* error);
+
+}  // namespace turncal::protocol

@@ -1,0 +1,169 @@
+#include "protocol/report_html.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "protocol/calibration_json.h"
+#include "protocol/report_analysis.h"
+#include "protocol/report_plots.h"
+#include "protocol/report_sections.h"
+#include "protocol/report_svg.h"
+#include "turncal/version.h"
+
+namespace turncal::protocol {
+namespace {
+
+using svg::Escape;
+
+constexpr const char* kStyle = R"(
+body { font: 14px/1.45 system-ui, sans-serif; color: #222; margin: 24px auto; max-width: 960px; padding: 0 12px; }
+h1 { font-size: 22px; margin-bottom: 4px; } h2 { font-size: 18px; border-bottom: 2px solid #ccc; margin-top: 36px; }
+h3 { font-size: 15px; margin: 20px 0 6px; } h4 { font-size: 13px; margin: 8px 0 2px; }
+table { border-collapse: collapse; margin: 6px 0; } th, td { padding: 2px 8px; border-bottom: 1px solid #e4e4e4; text-align: left; }
+.observability th, .identity th { white-space: nowrap; } .formula { white-space: nowrap; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; } .small { font-size: 12px; color: #555; }
+tr.exceeds td { background: #fde8e8; } tr.within td:nth-child(6) { color: #176317; }
+.verdict { font-size: 16px; } .verdict.pass strong { color: #176317; } .verdict.fail strong { color: #b00; }
+.missing { color: #a00; } table.matrix td { font-family: ui-monospace, monospace; border: none; }
+table.matrix caption { text-align: left; font-weight: bold; } .sigma { color: #666; }
+svg.plot { display: block; margin: 8px 0; background: #fff; }
+svg.plot text { font: 11px system-ui, sans-serif; fill: #222; }
+svg.plot .plot-title { font-size: 13px; font-weight: bold; } svg.plot .panel-title { font-size: 12px; }
+svg.plot .frame { fill: none; stroke: #555; } svg.plot .grid { fill: none; stroke: #e2e2e2; }
+svg.plot .zero { stroke: #999; } svg.plot .tolerance { stroke: #c00; stroke-dasharray: 6 3; stroke-width: 1.5; }
+svg.plot .sigma-series polyline { fill: none; stroke-width: 1.6; } svg.plot .point-label { font-size: 9px; fill: #555; }
+svg.plot .missing { fill: #a00; } svg.plot .residual-after line, svg.plot .residual-before line { stroke-width: 1; }
+)";
+
+// Model order of the registry (accel12, accel13, mag-physical, mag13, mag22, ...).
+int ModelRank(const std::string& name) {
+  const auto names = ModelNames();
+  const auto it = std::find(names.begin(), names.end(), name);
+  return static_cast<int>(it - names.begin());
+}
+
+std::string IdentityHtml(const nlohmann::json& identity) {
+  if (!identity.is_object() || identity.empty()) {
+    return "<p>Device identity: not recorded (replays and devices without a configuration "
+           "dialogue have none).</p>";
+  }
+  std::string o = "<table class=\"identity\"><caption>Device identity</caption>";
+  for (const auto& [key, value] : identity.items()) {
+    o += "<tr><th>" + Escape(key) + "</th><td>" +
+         Escape(value.is_string() ? value.get<std::string>() : value.dump()) + "</td></tr>";
+  }
+  return o + "</table>";
+}
+
+std::string SummaryHtml(const std::vector<CalibrationDocument>& docs) {
+  std::string o =
+      "<table class=\"summary\"><thead><tr><th>model</th><th>version</th><th>calibrated (UTC)"
+      "</th><th>software</th><th>poses</th><th>rank</th><th>&#967;&#178; / dof</th><th>gate</th>"
+      "</tr></thead><tbody>";
+  for (const auto& d : docs) {
+    o += fmt::format(
+        "<tr><td><a href=\"#model-{0}\">{0}</a></td><td class=\"num\">{1}</td><td>{2}</td>"
+        "<td>{3}</td><td class=\"num\">{4}</td><td class=\"num\">{5}</td>"
+        "<td class=\"num\">{6:.1f} / {7}</td><td class=\"gate-{8}\">{9}</td></tr>",
+        Escape(d.model), d.version, Escape(d.time), Escape(d.software), d.poses.size(), d.rank,
+        d.chi2, d.dof, d.gate.pass ? "pass" : "fail", d.gate.pass ? "PASS" : "FAIL");
+  }
+  return o + "</tbody></table>";
+}
+
+std::string ModelSection(const CalibrationDocument& d) {
+  const ModelAnalysis a = AnalyzeCalibration(d);
+  const MeasurementModel& model = *d.measurement_model;
+  std::string o = fmt::format("<section class=\"model\" id=\"model-{}\">", Escape(d.model));
+  o += fmt::format("<h2>{} &#8212; {}, corrected output in the {} frame</h2>", Escape(d.model),
+                   ToString(model.sensor()), ToString(model.corrected_frame()));
+  const int with_triad = static_cast<int>(a.residuals.after.size());
+  o += fmt::format(
+      "<p class=\"meta\">Version {} calibrated {} by turncal {}; {} poses ({} with {} "
+      "measurements in the calibration); &#967;&#178; {:.2f} for {} degrees of freedom "
+      "(p = {:.3g}).",
+      d.version, Escape(d.time.empty() ? "(time not recorded)" : d.time),
+      Escape(d.software.empty() ? "?" : d.software), d.poses.size(), with_triad,
+      ToString(model.sensor()), d.chi2, d.dof, d.p_value);
+  if (!d.sensor_class.empty()) o += " Sensor class: " + Escape(d.sensor_class) + ".";
+  if (!d.context_recorded) {
+    o += " The calibration does not record its reference vectors: the defaults (MODELS.md) are "
+         "used.";
+  }
+  o += "</p>";
+  if (!d.gauge.empty()) {
+    o += "<p class=\"gauge\"><strong>Gauge:</strong> " + Escape(d.gauge) + "</p>";
+  }
+  o += "<h3>Gate</h3>" + GateHtml(d);
+  o += "<h3>Parameters</h3>" + ParameterTableHtml(d);
+  o += "<h3>Sensor matrix</h3>" + PhysicalFormHtml(d);
+  o += "<h3>Residuals</h3>" + ResidualSummaryHtml(d, a) + ResidualsSvg(d, a);
+  o += "<h3>Pose coverage</h3>" + CoverageSvg(d, a);
+  o += "<h3>Convergence</h3>" + ConvergenceSvg(d, a);
+  if (a.has_records && !a.convergence.note.empty()) {
+    o += "<p class=\"missing\">" + Escape(a.convergence.note) + "</p>";
+  } else if (std::isfinite(a.convergence.resolve_max_z)) {
+    o += fmt::format(
+        "<p class=\"small\">Re-solved with every pose, the calibrator reproduces the stored "
+        "estimate to {} &#963;.</p>",
+        a.convergence.resolve_max_z < 1e-3 ? std::string("better than 0.001")
+                                           : fmt::format("{:.2g}", a.convergence.resolve_max_z));
+  }
+  o += "<h3>Observability</h3>" + ObservabilityHtml(d, a);
+  return o + "</section>\n";
+}
+
+}  // namespace
+
+bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const ReportOptions& options,
+                      std::string* html, std::string* error) {
+  if (calibrations.empty()) {
+    if (error) *error = "no calibration to report";
+    return false;
+  }
+  std::vector<CalibrationDocument> docs(calibrations.size());
+  for (std::size_t i = 0; i < calibrations.size(); ++i) {
+    if (!ParseCalibrationDocument(calibrations[i], &docs[i], error)) return false;
+    if (docs[i].device != docs[0].device) {
+      if (error) {
+        *error = fmt::format(
+            "the calibrations are of two devices, '{}' and '{}': one report "
+            "is for one device",
+            docs[0].device, docs[i].device);
+      }
+      return false;
+    }
+    for (std::size_t k = 0; k < i; ++k) {
+      if (docs[k].model == docs[i].model) {
+        if (error) *error = fmt::format("two calibrations of {} {}", docs[i].device, docs[i].model);
+        return false;
+      }
+    }
+  }
+  std::sort(docs.begin(), docs.end(),
+            [](const auto& a, const auto& b) { return ModelRank(a.model) < ModelRank(b.model); });
+  const std::string& device = docs[0].device;
+  std::string o = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n";
+  o += "<title>Calibration report: " + Escape(device) + "</title>\n";
+  o += "<style>" + std::string(kStyle) + "</style>\n</head>\n<body>\n";
+  o += "<header><h1>Calibration report: " + Escape(device) + "</h1>";
+  o += "<p class=\"small\">turncal " + Escape(kVersion) + " report";
+  if (!options.generated_utc.empty()) o += ", generated " + Escape(options.generated_utc);
+  if (!options.source.empty()) o += ", from " + Escape(options.source);
+  o += ".</p>";
+  nlohmann::json identity;
+  for (const auto& d : docs) {
+    if (d.identity.is_object() && !d.identity.empty()) identity = d.identity;
+  }
+  o += IdentityHtml(identity);
+  o += SummaryHtml(docs);
+  o += "</header>\n";
+  for (const auto& d : docs) o += ModelSection(d);
+  o += "</body>\n</html>\n";
+  *html = std::move(o);
+  return true;
+}
+
+}  // namespace turncal::protocol

@@ -1,0 +1,36 @@
+#pragma once
+// The calibration report (issue "Calibration report"): one self-contained HTML document for one
+// device -- inline CSS and inline SVG, no script, nothing fetched -- from the device's active
+// calibrations (daemon/persistence.h: calibrations/DEVICE.MODEL.json). Per model: identity,
+// time, software, poses, gate verdict with reasons and notes; the parameter table in ppm,
+// degrees, mg, mG with 1 sigma and the gate's tolerance; the model's other form (G, K, the
+// mag22 gauge); residuals per pose before and after calibration; pose coverage on the sphere;
+// sigma as poses were added (the calibrator re-solved with the first k poses); observability
+// (rank, condition number, weakest direction by parameter names).
+//
+// The plots are <svg class="plot" id="residuals-MODEL|coverage-MODEL|convergence-MODEL"> with a
+// <title>. Residuals, convergence and observability need the pose measurements: the
+// calibration's provenance.records (written by the station since the report exists); a caller
+// holding them elsewhere (the pose journal) may put them there before rendering.
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace turncal::protocol {
+
+struct ReportOptions {
+  // Where the calibrations came from (a state directory), shown in the header; may be empty.
+  std::string source;
+  // When the report was made, shown as given (protocol/ reads no clock); may be empty.
+  std::string generated_utc;
+};
+
+// Renders the report of the device all `calibrations` belong to (one per model, any order; the
+// report lists them by model name). False with a message, and *html untouched, when the list is
+// empty, a document is malformed (ParseCalibrationDocument), two documents name different
+// devices or the same model.
+bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const ReportOptions& options,
+                      std::string* html, std::string* error);
+
+}  // namespace turncal::protocol

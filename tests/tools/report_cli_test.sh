@@ -1,0 +1,85 @@
+#!/usr/bin/env bash
+# `turncal report --state-dir DIR -o FILE [--device D]` without a daemon: a state directory made
+# by `turncald --replay CAPTURE --once --state-dir DIR` on a `turncal sim` capture gives one
+# report with every plot; a second device gives one file per device (name before the
+# extension); --device picks one; calibrations without their pose records take them from the
+# journal; no calibrations, an unknown device and malformed JSON are refused with exit code 2
+# and a message. Usage: report_cli_test.sh TURNCAL TURNCALD
+set -uo pipefail
+turncal=$1
+turncald=$2
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+failures=0
+fail() {
+  echo "FAIL: $*"
+  failures=$((failures + 1))
+}
+# expect_refusal WORDS COMMAND...: exit code 2 and WORDS in the message.
+expect_refusal() {
+  local words=$1
+  shift
+  "$@" > "$dir/out.txt" 2> "$dir/err.txt"
+  local rc=$?
+  [[ $rc == 2 ]] || fail "$* exited $rc, not 2"
+  grep -q -- "$words" "$dir/err.txt" || fail "$*: no '$words' in: $(cat "$dir/err.txt")"
+}
+
+"$turncal" sim --protocol xbus --seed 3 -o "$dir/s.tcap" > /dev/null 2>&1 || fail "turncal sim"
+"$turncald" --replay "$dir/s.tcap" --once --state-dir "$dir/state" 2> "$dir/turncald.log" ||
+  fail "turncald --replay --once --state-dir"
+ls "$dir/state/calibrations"
+
+# One device: FILE itself, its path printed first.
+"$turncal" report --state-dir "$dir/state" -o "$dir/r.html" > "$dir/written.txt" || fail "report"
+cat "$dir/written.txt"
+[[ $(cut -f1 "$dir/written.txt") == "$dir/r.html" ]] || fail "the path printed is not r.html"
+plots=$(grep -o '<svg class="plot" id="[a-z0-9-]*"' "$dir/r.html" | wc -l)
+[[ $plots == 6 ]] || fail "$plots plots, not 6 (3 per model)"
+grep -qi '<script' "$dir/r.html" && fail "a script in the report"
+
+# Two devices: one file each; --device picks one; an unknown device is refused.
+for f in "$dir"/state/calibrations/imu.*.json; do
+  sed 's/"device": "imu"/"device": "imu2"/' "$f" > "${f/\/imu./\/imu2.}"
+done
+"$turncal" report --state-dir "$dir/state" -o "$dir/two.html" --json > "$dir/two.jsonl" ||
+  fail "report of two devices"
+cat "$dir/two.jsonl"
+[[ -s $dir/two.imu.html && -s $dir/two.imu2.html && ! -e $dir/two.html ]] ||
+  fail "two devices: not two.imu.html and two.imu2.html"
+"$turncal" report --state-dir "$dir/state" -o "$dir/one.html" --device imu2 > /dev/null ||
+  fail "--device imu2"
+[[ -s $dir/one.html ]] || fail "--device imu2 wrote no one.html"
+expect_refusal "no calibration of device 'nope'.*devices there: imu, imu2" \
+  "$turncal" report --state-dir "$dir/state" -o "$dir/x.html" --device nope
+
+# Calibrations without their records (written before they carried them): from the journal.
+if command -v python3 > /dev/null; then
+  python3 - "$dir/state/calibrations/imu.accel13.json" << 'EOF'
+import json, sys
+c = json.load(open(sys.argv[1]))
+del c["provenance"]["records"]
+json.dump(c, open(sys.argv[1], "w"), indent=2)
+EOF
+  "$turncal" report --state-dir "$dir/state" -o "$dir/j.html" --device imu 2> "$dir/j.err" \
+    > /dev/null || fail "report from the journal"
+  grep -q "pose records taken from the journal" "$dir/j.err" || fail "journal not used"
+  grep -q 'class="missing"' "$dir/j.html" && fail "journal records not used in j.html"
+fi
+
+# Refusals.
+expect_refusal "no calibrations found" "$turncal" report --state-dir "$dir/none" -o "$dir/x.html"
+mkdir -p "$dir/empty/calibrations"
+expect_refusal "no calibrations found" "$turncal" report --state-dir "$dir/empty" -o "$dir/x.html"
+mkdir -p "$dir/bad/calibrations"
+printf '{"device": "imu", "model": "accel13", "params": {' > "$dir/bad/calibrations/imu.accel13.json"
+expect_refusal "is not valid JSON" "$turncal" report --state-dir "$dir/bad" -o "$dir/x.html"
+printf '{"device": "imu", "model": "accel13"}' > "$dir/bad/calibrations/imu.accel13.json"
+expect_refusal "'params' is missing" "$turncal" report --state-dir "$dir/bad" -o "$dir/x.html"
+expect_refusal "cannot connect\|No such file\|connect" \
+  "$turncal" report --socket "$dir/no.sock" -o "$dir/x.html"
+# Without -o, --state-dir or --device: the old text report from the daemon.
+expect_refusal "" "$turncal" report --socket "$dir/no.sock"
+
+echo "report cli: $failures failure(s)"
+[[ $failures == 0 ]]
