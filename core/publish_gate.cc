@@ -191,8 +191,10 @@ GateResult EvaluateGate(const MeasurementModel& model, const Estimate& estimate,
       result.notes.push_back(fmt::format("{} ({}) is not determined by these poses; not gated",
                                          params[j].name, ToString(params[j].kind)));
     } else {
+      // Value and sigma in the same display unit (degrees for beta and eps, mG for dB).
+      const DisplayQuantity value = ForDisplay(params[j], estimate.theta[j], /*is_sigma=*/false);
       result.notes.push_back(fmt::format("{} ({}) = {:.6g} +- {}; not gated", params[j].name,
-                                         ToString(params[j].kind), estimate.theta[j],
+                                         ToString(params[j].kind), value.value,
                                          FormatSigma(params[j], estimate.sigma[j])));
     }
   }

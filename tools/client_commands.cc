@@ -3,6 +3,8 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <map>
 #include <memory>
@@ -10,6 +12,7 @@
 
 #include "tools/capture_command.h"
 #include "tools/client_connection.h"
+#include "tools/report_command.h"
 
 namespace turncal::tools {
 
@@ -169,6 +172,51 @@ struct WatchView {
     if (log.size() > 6) log.erase(log.begin(), log.end() - 6);
   }
 
+  // One line for a log (standard output not a terminal): what happened, in words; empty for the
+  // events a log does not need (progress, samples, the watch confirmation).
+  static std::string Describe(const nlohmann::json& e) {
+    const std::string kind = e.value("class", "");
+    const std::string name = e.value("device", "");
+    if (kind == "POSE_PROGRESS" || kind == "WATCH" || kind == "POSE_COLLECTING") return "";
+    if (kind == "POSE_STARTED") {
+      return fmt::format("{}: pose {} ({}) started", name, e.value("index", -1),
+                         PoseText(e.value("pose", nlohmann::json())));
+    }
+    if (kind == "POSE_CAPTURED" || kind == "POSE_REJECTED") {
+      return fmt::format("{}: pose {} {}: {}", name, e.value("index", -1),
+                         kind == "POSE_CAPTURED" ? "captured" : "REJECTED", e.value("reason", ""));
+    }
+    if (kind == "ESTIMATE") {
+      const nlohmann::json gate = e.value("gate", nlohmann::json::object());
+      std::string line =
+          fmt::format("{}: {} after {} poses: gate {}", name, e.value("model", ""),
+                      e.value("poses", 0), gate.value("pass", false) ? "PASS" : "fail");
+      const auto reasons = gate.value("reasons", nlohmann::json::array());
+      if (!reasons.empty() && reasons[0].is_string()) {
+        line += " (" + reasons[0].get<std::string>();
+        if (reasons.size() > 1) line += fmt::format("; {} more", reasons.size() - 1);
+        line += ")";
+      }
+      return line;
+    }
+    if (kind == "CALIBRATION_ACTIVE") {
+      return fmt::format("{}: {} calibration v{} active ({} poses)", name, e.value("model", ""),
+                         e.value("version", 0), e.value("poses", 0));
+    }
+    if (kind.rfind("NOISE", 0) == 0 || kind == "DEVICE" || kind == "ERROR") {
+      std::string what = kind == "DEVICE" ? e.value("state", "") : kind;
+      std::transform(what.begin(), what.end(), what.begin(),
+                     [](unsigned char ch) { return ch == '_' ? ' ' : std::tolower(ch); });
+      std::string line = fmt::format("{}: {}: {}", name.empty() ? "turncald" : name, what,
+                                     e.value("reason", e.value("message", "")));
+      if (line.size() > 200) line = line.substr(0, 197) + "...";
+      return line;
+    }
+    nlohmann::json brief = e;
+    brief.erase("record");
+    return brief.dump().substr(0, 300);
+  }
+
   std::string Render() const {
     std::string out;
     for (const auto& [name, d] : devices) {
@@ -255,11 +303,8 @@ int RunWatch(const WatchArgs& a) {
     }
     view.Take(e);
     if (!tty) {
-      const std::string kind = e.value("class", "");
-      if (kind != "POSE_PROGRESS") {
-        e.erase("record");
-        fmt::print("{}\n", e.dump());
-      }
+      const std::string text = WatchView::Describe(e);
+      if (!text.empty()) fmt::print("{}\n", text);
       std::fflush(stdout);
       continue;
     }
@@ -378,14 +423,36 @@ void AddClientCommands(CLI::App* app) {
     throw CLI::RuntimeError(Simple("result", *result, {{"cmd", "result"}}, PrintResult));
   });
 
-  auto report = std::make_shared<Common>();
-  auto* rp = app->add_subcommand("report", "status and result together (a session report)");
-  AddCommon(rp, report.get());
-  rp->callback([report] {
-    int rc = Simple("report", *report, {{"cmd", "status"}}, PrintStatus);
+  struct ReportArgs {
+    Common common;
+    HtmlReportArgs html;
+  };
+  auto report = std::make_shared<ReportArgs>();
+  auto* rp = app->add_subcommand(
+      "report",
+      "status and result together (a session report); with -o or --state-dir: the HTML "
+      "calibration report of each device's active calibrations");
+  AddCommon(rp, &report->common);
+  rp->add_option("-o,--output", report->html.output,
+                 "write the HTML report here; with several devices and no --device, one file per "
+                 "device with its name before the extension (report.html -> report.imu1.html)")
+      ->capture_default_str();
+  rp->add_option("--state-dir", report->html.state_dir,
+                 "read DIR/calibrations/*.json directly (no daemon needed); without it, -o asks "
+                 "the daemon for its state directory");
+  rp->add_option("--device", report->html.device, "only this device's report (with -o)");
+  rp->callback([report, rp] {
+    const bool html =
+        rp->count("--output") > 0 || rp->count("--state-dir") > 0 || rp->count("--device") > 0;
+    if (html) {
+      report->html.socket = report->common.socket;
+      report->html.json = report->common.json;
+      throw CLI::RuntimeError(RunHtmlReport(report->html));
+    }
+    int rc = Simple("report", report->common, {{"cmd", "status"}}, PrintStatus);
     if (rc == 0) {
-      if (!report->json) fmt::print("\n");
-      rc = Simple("report", *report, {{"cmd", "result"}}, PrintResult);
+      if (!report->common.json) fmt::print("\n");
+      rc = Simple("report", report->common, {{"cmd", "result"}}, PrintResult);
     }
     throw CLI::RuntimeError(rc);
   });

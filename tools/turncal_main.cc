@@ -5,6 +5,7 @@
 #include "tools/capture_command.h"
 #include "tools/client_commands.h"
 #include "tools/decode_command.h"
+#include "tools/help_text.h"
 #include "tools/models_command.h"
 #include "tools/observability_command.h"
 #include "tools/plan_compare_command.h"
@@ -27,6 +28,12 @@ int main(int argc, char** argv) {
   turncal::tools::AddPlanCompareCommand(&app);
   turncal::tools::AddSequenceCommand(&app);
   turncal::tools::AddClientCommands(&app);
+  // Description, examples, exit status and where to read more under every command's --help
+  // (tests/tools/help_test.sh checks that no command lacks them).
+  turncal::tools::AddManualFooters(&app);
+  app.footer(
+      "\nEvery command: turncal COMMAND --help shows its options, examples and exit status.\n"
+      "Start with ./scripts/demo and README.md; the daemon is turncald (turncald --help).");
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& e) {

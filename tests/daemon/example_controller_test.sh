@@ -44,26 +44,10 @@ phi,gamma,psi
 EOF
 n_poses=$(($(wc -l < "$dir/poses.csv") - 1))
 
-# The table command: returns once the simulator printed the pose event of these angles (the
-# table has settled there and holds it for --dwell seconds of simulated time).
-cat > "$dir/table.py" << 'EOF'
-import json, sys, time
-events, phi, gamma, psi = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4])
-deadline = time.monotonic() + 60
-while time.monotonic() < deadline:
-    with open(events) as f:
-        for line in f:
-            try:
-                e = json.loads(line)
-            except ValueError:
-                continue
-            if e.get("event") == "pose" and all(
-                    abs(e[k] - v) < 1e-6 for k, v in
-                    (("phi_deg", phi), ("gamma_deg", gamma), ("psi_deg", psi))):
-                sys.exit(0)
-    time.sleep(0.02)
-sys.exit(f"table.py: the table never reached {phi} {gamma} {psi}")
-EOF
+# The table command (tools/examples/sim_table.py): returns once the simulator printed the pose
+# event of these angles (the table has settled there and holds it for --dwell seconds of simulated
+# time).
+table_cmd="python3 $src/tools/examples/sim_table.py $dir/events.jsonl"
 
 cat > "$dir/turncald.toml" << EOF
 socket = "$dir/t.sock"
@@ -89,7 +73,7 @@ pids+=($!)
 
 status=0
 python3 "$controller" --socket "$dir/t.sock" --poses "$dir/poses.csv" --retries 0 \
-  --timeout 30 --table-cmd "python3 $dir/table.py $dir/events.jsonl" --json \
+  --timeout 30 --table-cmd "$table_cmd" --json \
   > "$dir/controller.out" 2> "$dir/controller.err" || status=$?
 cat "$dir/controller.out"
 summary=$(tail -n 1 "$dir/controller.out")

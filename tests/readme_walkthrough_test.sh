@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# README.md's "Your first five minutes", followed literally: the shell block between the
+# `<!-- walkthrough -->` markers runs as written with bash, from the repository's root (it needs
+# the build in build/, which ./scripts/test makes; ./scripts/demo inside it rebuilds nothing then).
+# Passes when the block exits 0, the demo printed its report's path, and both reports exist with
+# their plots. Run by ./scripts/test after ctest (not by ctest: it uses the fixed paths the README
+# shows, /tmp/turncal.sock and friends, which parallel tests must not share).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+block=$(awk '/<!-- walkthrough/{on=1; next} /<!-- \/walkthrough -->/{on=0} on' README.md |
+  sed -n '/^```sh$/,/^```$/p' | sed '1d;$d')
+[[ -n $block ]] || { echo "FAIL: no walkthrough block in README.md"; exit 1; }
+# A previous run's daemon state would be resumed (its poses counted twice): start clean, as a
+# first-time user does.
+rm -rf /tmp/turncal-state /tmp/turncal.sock /tmp/imu1-report.html
+log=$(mktemp)
+start=$SECONDS
+status=0
+bash -e <<< "$block" > "$log" 2>&1 || status=$?
+elapsed=$((SECONDS - start))
+fail() {
+  echo "--- output of the walkthrough"; cat "$log"
+  echo "FAIL: $1"
+  exit 1
+}
+[[ $status == 0 ]] || fail "the block exited $status"
+grep -q "The calibration report: .*report.html" "$log" || fail "the demo did not print the report path"
+for r in demo-output/report.html /tmp/imu1-report.html; do
+  [[ -s $r ]] || fail "$r is missing"
+  plots=$(grep -o '<svg class="plot"' "$r" | wc -l)
+  ((plots >= 6)) || fail "$r has $plots plots (expected at least 6: residuals, coverage, convergence per model)"
+done
+grep -q "gate PASS" "$log" || fail "no gate passed"
+echo "README walkthrough: followed literally, exit 0 in ${elapsed} s; demo-output/report.html and /tmp/imu1-report.html written"

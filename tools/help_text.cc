@@ -1,0 +1,233 @@
+#include "tools/help_text.h"
+
+#include <map>
+
+namespace turncal::tools {
+namespace {
+
+struct Manual {
+  const char* description;
+  const char* examples;
+  const char* exit_status;
+  const char* see_also;
+};
+
+// Client commands share these.
+constexpr const char* kClientExit =
+    "0 done; 2 the daemon cannot be reached (is turncald running? --socket, $TURNCAL_SOCKET), it "
+    "answered ERROR, or a command-line mistake";
+constexpr const char* kSocketNote =
+    "The daemon's socket is --socket, else $TURNCAL_SOCKET, else /run/turncal/turncal.sock.";
+
+const std::map<std::string, Manual>& Manuals() {
+  static const std::map<std::string, Manual> manuals = {
+      {"status",
+       {"The daemon's state: every device's connection, rates and counters, poses captured, the "
+        "pose being collected, each model's gate and active calibration version. {socket}",
+        "turncal status\n"
+        "turncal status --json | jq '.devices.imu1.counters'",
+        kClientExit, "docs/protocol.md (status), docs/TROUBLESHOOTING.md"}},
+      {"devices",
+       {"The daemon's devices and what they said in their configuration dialogue (identity, "
+        "firmware, rate). With --local: this machine's serial ports, no daemon needed. {socket}",
+        "turncal devices\n"
+        "turncal devices --local          # which /dev/ttyUSB* is which IMU",
+        kClientExit, "docs/TROUBLESHOOTING.md (permissions, ModemManager)"}},
+      {"result",
+       {"The current estimate of every model of every device: each parameter with its 1 sigma, "
+        "rank, chi^2 and the publish gate's verdict with its reasons. {socket}",
+        "turncal result\n"
+        "turncal result --json > result.json   # the shape of turncald --result-out",
+        kClientExit, "docs/models.md (what each parameter means), docs/OBSERVABILITY.md"}},
+      {"report",
+       {"Without -o: status and result together, as text. With -o FILE: the calibration report, "
+        "one self-contained HTML file per device (parameter table with 1 sigma and tolerances, "
+        "residual, coverage and convergence plots, observability). It reads the active "
+        "calibrations from the state directory (--state-dir, else the one the daemon reports). "
+        "{socket}",
+        "turncal report\n"
+        "turncal report -o report.html\n"
+        "turncal report --state-dir /var/lib/turncal --device imu1 -o imu1.html   # no daemon",
+        "0 done; 2 the daemon cannot be reached, it answered ERROR, no active calibration was "
+        "found, a calibration file is unreadable or malformed, --device names no device there, "
+        "or a command-line mistake",
+        "README.md (the walk-through), docs/models.md; turncald writes "
+        "STATE_DIR/reports/DEVICE.html itself after each activation"}},
+      {"next-pose",
+       {"The most informative pose to capture next for a device (D-optimal over its models), and "
+        "how many poses the gate still needs. {socket}",
+        "turncal next-pose\n"
+        "turncal next-pose --device imu2 --json",
+        "0, also when there is no recommendation (printed as \"no recommendation: ...\"); 2 as "
+        "for every client command",
+        "docs/OBSERVABILITY.md (planning), tools/examples/turntable_controller.py --plan"}},
+      {"watch",
+       {"Live view: pose progress, poses captured, each parameter's sigma against its tolerance. "
+        "On a terminal the view redraws in place; otherwise one line per event (a log). With "
+        "--corrected / --raw it also prints samples; --json prints the daemon's messages "
+        "unchanged. {socket}",
+        "turncal watch\n"
+        "turncal watch --corrected --rate 10 --json     # corrected samples for a script\n"
+        "turncal watch --seconds 60 > session.log",
+        "0 after --count samples or --seconds; 2 on an error or when the daemon closes the "
+        "connection",
+        "docs/protocol.md (watch, CORRECTED)"}},
+      {"pose",
+       {"Tells turncald that the table is at PHI GAMMA PSI (degrees: inner x, middle y, outer z "
+        "axis) and waits until every device captured or rejected the pose. A controller script "
+        "calls this after each move. Negative angles need no --. {socket}",
+        "turncal pose 0 0 0\n"
+        "turncal pose 90 45 -180 --dwell 5\n"
+        "turncal pose 0 90 0 --device imu2 || echo \"rejected or failed: $?\"",
+        "0 every device captured the pose; 1 some device rejected it (the reason is printed); 2 "
+        "an ERROR, no answer within --timeout, or a command-line mistake",
+        "tools/examples/README.md (a whole controller), docs/SEQUENCER.md (why poses are "
+        "rejected)"}},
+      {"reset",
+       {"Starts a new session: the current poses and noise profiles are archived under "
+        "sessions/ in the state directory; active calibrations stay active. Needs a permitted "
+        "uid. {socket}",
+        "turncal reset --note \"new fixture\"", kClientExit,
+        "systemd/README.md (state directory)"}},
+      {"publish",
+       {"Operator override: makes the current estimate of DEVICE MODEL active although the gate "
+        "refused it. The operator, the reason and the gate's reasons are recorded in the "
+        "calibration. Needs a permitted uid. {socket}",
+        "turncal publish imu1 accel13 --operator \"A. Engineer\" --reason \"re-issue after audit\"",
+        kClientExit, "docs/protocol.md (publish)"}},
+      {"capture",
+       {"Records a live port into a .tcap capture (bytes with their host times) until Ctrl-C or "
+        "SIGTERM. A capture replays through the whole pipeline: turncald --replay FILE --once.",
+        "turncal capture --device imu=mip:/dev/ttyUSB0@921600 -o session.tcap\n"
+        "turncal capture --device imu=xbus:tcp://10.0.0.5:4001 -o xsens.tcap --note \"bench 2\"",
+        "0 when stopped by a signal; 1 the port failed; 2 a command-line mistake",
+        "docs/capture-format.md"}},
+      {"decode",
+       {"Decodes a capture or a raw byte stream: frames and samples (SI units), then one SUMMARY "
+        "line with the counters (frames, samples, bad checksums, skipped bytes).",
+        "turncal decode session.tcap | tail -1\n"
+        "turncal decode stream.bin --protocol mip --json | head",
+        "0 decoded (bad frames are counted, not fatal); 2 the input cannot be read or a "
+        "command-line mistake",
+        "docs/DRIVERS.md, docs/TROUBLESHOOTING.md (baud rate)"}},
+      {"models",
+       {"Lists the measurement models and their parameters in the order results use.",
+        "turncal models\nturncal models --json", "0", "docs/models.md"}},
+      {"fit-sim",
+       {"Simulates one calibration session in memory, calibrates it and prints every parameter "
+        "with its 1 sigma, the truth and the error in sigma units.",
+        "turncal fit-sim --model accel13 --poses 26 --design cube\n"
+        "turncal fit-sim --model mag22 --class consumer --seed 7 --json",
+        "0; 2 a command-line mistake", "docs/ACCURACY.md"}},
+      {"montecarlo",
+       {"Repeats simulated sessions and checks that the reported sigma matches the scatter of the "
+        "errors (the honesty of the uncertainty).",
+        "turncal montecarlo --model accel13 --runs 1000\n"
+        "turncal montecarlo --model mag13 --noise session --runs 200",
+        "0; 2 a command-line mistake", "docs/ACCURACY.md"}},
+      {"sim",
+       {"Simulates a whole turntable session: a .tcap capture of a MIP, GX2 or Xbus device and a "
+        "truth file. With --live it streams into ptys in real time (or --live-speed times "
+        "faster); with --controller it also plays the lab's controller on turncald's socket.",
+        "turncal sim --protocol mip --seed 1 --truth-out truth.json -o session.tcap\n"
+        "turncal sim --protocol xbus --live /tmp/imu --poses poses.csv --live-speed 2\n"
+        "turncal sim --protocol mip --protocol xbus --live /tmp/a /tmp/b --controller "
+        "/run/turncal/turncal.sock",
+        "0 written (with --controller: every pose captured); 1 some pose was not captured or a "
+        "write failed; 2 a command-line mistake",
+        "docs/SIMULATOR.md"}},
+      {"poses",
+       {"Prints a pose list (CSV, degrees) of a standard design, for --poses FILE of the other "
+        "commands and for a controller script.",
+        "turncal poses --design cube > cube.csv\nturncal poses --design random --count 40 --seed 3",
+        "0; 2 a command-line mistake", "docs/OBSERVABILITY.md"}},
+      {"observability",
+       {"Rank, null directions (in parameter names) and Cramer-Rao sigma of a model: the paper's "
+        "structural test, or the data-level test over a pose list.",
+        "turncal observability --model mag22 --structural\n"
+        "turncal observability --model accel13 --poses cube.csv --json",
+        "0; 2 a command-line mistake or an unreadable pose list", "docs/OBSERVABILITY.md"}},
+      {"plan",
+       {"The D-optimal next pose over a grid of reachable table angles, and the greedy plan until "
+        "the predicted publish gate passes.",
+        "turncal plan --model accel13 --model mag13\n"
+        "turncal plan --poses captured.csv --gamma -60:60:30 --json",
+        "0; 2 a command-line mistake or an unreadable pose list", "docs/OBSERVABILITY.md"}},
+      {"plan-vs-cube",
+       {"Simulated sessions: how many poses the real calibrator and gate need along the 26-pose "
+        "cube and with next-pose planning.",
+        "turncal plan-vs-cube --model accel13 --class consumer --runs 50",
+        "0; 2 a command-line "
+        "mistake",
+        "docs/OBSERVABILITY.md"}},
+      {"sequence",
+       {"Replays a capture through the decoders and the position sequencer only: which poses were "
+        "captured or rejected, and why. Useful to tune stillness settings on a real recording.",
+        "turncal sequence session.tcap\n"
+        "turncal sequence table.tcap --schedule poses.csv --dwell 5 --json",
+        "0; 2 the capture cannot be read or a command-line mistake", "docs/SEQUENCER.md"}},
+  };
+  return manuals;
+}
+
+// Words of `text` in lines of at most `width` characters, each indented by two spaces.
+std::string Wrap(const std::string& text, std::size_t width = 96) {
+  std::string out, line;
+  std::size_t start = 0;
+  while (start < text.size()) {
+    std::size_t end = text.find(' ', start);
+    if (end == std::string::npos) end = text.size();
+    const std::string word = text.substr(start, end - start);
+    if (!line.empty() && line.size() + 1 + word.size() > width) {
+      out += "  " + line + "\n";
+      line.clear();
+    }
+    if (!word.empty()) line += (line.empty() ? "" : " ") + word;
+    start = end + 1;
+  }
+  if (!line.empty()) out += "  " + line + "\n";
+  return out;
+}
+
+std::string Render(const Manual& m) {
+  std::string description = m.description;
+  const std::string token = "{socket}";
+  if (auto at = description.find(token); at != std::string::npos) {
+    description.replace(at, token.size(), kSocketNote);
+  }
+  std::string examples;
+  std::string line;
+  for (const char* c = m.examples;; ++c) {
+    if (*c == '\n' || *c == '\0') {
+      examples += "  $ " + line + "\n";
+      line.clear();
+      if (*c == '\0') break;
+    } else {
+      line += *c;
+    }
+  }
+  return "\nDESCRIPTION\n" + Wrap(description) + "\nEXAMPLES\n" + examples + "\nEXIT STATUS\n" +
+         Wrap(m.exit_status) + "\nSEE ALSO\n" + Wrap(m.see_also);
+}
+
+}  // namespace
+
+std::string ManualFooter(const std::string& subcommand) {
+  const auto it = Manuals().find(subcommand);
+  return it == Manuals().end() ? std::string() : Render(it->second);
+}
+
+std::vector<std::string> AddManualFooters(CLI::App* app) {
+  std::vector<std::string> missing;
+  for (CLI::App* sub : app->get_subcommands([](CLI::App*) { return true; })) {
+    const std::string text = ManualFooter(sub->get_name());
+    if (text.empty()) {
+      missing.push_back(sub->get_name());
+      continue;
+    }
+    sub->footer(text);
+  }
+  return missing;
+}
+
+}  // namespace turncal::tools
