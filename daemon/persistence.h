@@ -7,6 +7,8 @@
 //   history/DEVICE.MODEL.vN.json   every earlier active calibration
 //   noise/DEVICE.json              the noise profile this session measured
 //   sessions/UTCTIME/              earlier sessions' journals and noise profiles (`reset`)
+//   reports/DEVICE.html            the calibration report of the device's active calibrations
+//                                  (protocol/report_html.h), rewritten after activations
 //
 // A kill -9 can leave the journal's last line incomplete; loading skips it and says so.
 

@@ -20,6 +20,9 @@ struct Station::ModelState {
   std::unique_ptr<MeasurementModel> model;
   std::unique_ptr<Calibrator> calibrator;
   Estimate estimate;
+  // How many of the device's poses (poses_used, records_used) `estimate` saw: later poses may be
+  // captured while its solve runs, and a calibration carries only its own evidence.
+  std::size_t estimate_poses = 0;
   GateResult gate;
   int rank = 0;
   int active_version = 0;  // 0: no active calibration
@@ -482,14 +485,16 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
     }
     covariance.push_back(row);
   }
+  const std::size_t n = std::min(m.estimate_poses, d.poses_used.size());
   nlohmann::json poses = nlohmann::json::array();
-  for (const auto& p : d.poses_used) poses.push_back(ToJson(p));
+  for (std::size_t i = 0; i < n; ++i) poses.push_back(ToJson(d.poses_used[i]));
   // The records themselves, with the model's triad only, so that the calibration can be
   // re-evaluated (the report's residuals and convergence) without the journal, which `reset`
   // archives.
   const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
   nlohmann::json records = nlohmann::json::array();
-  for (PoseRecord r : d.records_used) {
+  for (std::size_t i = 0; i < n && i < d.records_used.size(); ++i) {
+    PoseRecord r = d.records_used[i];
     r.gyr.reset();
     (accel ? r.mag : r.acc).reset();
     records.push_back(protocol::ToJson(r));
@@ -524,6 +529,7 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
 
 // What one model's update computes (on the solve worker when there is one).
 struct Station::UpdateJob {
+  std::size_t device_poses = 0;  // the device's poses when the update was queued, this one included
   bool added = false;
   std::string error;
   Estimate estimate;
@@ -541,6 +547,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
     const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
     if (accel ? !record.acc : !record.mag) continue;
     auto job = std::make_shared<UpdateJob>();
+    job->device_poses = d.records_used.size();
     // The calibrator is only touched under its lock (the worker solves; NextPose reads).
     auto work = [&m, record, job, gate = d.gate] {
       std::lock_guard lock(*m.calibrator_mutex);
@@ -577,6 +584,7 @@ void Station::Apply(std::size_t device, std::size_t model, double t_s, const Upd
     return;
   }
   m.estimate = job.estimate;
+  m.estimate_poses = job.device_poses;
   m.rank = job.rank;
   m.gate = job.gate;
   if (sink_ && !resuming) {

@@ -153,8 +153,17 @@ std::string PhysicalFormHtml(const CalibrationDocument& doc) {
                     with_sigma ? &sigma : nullptr);
     return o;
   }
+  const int g11 = model.index_of("g11");
+  if (g11 < 0) {
+    // mag-physical: its 22 parameters are the physical breakdown, of which a turntable sees only
+    // 13 combinations (MODELS.md); no single G is shown for it.
+    o += "<p>This model is written in physical parameters (S, &#945;, &#949;, K, &#948;B); a "
+         "turntable test determines only 13 combinations of them (see the observability summary). "
+         "Use mag13 for a correction.</p>";
+    return o;
+  }
   Mat3<double> G;
-  for (int e = 0; e < 9; ++e) G(e / 3, e % 3) = doc.theta[e];
+  for (int e = 0; e < 9; ++e) G(e / 3, e % 3) = doc.theta[g11 + e];
   o += "<p>G absorbs the sensor's scale factors, axis non-orthogonality, mounting and the soft "
        "iron around it, in the device's unit: a magnetometer model on a turntable has no unique "
        "physical decomposition (MODELS.md). ";
@@ -163,8 +172,8 @@ std::string PhysicalFormHtml(const CalibrationDocument& doc) {
              "B<sub>q</sub> = G<sup>&#8722;1</sup>(B<sub>m</sub> &#8722; b)</span>.</p>"
            : "</p>";
   Mat3<double> sigma;
-  bool with_sigma = doc.sigma.size() >= 9;
-  for (int e = 0; with_sigma && e < 9; ++e) sigma(e / 3, e % 3) = doc.sigma[e];
+  bool with_sigma = doc.sigma.size() >= g11 + 9;
+  for (int e = 0; with_sigma && e < 9; ++e) sigma(e / 3, e % 3) = doc.sigma[g11 + e];
   o += MatrixHtml("G (magnetometer)", G, with_sigma ? &sigma : nullptr);
   const int k11 = model.index_of("k11");
   if (k11 >= 0) {

@@ -16,7 +16,12 @@ rm -rf /tmp/turncal-state /tmp/turncal.sock /tmp/imu1-report.html
 log=$(mktemp)
 start=$SECONDS
 status=0
-bash -e <<< "$block" > "$log" 2>&1 || status=$?
+# In its own session, so that whatever it left running when it failed (turncald, the simulator)
+# is stopped with it.
+setsid bash -e <<< "$block" > "$log" 2>&1 &
+pid=$!
+wait "$pid" || status=$?
+kill -- -"$pid" 2> /dev/null || true
 elapsed=$((SECONDS - start))
 fail() {
   echo "--- output of the walkthrough"; cat "$log"

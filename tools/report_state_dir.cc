@@ -33,7 +33,7 @@ bool ReadJsonFile(const fs::path& path, nlohmann::json* out, std::string* error)
   }
   try {
     *out = nlohmann::json::parse(text.str());
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {  // parse errors, numbers out of range (1e400)
     *error = fmt::format("'{}' is not valid JSON: {}", path.string(), e.what());
     return false;
   }
@@ -52,8 +52,8 @@ std::vector<nlohmann::json> JournalRecords(const fs::path& journal, const std::s
   std::string line;
   while (in && std::getline(in, line)) {
     const auto j = nlohmann::json::parse(line, nullptr, false);
-    if (j.is_discarded() || !j.is_object() || j.value("device", "") != device ||
-        !j.contains("record")) {
+    if (j.is_discarded() || !j.is_object() || !j.contains("device") || !j["device"].is_string() ||
+        j["device"].get<std::string>() != device || !j.contains("record")) {
       continue;
     }
     PoseRecord record;
@@ -66,6 +66,9 @@ std::vector<nlohmann::json> JournalRecords(const fs::path& journal, const std::s
 bool SamePoses(const nlohmann::json& poses, const std::vector<nlohmann::json>& records) {
   if (!poses.is_array() || poses.empty() || records.size() < poses.size()) return false;
   for (std::size_t i = 0; i < poses.size(); ++i) {
+    if (!poses[i].is_object() || !records[i].contains("pose") || !records[i]["pose"].is_object()) {
+      return false;
+    }
     for (const char* key : {"phi_deg", "gamma_deg", "psi_deg"}) {
       const auto& a = poses[i].value(key, nlohmann::json());
       const auto& b = records[i]["pose"].value(key, nlohmann::json());
@@ -119,6 +122,13 @@ bool ReadStateDirCalibrations(const std::string& state_dir, const std::string& d
     nlohmann::json calibration;
     if (!ReadJsonFile(f, &calibration, error)) return false;
     const std::string name = calibration["device"].get<std::string>();
+    // The file name decides which device a calibration is (and so the report's file name): a
+    // document that names another device is refused, not filed elsewhere.
+    if (name != DeviceOfFileName(f)) {
+      *error = fmt::format("'{}' names device '{}', but its file name says '{}'", f.string(), name,
+                           DeviceOfFileName(f));
+      return false;
+    }
     DeviceCalibrations& d = (*out)[name];
     d.calibrations.push_back(std::move(calibration));
     d.paths.push_back(f.string());
@@ -148,7 +158,8 @@ std::string AttachJournalRecords(const std::string& state_dir, nlohmann::json* c
     if (!SamePoses(poses, records)) continue;
     records.resize(poses.size());
     provenance["records"] = records;
-    return fmt::format("pose records taken from the journal '{}'", journal.string());
+    return fmt::format("pose records taken from the journal '{}' (matched by table angles)",
+                       journal.string());
   }
   return "the calibration carries no pose records and no journal holds its poses: residuals, "
          "convergence and observability are left out";

@@ -76,10 +76,33 @@ printf '{"device": "imu", "model": "accel13", "params": {' > "$dir/bad/calibrati
 expect_refusal "is not valid JSON" "$turncal" report --state-dir "$dir/bad" -o "$dir/x.html"
 printf '{"device": "imu", "model": "accel13"}' > "$dir/bad/calibrations/imu.accel13.json"
 expect_refusal "'params' is missing" "$turncal" report --state-dir "$dir/bad" -o "$dir/x.html"
+# A number out of range, a document filed under another device's name: refused, not a crash.
+printf '{"device": "imu", "model": "accel13", "chi2": 1e400}' > "$dir/bad/calibrations/imu.accel13.json"
+expect_refusal "is not valid JSON" "$turncal" report --state-dir "$dir/bad" -o "$dir/x.html"
+sed 's/"device": "imu"/"device": "other"/' "$dir/state/calibrations/imu.mag13.json" \
+  > "$dir/bad/calibrations/imu.accel13.json"
+expect_refusal "names device 'other', but its file name says 'imu'" \
+  "$turncal" report --state-dir "$dir/bad" -o "$dir/x.html"
+# A journal line whose device is not a string, and provenance poses that are not objects, when the
+# calibration has no records: the journal is not used; no crash (exit 0 or a refusal).
+if command -v python3 > /dev/null; then
+  mkdir -p "$dir/odd/calibrations"
+  printf '{"device":5,"record":{}}\n' > "$dir/odd/journal.jsonl"
+  python3 - "$dir/state/calibrations/imu.mag13.json" "$dir/odd/calibrations/imu.mag13.json" << 'EOF'
+import json, sys
+c = json.load(open(sys.argv[1]))
+del c["provenance"]["records"]
+c["provenance"]["poses"] = [1] + c["provenance"]["poses"][1:]
+json.dump(c, open(sys.argv[2], "w"), indent=2)
+EOF
+  "$turncal" report --state-dir "$dir/odd" -o "$dir/odd.html" > /dev/null 2> "$dir/odd.err"
+  rc=$?
+  [[ $rc == 0 || $rc == 2 ]] || fail "odd journal and poses: exit $rc (a crash?): $(cat "$dir/odd.err")"
+fi
 expect_refusal "cannot connect\|No such file\|connect" \
   "$turncal" report --socket "$dir/no.sock" -o "$dir/x.html"
 # Without -o, --state-dir or --device: the old text report from the daemon.
-expect_refusal "" "$turncal" report --socket "$dir/no.sock"
+expect_refusal "turncal report" "$turncal" report --socket "$dir/no.sock"
 
 echo "report cli: $failures failure(s)"
 [[ $failures == 0 ]]
