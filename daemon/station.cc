@@ -9,6 +9,7 @@
 
 #include "core/pose_planner.h"
 #include "daemon/persistence.h"
+#include "drivers/transport/transport.h"
 #include "protocol/calibration_json.h"
 #include "protocol/observability_json.h"
 #include "protocol/sequencer_json.h"
@@ -91,15 +92,6 @@ nlohmann::json ParamsJson(const Estimate& e) {
         {"sigma", std::isfinite(e.sigma[k]) ? nlohmann::json(e.sigma[k]) : nlohmann::json()}};
   }
   return params;
-}
-
-std::string UtcNow() {
-  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char text[32];
-  std::strftime(text, sizeof(text), "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return text;
 }
 
 }  // namespace
@@ -380,7 +372,7 @@ void Station::WriteReport(std::size_t device, std::int64_t now_ns, bool now) {
   }
   auto error = std::make_shared<std::string>();
   Defer([dir = options_.state_dir, name = d.name, models,
-         error] { WriteDeviceReport(dir, name, models, UtcNow(), error.get()); },
+         error] { WriteDeviceReport(dir, name, models, drivers::UtcNowIso8601(), error.get()); },
         [this, name = d.name, error] {
           if (!error->empty()) Publish({{"class", "ERROR"}, {"device", name}, {"message", *error}});
         });
@@ -511,7 +503,7 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
           {"model", m.model->name()},
           {"version", m.active_version},
           {"software", kVersion},
-          {"time", UtcNow()},
+          {"time", drivers::UtcNowIso8601()},
           {"params", ParamsJson(e)},
           {"parameter_order", order},
           {"covariance", covariance},

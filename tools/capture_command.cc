@@ -15,15 +15,6 @@ namespace turncal::tools {
 
 namespace {
 
-std::string NowIso() {
-  const std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
 class CountingSink : public drivers::DecoderSink {
  public:
   void OnFrame(const drivers::FrameView&) override {}
@@ -39,7 +30,7 @@ int RunCapture(const std::string& spec_text, const std::string& output, const st
   }
   drivers::CaptureHeader header;
   header.devices.push_back({spec->name, spec->protocol, spec->baud, std::nullopt, std::nullopt});
-  header.created = NowIso();
+  header.created = drivers::UtcNowIso8601();
   header.note = note;
   auto writer = drivers::CaptureWriter::Create(output, header, &error);
   if (!writer) {

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "drivers/atomic_file.h"
+#include "drivers/transport/transport.h"
 #include "protocol/report_html.h"
 #include "tools/client_connection.h"
 #include "tools/report_state_dir.h"
@@ -18,15 +19,6 @@ namespace {
 int Fail(const std::string& message) {
   fmt::print(stderr, "turncal report: {}\n", message);
   return 2;
-}
-
-std::string UtcNow() {
-  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char text[32];
-  std::strftime(text, sizeof(text), "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return text;
 }
 
 // The running daemon's state directory (`status` names it).
@@ -69,7 +61,7 @@ int RunHtmlReport(const HtmlReportArgs& args) {
   const bool several = devices.size() > 1;
   protocol::ReportOptions options;
   options.source = state_dir;
-  options.generated_utc = UtcNow();
+  options.generated_utc = drivers::UtcNowIso8601();
   for (auto& [device, d] : devices) {
     for (std::size_t i = 0; i < d.calibrations.size(); ++i) {
       const std::string note = AttachJournalRecords(state_dir, &d.calibrations[i]);

@@ -3,6 +3,8 @@
 #include <libserialport.h>
 #include <time.h>
 
+#include <ctime>
+
 #include "drivers/transport/transport_impl.h"
 
 namespace turncal::drivers {
@@ -29,6 +31,15 @@ std::int64_t MonotonicNowNs() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+std::string UtcNowIso8601() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char text[32];
+  std::strftime(text, sizeof(text), "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return text;
 }
 
 std::unique_ptr<Transport> MakeTransport(boost::asio::io_context& io, const std::string& port,

@@ -63,6 +63,9 @@ class Transport {
 
 // Host monotonic time in nanoseconds (the receive-time stamp of every chunk).
 std::int64_t MonotonicNowNs();
+// The wall clock as UTC, ISO 8601 to the second ("2026-11-22T15:16:05Z"): the time stamps of
+// calibrations, reports and capture headers.
+std::string UtcNowIso8601();
 
 // The transport for a PORT of DESIGN.md: a device path, tcp://HOST:PORT or
 // replay:FILE[?speed=X|max].
