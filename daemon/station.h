@@ -115,7 +115,7 @@ class Station : public ReplayTarget {
   // (the service calls it before it stops; OnFinish does for replays). Reports are otherwise
   // written from TickDevice/OnTick, at most every kReportIntervalNs per device.
   void WriteDueReports();
-  static constexpr std::int64_t kReportIntervalNs = 10'000'000'000;
+  static constexpr std::int64_t kReportIntervalNs = 60'000'000'000;
 
   // CPU time of this thread (ms) that the loop spent handling a captured pose (its answer, the
   // journal append queued, the update queued; with no executor also the solve): the last one and
