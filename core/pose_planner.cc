@@ -8,12 +8,11 @@
 #include <cmath>
 
 #include "core/mag22_gauge.h"
+#include "core/units.h"
 
 namespace turncal {
 
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 bool AxisValid(const AxisRange& a, const char* name, std::string* error) {
   if (!std::isfinite(a.min_deg) || !std::isfinite(a.max_deg) || !std::isfinite(a.step_deg) ||
@@ -33,8 +32,8 @@ bool AxisValid(const AxisRange& a, const char* name, std::string* error) {
 
 std::vector<double> AxisValues(const AxisRange& a) {
   std::vector<double> v;
-  if (a.step_deg <= 0) return {a.min_deg * kDeg};
-  for (double x = a.min_deg; x <= a.max_deg + 1e-9; x += a.step_deg) v.push_back(x * kDeg);
+  if (a.step_deg <= 0) return {a.min_deg * kRadPerDeg};
+  for (double x = a.min_deg; x <= a.max_deg + 1e-9; x += a.step_deg) v.push_back(x * kRadPerDeg);
   return v;
 }
 

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -10,6 +11,8 @@ namespace {
 
 constexpr std::uint32_t kBadFlags =
     kAccSaturated | kGyrSaturated | kMagSaturated | kStatusError | kClipping;
+// Beyond a window, how long a tick lets a stream be silent before it has stopped (CheckTimeout).
+constexpr double kReadStallAllowanceS = 2.0;
 
 std::string PoseText(const TablePose& p) {
   return fmt::format("phi {:.3f} gamma {:.3f} psi {:.3f} deg", p.phi_rad * 180 / M_PI,
@@ -31,6 +34,9 @@ bool SequencerOptions::IsValid(std::string* error) const {
   }
   if (!(max_bad_fraction >= 0 && max_bad_fraction < 1)) {
     return fail("the bad-sample fraction must be in [0, 1)");
+  }
+  if (!(max_lost_fraction >= 0 && max_lost_fraction < 1)) {
+    return fail("the lost-sample fraction must be in [0, 1)");
   }
   if (!(pose_check_false_alarm > 0 && pose_check_false_alarm < 1)) {
     return fail("the pose-check false alarm must be in (0, 1)");
@@ -160,26 +166,71 @@ void Sequencer::NextScheduled(double t_s) {
 
 void Sequencer::Push(const Sample& sample) { Push(ToStillSample(sample)); }
 
-std::uint32_t Sequencer::CountLost(const StillSample& s) {
-  std::uint32_t lost = 0;
+// A device-clock jump this large or larger counts no lost samples (a clock reset, not a gap).
+constexpr double kMaxSteps = 1e7;
+
+std::optional<std::int64_t> Sequencer::StepsAhead(const StillSample& s) const {
   if (s.counter) {
-    if (last_counter_) {
-      const auto gap = static_cast<std::uint16_t>(*s.counter - *last_counter_ - 1u);
-      if (gap < 0x8000) lost = gap;
-    }
-    last_counter_ = s.counter;
-  } else if (s.t_device_s) {
-    const NoiseProfile* p = noise();
-    if (last_device_s_ && p && p->device_period_s && *p->device_period_s > 0) {
-      const double k = std::round((*s.t_device_s - *last_device_s_) / *p->device_period_s) - 1;
-      if (k > 0 && k < 1e7) lost = static_cast<std::uint32_t>(k);
-    }
+    if (!last_counter_) return std::nullopt;
+    // 16 bits wrap: -32768..32767 periods.
+    return static_cast<std::int16_t>(static_cast<std::uint16_t>(*s.counter - *last_counter_));
   }
+  const NoiseProfile* p = noise();
+  if (!s.t_device_s || !last_device_s_ || !p || !p->device_period_s || !(*p->device_period_s > 0)) {
+    return std::nullopt;
+  }
+  const double k = std::round((*s.t_device_s - *last_device_s_) / *p->device_period_s);
+  if (std::isnan(k)) return std::nullopt;
+  return static_cast<std::int64_t>(std::clamp(k, -kMaxSteps, kMaxSteps));
+}
+
+std::uint32_t Sequencer::CountLost(const StillSample& s) {
+  const std::optional<std::int64_t> steps = StepsAhead(s);
+  if (s.counter) last_counter_ = s.counter;
   if (s.t_device_s) last_device_s_ = s.t_device_s;
-  return lost;
+  return steps && *steps > 1 && *steps < kMaxSteps ? static_cast<std::uint32_t>(*steps - 1) : 0u;
 }
 
 void Sequencer::Push(StillSample s) {
+  // A sample whose counter or device clock breaks the sequence (backwards, or more samples ahead
+  // than half a window: an interruption) waits for its successor. A successor that continues the
+  // old sequence shows the jump was a corrupted counter or time stamp (a bit error the frame's
+  // checksum missed, ~1 in 16 double errors for Xbus's 8-bit sum): that sample is dropped
+  // (counted as flagged), not taken for an interruption. Otherwise the jump was real.
+  const auto plausible = [this](std::optional<std::int64_t> steps) {
+    return !steps ||
+           (*steps >= 1 && *steps - 1 <= static_cast<std::int64_t>(detector_->window() / 2));
+  };
+  if (jumped_) {
+    const StillSample jumped = *jumped_;
+    jumped_.reset();
+    const std::optional<std::int64_t> steps = StepsAhead(s);
+    if (steps && plausible(steps)) {
+      ++pending_flagged_;
+      ++totals_.flagged;
+      if (excluded_) excluded_(jumped, "corrupt counter");
+      // It stood for the sample after the last one (unless `s` is that one): not lost.
+      if (*steps > 1) {
+        if (last_counter_) ++*last_counter_;
+        if (last_device_s_ && noise()->device_period_s)
+          *last_device_s_ += *noise()->device_period_s;
+      }
+    } else {
+      Accept(jumped);
+    }
+  }
+  if (detector_ && !plausible(StepsAhead(s))) {
+    jumped_ = s;
+    return;
+  }
+  Accept(s);
+}
+
+void Sequencer::Accept(StillSample s) {
+  last_read_ns_ = s.t_host_ns;
+  // From here on a sample's time is when its device sent it, on the host clock (HostClock): a
+  // backlog read at once after an announcement belongs before it.
+  s.t_host_ns = clock_.Map(s.t_host_ns, s.t_device_s);
   CheckTimeout(s.t_host_ns);
   const double t_s = s.t_s();
   const std::uint32_t lost = CountLost(s);
@@ -397,11 +448,19 @@ void Sequencer::Commit(const StillSample& s) {
 }
 
 void Sequencer::Complete(double t_s) {
-  if (counts_.bad_fraction() > options_.max_bad_fraction) {
-    const std::string why = fmt::format(
-        "too many bad samples: {} flagged, {} outliers, {} lost of {} ({:.1f}% > {:.1f}%)",
-        counts_.flagged, counts_.outliers, counts_.lost, counts_.used + counts_.bad(),
-        100 * counts_.bad_fraction(), 100 * options_.max_bad_fraction);
+  const bool too_bad = counts_.bad_fraction() > options_.max_bad_fraction;
+  if (too_bad || counts_.lost_fraction() > options_.max_lost_fraction) {
+    const std::string why =
+        too_bad ? fmt::format(
+                      "too many bad samples: {} flagged, {} outliers of {} ({:.1f}% > {:.1f}%); "
+                      "{} lost",
+                      counts_.flagged, counts_.outliers, counts_.used + counts_.bad(),
+                      100 * counts_.bad_fraction(), 100 * options_.max_bad_fraction, counts_.lost)
+                : fmt::format(
+                      "too many lost samples: {} lost of {} ({:.1f}% > {:.1f}%; a bad cable, "
+                      "line noise or an overrun?)",
+                      counts_.lost, counts_.used + counts_.bad(), 100 * counts_.lost_fraction(),
+                      100 * options_.max_lost_fraction);
     if (scheduled()) {
       SkipSegment(t_s, why);
     } else {
@@ -501,14 +560,17 @@ void Sequencer::SkipSegment(double t_s, std::string reason) {
 }
 
 void Sequencer::CheckTimeout(std::int64_t now_ns) {
-  // A stream that stops during the dwell: nothing will complete the pose.
-  if (state_ == State::kCollecting && last_host_ns_ &&
-      static_cast<double>(now_ns) * 1e-9 - static_cast<double>(*last_host_ns_) * 1e-9 >
-          options_.stillness.window_s) {
-    Interrupt(
-        static_cast<double>(now_ns) * 1e-9,
-        fmt::format("the stream stopped during the dwell (no sample for {:.2f} s)",
-                    (static_cast<double>(now_ns) - static_cast<double>(*last_host_ns_)) * 1e-9));
+  // A stream that stops during the dwell: nothing will complete the pose. A gap between samples
+  // is an interruption (Accept, by sending times); this is for a stream that stops for good, so
+  // it goes by when the last sample was read, with an allowance for the daemon's own stalls: a
+  // tick can run after a stall before the bytes that came meanwhile are read (0.6 s stalls in
+  // CI; a replay ticks at every record, elsewhere than the live 50 ms ticks fell).
+  if (state_ == State::kCollecting && last_read_ns_ &&
+      static_cast<double>(now_ns - *last_read_ns_) * 1e-9 >
+          options_.stillness.window_s + kReadStallAllowanceS) {
+    Interrupt(static_cast<double>(now_ns) * 1e-9,
+              fmt::format("the stream stopped during the dwell (nothing read for {:.2f} s)",
+                          static_cast<double>(now_ns - *last_read_ns_) * 1e-9));
     return;
   }
   if (state_ != State::kWaiting || !announced_) return;
@@ -536,6 +598,13 @@ void Sequencer::Tick(std::int64_t now_ns) { CheckTimeout(now_ns); }
 
 void Sequencer::Finish(std::int64_t now_ns) {
   const double t_s = static_cast<double>(now_ns) * 1e-9;
+  if (jumped_) {
+    // No successor to vouch for its jump.
+    ++pending_flagged_;
+    ++totals_.flagged;
+    if (excluded_) excluded_(*jumped_, "corrupt counter");
+    jumped_.reset();
+  }
   if (held_) {
     ++pending_outliers_;
     ++totals_.outliers;

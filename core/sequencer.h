@@ -20,10 +20,15 @@
 // Samples with saturation, clipping or status-error flags, samples missing a triad the noise
 // profile uses, isolated outliers (StillnessDetector::IsOutlier) and lost samples (counter or
 // device-clock gaps) are excluded and counted against the pose whose window they fall in; more
-// than max_bad_fraction of them rejects the pose. Memory is fixed once the noise is known: the
+// than max_bad_fraction flagged and outliers, or more than max_lost_fraction lost, rejects the
+// pose. Lost samples are apart: a checksum that fails on line noise loses samples at random,
+// which leaves the mean of the rest unbiased (only its n smaller); flags and outliers say the
+// device or the table misbehaved. Memory is fixed once the noise is known: the
 // detector's window and three Welford accumulators, whatever the dwell.
 //
-// Pure computation: time comes from the samples (host receive time) and from Tick().
+// Pure computation: time comes from the samples and from Tick(). A sample's time is when it was
+// sent, on the host clock: its receive time, or earlier when its device clock shows it was read
+// late, in a backlog (HostClock).
 
 #include <cstdint>
 #include <functional>
@@ -32,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "core/host_clock.h"
 #include "core/pose_check.h"
 #include "core/pose_record.h"
 #include "core/sample.h"
@@ -44,7 +50,8 @@ struct SequencerOptions {
   double dwell_s = 3.0;            // of samples to average per pose
   double settle_guard_s = 0.5;     // stillness required beyond one window before samples count
   double still_timeout_s = 20.0;   // from the announcement until collection starts
-  double max_bad_fraction = 0.02;  // flagged + outliers + lost over the dwell
+  double max_bad_fraction = 0.02;  // flagged + outliers over the dwell
+  double max_lost_fraction = 0.5;  // lost over the dwell (counter or device-clock gaps)
   double pose_check_false_alarm = 1e-6;
   double progress_step = 0.1;  // a progress event every this fraction of the dwell
   StillnessOptions stillness;
@@ -72,9 +79,12 @@ struct SampleCounts {
   std::int64_t outliers = 0;  // isolated samples far from the window's median
   std::int64_t lost = 0;      // counter or device-clock gaps
   std::int64_t bad() const { return flagged + outliers + lost; }
-  double bad_fraction() const {
+  // Of every sample the dwell spanned (used + bad).
+  double bad_fraction() const { return Fraction(flagged + outliers); }
+  double lost_fraction() const { return Fraction(lost); }
+  double Fraction(std::int64_t n) const {
     const auto all = used + bad();
-    return all > 0 ? static_cast<double>(bad()) / static_cast<double>(all) : 0.0;
+    return all > 0 ? static_cast<double>(n) / static_cast<double>(all) : 0.0;
   }
 };
 
@@ -143,6 +153,10 @@ class Sequencer {
   void Reject(double t_s, std::string reason);
   void SkipSegment(double t_s, std::string reason);
   void NextScheduled(double t_s);
+  void Accept(StillSample s);
+  // Sample periods from the last sample to `s` by the device's counter or clock (negative:
+  // backwards); nullopt when neither tells.
+  std::optional<std::int64_t> StepsAhead(const StillSample& s) const;
   std::uint32_t CountLost(const StillSample& s);
   void CheckTimeout(std::int64_t now_ns);
   void Interrupt(double t_s, const std::string& why);
@@ -177,10 +191,14 @@ class Sequencer {
 
   // Stream state.
   std::optional<StillSample> held_;  // a possible outlier waiting for its successor
+  std::optional<StillSample>
+      jumped_;  // its counter jumped: corrupt, or a real gap? (its successor)
   std::uint32_t pending_lost_ = 0, pending_flagged_ = 0, pending_outliers_ = 0;
   std::optional<std::uint32_t> last_counter_;
   std::optional<double> last_device_s_;
-  std::optional<std::int64_t> last_host_ns_;
+  std::optional<std::int64_t> last_host_ns_;  // the last sample's sending time (HostClock)
+  std::optional<std::int64_t> last_read_ns_;  // and when it was read
+  HostClock clock_;                           // device time -> host time of sending
   StillFinding last_motion_;
   double last_motion_t_s_ = -1.0;
   std::string last_noise_failure_;

@@ -135,8 +135,9 @@ void NoiseMeter::Restart() {
 }
 
 NoiseMeter::Status NoiseMeter::Add(const StillSample& s) {
-  if (!samples_.empty() &&
-      static_cast<double>(s.t_host_ns - samples_.front().t_host_ns) * 1e-9 >= options_.duration_s) {
+  if (!samples_.empty() && (static_cast<double>(s.t_host_ns - samples_.front().t_host_ns) * 1e-9 >=
+                                options_.duration_s ||
+                            samples_.size() >= kMaxMeterSamples)) {
     return Finish();
   }
   samples_.push_back(s);
@@ -148,19 +149,33 @@ NoiseMeter::Status NoiseMeter::Finish() {
     failure_ = why;
     return Status::kRejected;
   };
-  std::uint8_t present = 0x7;
-  for (const auto& s : samples_) present &= s.present;
+  // The triads the device sends: those in most samples. A sample without one of them (a frame
+  // that passed its checksum corrupted, e.g. an Xbus item id flipped under the 8-bit checksum)
+  // is left out below, instead of taking the triad out of the session's profile.
+  std::uint8_t present = 0;
+  for (int t = 0; t < 3; ++t) {
+    std::size_t with = 0;
+    for (const auto& s : samples_) with += s.has(t) ? 1 : 0;
+    if (2 * with > samples_.size()) present |= static_cast<std::uint8_t>(1u << t);
+  }
   if (!options_.use_mag) present &= static_cast<std::uint8_t>(~(1u << kTriadMag));
   if (!(present & (1u << kTriadAcc)) && !(present & (1u << kTriadGyr))) {
     return reject("the samples carry neither accelerometer nor gyro");
   }
-  // Isolated outliers: beyond outlier_k robust sigmas (1.4826 MAD) of the attempt's median.
-  std::vector<double> values(samples_.size());
   std::vector<char> keep(samples_.size(), 1);
+  for (std::size_t i = 0; i < samples_.size(); ++i) {
+    if ((samples_[i].present & present) != present) keep[i] = 0;
+  }
+  // Isolated outliers: beyond outlier_k robust sigmas (1.4826 MAD) of the attempt's median.
+  std::vector<double> values;
+  values.reserve(samples_.size());
   for (int t = 0; t < 3; ++t) {
     if (!(present & (1u << t))) continue;
     for (int a = 0; a < 3; ++a) {
-      for (std::size_t i = 0; i < samples_.size(); ++i) values[i] = samples_[i].v[t][a];
+      values.clear();
+      for (std::size_t i = 0; i < samples_.size(); ++i) {
+        if (samples_[i].has(t)) values.push_back(samples_[i].v[t][a]);
+      }
       auto mid = values.begin() + static_cast<long>(values.size() / 2);
       std::nth_element(values.begin(), mid, values.end());
       const double med = *mid;
@@ -168,6 +183,7 @@ NoiseMeter::Status NoiseMeter::Finish() {
       std::nth_element(values.begin(), mid, values.end());
       const double robust = std::max(kMadToSigma * *mid, kFloat32Resolution * std::abs(med));
       for (std::size_t i = 0; i < samples_.size(); ++i) {
+        if (!keep[i]) continue;
         const double x = samples_[i].v[t][a];
         if (!std::isfinite(x) || std::abs(x - med) > options_.outlier_k * robust) keep[i] = 0;
       }

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <memory>
 #include <nlohmann/json.hpp>
 
@@ -36,9 +37,12 @@ class SequencerTarget : public ReplayTarget {
   void OnSample(int device, const Sample& sample) override {
     sequencers_[static_cast<std::size_t>(device)]->Push(sample);
   }
-  bool OnAnnounce(const Announcement& a, std::string* error) override {
+  bool OnAnnounce(const Announcement& a, const std::vector<int>& devices,
+                  std::string* error) override {
     bool ok = true;
-    for (auto& s : sequencers_) ok = s->Announce(a, error) && ok;
+    for (std::size_t i = 0; i < sequencers_.size(); ++i) {
+      if (AnnouncedTo(devices, static_cast<int>(i))) ok = sequencers_[i]->Announce(a, error) && ok;
+    }
     return ok;
   }
   void OnTick(std::int64_t now_ns) override {
@@ -96,8 +100,13 @@ bool ReplayInto(drivers::CaptureReader* reader, ReplayTarget* target, bool annou
     last_ns = std::max(last_ns, t_ns);
     if (r.type == drivers::RecordType::kEvent) {
       const auto j = nlohmann::json::parse(r.payload.begin(), r.payload.end(), nullptr, false);
-      if (j.is_object() && j.value("event", "") == "dialogue" && r.device < decoders.size()) {
-        in_dialogue[r.device] = j.value("state", "") == "begin";
+      // A key's text; "" when absent or not a string (json::value() would throw).
+      const auto text = [&j](const char* key) {
+        const auto it = j.find(key);
+        return it != j.end() && it->is_string() ? it->get<std::string>() : std::string();
+      };
+      if (j.is_object() && text("event") == "dialogue" && r.device < decoders.size()) {
+        in_dialogue[r.device] = text("state") == "begin";
         // Live, a device being (re)configured has no decoder: what the old one held is finished.
         if (in_dialogue[r.device]) decoders[r.device]->Finish();
         ++stats->dialogue_events;
@@ -112,11 +121,30 @@ bool ReplayInto(drivers::CaptureReader* reader, ReplayTarget* target, bool annou
         continue;
       }
       ++stats->pose_commands;
-      if (!ok) {
+      // turncald --record lists the devices a pose went to (a retry goes to one); a capture
+      // without the list announces it to every device.
+      std::vector<int> to;
+      bool listed_ok = true;
+      if (const auto listed = j.find("devices"); ok && listed != j.end()) {
+        listed_ok = listed->is_array();
+        for (const auto& name : listed_ok ? *listed : nlohmann::json::array()) {
+          const auto& header = reader->header().devices;
+          const auto it = std::find_if(header.begin(), header.end(), [&](const auto& h) {
+            return name.is_string() && h.name == name.get<std::string>();
+          });
+          if (it == header.end()) {
+            listed_ok = false;
+            break;
+          }
+          to.push_back(static_cast<int>(it - header.begin()));
+        }
+        if (!listed_ok) why = "pose: 'devices' must list device names of the capture's header";
+      }
+      if (!ok || !listed_ok) {
         stats->warnings.push_back(fmt::format("event at {:.3f} s: {}", t_ns * 1e-9, why));
       } else if (!announce) {
         ++stats->ignored_events;
-      } else if (!target->OnAnnounce(a, &why)) {
+      } else if (!target->OnAnnounce(a, to, &why)) {
         stats->warnings.push_back(fmt::format("event at {:.3f} s: {}", t_ns * 1e-9, why));
       }
       continue;

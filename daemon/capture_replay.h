@@ -5,6 +5,7 @@
 // announcements). ReplayInto feeds any ReplayTarget (the Station; one Sequencer per device for
 // `turncal sequence`).
 
+#include <algorithm>
 #include <functional>
 #include <optional>
 #include <string>
@@ -20,11 +21,18 @@ class ReplayTarget {
  public:
   virtual ~ReplayTarget() = default;
   virtual void OnSample(int device, const Sample& sample) = 0;
-  // False with *error when the announcement is refused (schedule mode, bad dwell).
-  virtual bool OnAnnounce(const Announcement& announcement, std::string* error) = 0;
+  // To the devices listed (indices in the capture's header; empty: every device). False with
+  // *error when the announcement is refused (schedule mode, bad dwell).
+  virtual bool OnAnnounce(const Announcement& announcement, const std::vector<int>& devices,
+                          std::string* error) = 0;
   virtual void OnTick(std::int64_t now_ns) = 0;
   virtual void OnFinish(std::int64_t now_ns) = 0;
 };
+
+// Whether an announcement to `devices` (empty: every device) goes to device `i`.
+inline bool AnnouncedTo(const std::vector<int>& devices, int i) {
+  return devices.empty() || std::find(devices.begin(), devices.end(), i) != devices.end();
+}
 
 struct ReplayStats {
   std::vector<drivers::DecoderCounters> decoders;  // per device of the header

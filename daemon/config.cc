@@ -131,7 +131,11 @@ bool ParseGate(const toml::table& t, const std::string& context, const std::stri
       gate->parameter_tolerance[std::string(key.str())] = *v;
     }
   }
-  return gate->IsValid(error);
+  if (!gate->IsValid(error)) {
+    *error = fmt::format("{}: {}: {}", Where(t, source), context, *error);
+    return false;
+  }
+  return true;
 }
 
 }  // namespace
@@ -172,8 +176,9 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
       std::string name;
       if (auto v = u.value<std::string>()) {
         name = *v;
-      } else if (auto i = u.value<std::int64_t>(); i && *i >= 0) {
-        name = std::to_string(*i);
+      } else if (const auto* i = u.as_integer(); i && i->get() >= 0) {
+        // An integer node only: value<std::int64_t>() would convert a float (1e301: undefined).
+        name = std::to_string(i->get());
       } else {
         *error = fmt::format("{}: 'control_users' holds user names or uids", Where(u, source));
         return false;
@@ -200,8 +205,8 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   if (const toml::table* t = root["sequencer"].as_table()) {
     if (!OnlyKeys(*t,
                   {"dwell_s", "window_s", "settle_guard_s", "still_timeout_s", "startup_s",
-                   "max_bad_fraction", "false_alarm", "outlier_k", "gyr_bias_drift_radps",
-                   "pose_check_false_alarm"},
+                   "max_bad_fraction", "max_lost_fraction", "false_alarm", "outlier_k",
+                   "gyr_bias_drift_radps", "pose_check_false_alarm"},
                   "[sequencer]", source, error)) {
       return false;
     }
@@ -212,6 +217,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
         !GetNumber(*t, "still_timeout_s", &q.still_timeout_s, source, error) ||
         !GetNumber(*t, "startup_s", &q.noise_meter.duration_s, source, error) ||
         !GetNumber(*t, "max_bad_fraction", &q.max_bad_fraction, source, error) ||
+        !GetNumber(*t, "max_lost_fraction", &q.max_lost_fraction, source, error) ||
         !GetNumber(*t, "false_alarm", &q.stillness.false_alarm, source, error) ||
         !GetNumber(*t, "outlier_k", &q.stillness.outlier_k, source, error) ||
         !GetNumber(*t, "gyr_bias_drift_radps", &q.stillness.gyr_bias_drift_radps, source, error) ||
@@ -270,8 +276,24 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
           !GetNumber(*t, "baud", &baud, source, error)) {
         return false;
       }
-      std::string spec = fmt::format("{}={}:{}", name, protocol, port);
-      if (baud > 0) spec += fmt::format("@{}", static_cast<long long>(baud));
+      if (!drivers::ParseProtocol(protocol)) {
+        *error = fmt::format("{}: device: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)",
+                             Where(d, source), protocol);
+        return false;
+      }
+      if (const toml::node* bn = t->get("baud")) {
+        // As on the command line (drivers/device_spec.h); never a silent default.
+        if (!(baud >= 300 && baud <= 4000000 && baud == std::floor(baud))) {
+          *error = fmt::format("{}: 'baud' must be a whole number from 300 to 4000000",
+                               Where(*bn, source));
+          return false;
+        }
+      } else {
+        baud = drivers::DeviceSpec().baud;
+      }
+      // The baud always given: an '@' in the port stays in the port.
+      const std::string spec =
+          fmt::format("{}={}:{}@{}", name, protocol, port, static_cast<long long>(baud));
       std::string why;
       auto parsed = drivers::ParseDeviceSpec(spec, &why);
       if (!parsed) {

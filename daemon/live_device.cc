@@ -58,6 +58,9 @@ drivers::xbus::OutputConfiguration XbusOutputs(double rate_hz) {
 // The counters of a decoder replaced after a reconfiguration, kept in the device's totals.
 void AddCounters(drivers::DecoderCounters* into, const drivers::DecoderCounters& c) {
   into->bytes_in += c.bytes_in;
+  into->bytes_in_frames += c.bytes_in_frames;
+  into->bad_structure += c.bad_structure;
+  into->timeouts += c.timeouts;
   into->frames += c.frames;
   into->bad_checksums += c.bad_checksums;
   into->bytes_skipped += c.bytes_skipped;
@@ -199,6 +202,7 @@ void LiveDevice::OnData(std::span<const std::uint8_t> bytes, std::int64_t t_host
     return;
   }
   if (link_ && state_ == "configuring") {
+    bytes_dialogue_ += bytes.size();
     link_->Deliver(bytes);
     return;
   }
@@ -321,6 +325,14 @@ nlohmann::json LiveDevice::Status() const {
             {"disconnects", t.disconnects},
             {"configure_failures", configure_failures_},
             {"bytes_ignored", bytes_ignored_},
+            // Every byte read is accounted for: bytes_read = bytes_dialogue + bytes_ignored +
+            // bytes_decoded, and bytes_decoded = bytes_in_frames + skipped_bytes + pending_bytes.
+            {"bytes_dialogue", bytes_dialogue_},
+            {"bytes_decoded", c.bytes_in},
+            {"bytes_in_frames", c.bytes_in_frames},
+            {"pending_bytes", decoder_ ? decoder_->pending_bytes() : 0},
+            {"bad_structure", c.bad_structure},
+            {"timeouts", c.timeouts},
             {"frames", c.frames},
             {"samples", c.samples},
             {"bad_checksums", c.bad_checksums},

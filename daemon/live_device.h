@@ -114,6 +114,7 @@ class LiveDevice {
   std::string message_;
   nlohmann::json identity_;
   std::uint64_t samples_ = 0, bytes_ignored_ = 0, configure_failures_ = 0;
+  std::uint64_t bytes_dialogue_ = 0;  // delivered to a configuration dialogue
   std::uint64_t rate_samples_ = 0;
   std::int64_t rate_t_ns_ = 0;
   double rate_hz_ = 0.0;

@@ -18,7 +18,7 @@ namespace turncal::daemon {
 namespace fs = std::filesystem;
 
 PoseJournal::~PoseJournal() {
-  if (file_) std::fclose(file_);
+  if (fd_ >= 0) ::close(fd_);
 }
 
 bool PoseJournal::Open(const std::string& state_dir, std::string* error) {
@@ -29,24 +29,47 @@ bool PoseJournal::Open(const std::string& state_dir, std::string* error) {
     return false;
   }
   const std::string path = (fs::path(state_dir) / "journal.jsonl").string();
-  file_ = std::fopen(path.c_str(), "ae");
-  if (!file_) {
+  fd_ = ::open(path.c_str(), O_RDWR | O_APPEND | O_CREAT | O_CLOEXEC, 0644);
+  if (fd_ < 0) {
     *error = fmt::format("cannot open the journal '{}': {}", path, std::strerror(errno));
     return false;
+  }
+  // A line torn by a crash or a full disk is ended here, so it spoils only itself (Load skips
+  // it), not the next record.
+  const off_t size = ::lseek(fd_, 0, SEEK_END);
+  char last = '\n';
+  if (size > 0 && ::pread(fd_, &last, 1, size - 1) == 1 && last != '\n') {
+    if (::write(fd_, "\n", 1) != 1 || ::fsync(fd_) != 0) {
+      *error = fmt::format("cannot repair the journal '{}': {}", path, std::strerror(errno));
+      ::close(fd_);
+      fd_ = -1;
+      return false;
+    }
   }
   return true;
 }
 
 bool PoseJournal::Append(const std::string& device, const PoseRecord& record, std::string* error) {
-  if (!file_) {
+  if (fd_ < 0) {
     *error = "the journal is not open";
     return false;
   }
   const std::string line =
       nlohmann::json{{"device", device}, {"record", protocol::ToJson(record)}}.dump() + "\n";
-  if (std::fwrite(line.data(), 1, line.size(), file_) != line.size() || std::fflush(file_) != 0 ||
-      ::fsync(::fileno(file_)) != 0) {
-    *error = fmt::format("cannot append to the journal: {}", std::strerror(errno));
+  // Unbuffered: a failed write leaves nothing behind in a buffer to appear later.
+  std::size_t done = 0;
+  while (done < line.size()) {
+    const ssize_t n = ::write(fd_, line.data() + done, line.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      *error = fmt::format("cannot append to the journal: {}",
+                           n < 0 ? std::strerror(errno) : "nothing written");
+      return false;
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  if (::fsync(fd_) != 0) {
+    *error = fmt::format("cannot append to the journal: fsync: {}", std::strerror(errno));
     return false;
   }
   return true;

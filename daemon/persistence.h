@@ -32,7 +32,8 @@ class PoseJournal {
   ~PoseJournal();
   // Opens (creating the directory and file) for appending. False with a message.
   bool Open(const std::string& state_dir, std::string* error);
-  // Appends one record and fsyncs it. False with a message (the entry may be missing then).
+  // Appends one record and fsyncs it. False with a message (the entry may be missing or torn
+  // then; the next Open ends a torn line).
   bool Append(const std::string& device, const PoseRecord& record, std::string* error);
   // Every whole entry of the journal in `state_dir` (none when there is no journal). Lines that
   // do not parse (a torn last line) are counted in *skipped.
@@ -40,7 +41,7 @@ class PoseJournal {
                    std::string* error);
 
  private:
-  std::FILE* file_ = nullptr;
+  int fd_ = -1;
 };
 
 // Writes calibrations/DEVICE.MODEL.json atomically; the calibration it replaces is copied to

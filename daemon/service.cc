@@ -134,13 +134,6 @@ void AppendRaw(std::string* out, const Sample& s) {
   }
 }
 
-// Mutating commands need a peer the configuration allows.
-bool IsMutating(const std::string& cmd) {
-  return cmd == "pose" || cmd == "reset" || cmd == "publish";
-}
-
-const char* kCommands = "status, devices, pose, watch, result, next_pose, reset, publish, version";
-
 }  // namespace
 
 Service::Service(ServiceOptions options)
@@ -445,7 +438,7 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
     if (!w.device.empty() && w.device != sample.device) continue;
     if (w.max_rate_hz > 0) {
       std::int64_t& last = s->last_sample_ns[sample.device];
-      if (sample.t_host_ns - last < static_cast<std::int64_t>(1e9 / w.max_rate_hz)) continue;
+      if (sample.t_host_ns - last < w.MinIntervalNs()) continue;
       last = sample.t_host_ns;
     }
     if (w.corrected) {
@@ -565,6 +558,8 @@ nlohmann::json Service::StatusJson() const {
           {"release", kVersion},
           {"uptime_s", static_cast<double>(drivers::MonotonicNowNs() - started_ns_) / 1e9},
           {"state_dir", options_.state_dir},
+          // What reached the state directory (writes, failed writes, the last failure).
+          {"persistence", station_ ? station_->PersistenceStatus() : nlohmann::json()},
           {"clients", server_ ? server_->sessions().size() : 0},
           // The loop's CPU ms per captured pose (its answer, journal append and update queued),
           // and the solve worker's longest pose update (wall ms: solve, observability, gate).
@@ -603,12 +598,13 @@ void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
     client->Reply(message);
   };
   auto error = [&](const std::string& message) { reply(protocol::ErrorMessage(message)); };
-  if (!request.contains("cmd") || !request["cmd"].is_string()) {
-    error(std::string("malformed request: no \"cmd\" (commands: ") + kCommands + ")");
+  std::string cmd, why;
+  if (!protocol::ParseCommand(request, &cmd, &why)) {
+    error(why);
     return;
   }
-  const std::string cmd = request["cmd"].get<std::string>();
-  if (IsMutating(cmd) && !client->control()) {
+  // Mutating commands need a peer the configuration allows.
+  if (protocol::IsMutatingCommand(cmd) && !client->control()) {
     error(
         fmt::format("'{}' refused: uid {} may not change the session (control_users in the "
                     "configuration)",
@@ -625,7 +621,11 @@ void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
   } else if (cmd == "result") {
     reply(station_->Result());
   } else if (cmd == "next_pose") {
-    std::string device = request.value("device", "");
+    std::string device;
+    if (!protocol::ParseNextPoseRequest(request, &device, &why)) {
+      error(why);
+      return;
+    }
     if (device.empty() && !options_.devices.empty()) device = options_.devices.front().name;
     reply(station_->NextPose(device));
   } else if (cmd == "pose") {
@@ -636,8 +636,6 @@ void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
     HandleReset(client, request, id);
   } else if (cmd == "publish") {
     HandlePublish(client, request, id);
-  } else {
-    error(fmt::format("unknown command '{}' (commands: {})", cmd, kCommands));
   }
 }
 
@@ -649,17 +647,13 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
     client->Reply(e);
   };
   Announcement a;
-  bool is_pose = false;
-  std::string why;
-  if (!protocol::ParsePoseCommand(request, drivers::MonotonicNowNs(), &a, &is_pose, &why)) {
+  std::string only, why;
+  if (!protocol::ParsePoseRequest(request, drivers::MonotonicNowNs(), &a, &only, &why)) {
     error(why);
     return;
   }
   if (!request.contains("index")) a.index = next_pose_index_;
   std::vector<std::size_t> targets;
-  const std::string only = request.contains("device") && request["device"].is_string()
-                               ? request["device"].get<std::string>()
-                               : "";
   nlohmann::json skipped = nlohmann::json::object();
   for (std::size_t i = 0; i < devices_.size(); ++i) {
     if (!only.empty() && devices_[i]->spec().name != only) continue;
@@ -697,12 +691,13 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
   }
   next_pose_index_ = std::max(next_pose_index_, a.index + 1);
   if (recorder_) {
-    // The pose as a capture event (replays announce it to every device of the capture).
+    // The pose as a capture event, with the devices it went to (a replay announces it to those).
     nlohmann::json event = {{"event", "pose"},
                             {"index", a.index},
                             {"phi_deg", request["phi_deg"]},
                             {"gamma_deg", request["gamma_deg"]},
-                            {"psi_deg", request["psi_deg"]}};
+                            {"psi_deg", request["psi_deg"]},
+                            {"devices", names}};
     if (a.dwell_s) event["dwell_s"] = *a.dwell_s;
     // Recorded at the announcement's own time: the replay's sequencer then starts the pose's
     // window at the same sample as live (it takes only samples received after the command).
@@ -717,40 +712,21 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
 void Service::HandleWatch(const std::shared_ptr<ClientSession>& client,
                           const nlohmann::json& request, const nlohmann::json& id) {
   nlohmann::json reply;
-  if (request.contains("enable") && request["enable"].is_boolean() &&
-      !request["enable"].get<bool>()) {
+  std::optional<WatchSpec> spec;
+  std::string error;
+  if (!protocol::ParseWatchRequest(request, &spec, &error)) {
+    reply = protocol::ErrorMessage(error);
+  } else if (!spec) {
     client->watch.reset();
     reply = {{"class", "WATCH"}, {"enable", false}};
   } else {
-    WatchSpec w;
-    auto flag = [&](const char* key, bool* out) {
-      if (!request.contains(key)) return true;
-      if (!request[key].is_boolean()) return false;
-      *out = request[key].get<bool>();
-      return true;
-    };
-    bool ok = flag("events", &w.events) && flag("corrected", &w.corrected) && flag("raw", &w.raw) &&
-              flag("uncertainty", &w.uncertainty);
-    if (ok && request.contains("device")) {
-      ok = request["device"].is_string();
-      if (ok) w.device = request["device"].get<std::string>();
-    }
-    if (ok && request.contains("max_rate_hz")) {
-      ok = request["max_rate_hz"].is_number() && request["max_rate_hz"].get<double>() >= 0;
-      if (ok) w.max_rate_hz = request["max_rate_hz"].get<double>();
-    }
-    if (!ok) {
-      reply = protocol::ErrorMessage(
-          "watch: events, corrected, raw, uncertainty are true/false, device a name, "
-          "max_rate_hz >= 0");
-    } else {
-      client->watch = w;
-      client->last_sample_ns.clear();
-      reply = {{"class", "WATCH"},   {"enable", true},
-               {"events", w.events}, {"corrected", w.corrected},
-               {"raw", w.raw},       {"uncertainty", w.uncertainty},
-               {"device", w.device}, {"max_rate_hz", w.max_rate_hz}};
-    }
+    const WatchSpec& w = *spec;
+    client->watch = w;
+    client->last_sample_ns.clear();
+    reply = {{"class", "WATCH"},   {"enable", true},
+             {"events", w.events}, {"corrected", w.corrected},
+             {"raw", w.raw},       {"uncertainty", w.uncertainty},
+             {"device", w.device}, {"max_rate_hz", w.max_rate_hz}};
   }
   if (!id.is_null()) reply["id"] = id;
   client->Reply(reply);
@@ -758,9 +734,15 @@ void Service::HandleWatch(const std::shared_ptr<ClientSession>& client,
 
 void Service::HandleReset(const std::shared_ptr<ClientSession>& client,
                           const nlohmann::json& request, const nlohmann::json& id) {
-  std::string archived, error;
-  DropStation("the session was reset");  // closes the journal
+  std::string note, archived, error;
   nlohmann::json reply;
+  if (!protocol::ParseResetRequest(request, &note, &error)) {
+    reply = protocol::ErrorMessage(error);
+    if (!id.is_null()) reply["id"] = id;
+    client->Reply(reply);
+    return;
+  }
+  DropStation("the session was reset");  // closes the journal
   if (!options_.state_dir.empty() && !ArchiveSession(options_.state_dir, &archived, &error)) {
     reply = protocol::ErrorMessage("reset: " + error);
   }
@@ -772,7 +754,7 @@ void Service::HandleReset(const std::shared_ptr<ClientSession>& client,
   if (reply.is_null()) {
     reply = {{"class", "RESET"},
              {"archived", archived.empty() ? nlohmann::json() : nlohmann::json(archived)},
-             {"note", request.value("note", "")},
+             {"note", note},
              {"uid", client->uid()}};
     spdlog::info("session reset by uid {}{}", client->uid(),
                  archived.empty() ? "" : "; previous session archived in " + archived);
@@ -785,17 +767,15 @@ void Service::HandleReset(const std::shared_ptr<ClientSession>& client,
 void Service::HandlePublish(const std::shared_ptr<ClientSession>& client,
                             const nlohmann::json& request, const nlohmann::json& id) {
   nlohmann::json reply;
-  const std::string device = request.value("device", "");
-  const std::string model = request.value("model", "");
-  const std::string operator_name = request.value("operator", "");
-  const std::string reason = request.value("reason", "");
-  if (!request.value("override", false) || device.empty() || model.empty() ||
-      operator_name.empty() || reason.empty()) {
-    reply = protocol::ErrorMessage(
-        "publish: an explicit operator override needs \"override\":true, \"device\", \"model\", "
-        "\"operator\" and \"reason\" (calibrations that pass the gate are published without "
-        "asking)");
+  protocol::PublishRequest p;
+  std::string why;
+  if (!protocol::ParsePublishRequest(request, &p, &why)) {
+    reply = protocol::ErrorMessage(why);
   } else {
+    const std::string& device = p.device;
+    const std::string& model = p.model;
+    const std::string& operator_name = p.operator_name;
+    const std::string& reason = p.reason;
     const nlohmann::json who = {{"operator", operator_name},
                                 {"reason", reason},
                                 {"uid", client->uid()},

@@ -10,6 +10,7 @@
 #include <boost/asio/post.hpp>
 #include <boost/asio/write.hpp>
 #include <cerrno>
+#include <charconv>
 #include <cstring>
 #include <filesystem>
 
@@ -21,7 +22,16 @@ namespace local = boost::asio::local;
 
 bool ResolveUser(const std::string& name_or_uid, unsigned* uid, std::string* error) {
   if (!name_or_uid.empty() && name_or_uid.find_first_not_of("0123456789") == std::string::npos) {
-    *uid = static_cast<unsigned>(std::stoul(name_or_uid));
+    // Up to 2^32 - 2: (uid_t)-1 is no user. (std::stoul threw beyond 2^64 and wrapped beyond
+    // 2^32 to another uid.)
+    std::uint64_t value = 0;
+    const char* end = name_or_uid.data() + name_or_uid.size();
+    const auto [ptr, ec] = std::from_chars(name_or_uid.data(), end, value);
+    if (ec != std::errc() || ptr != end || value > 4294967294u) {
+      *error = "uid " + name_or_uid + " is out of range (0 to 4294967294)";
+      return false;
+    }
+    *uid = static_cast<unsigned>(value);
     return true;
   }
   const passwd* p = ::getpwnam(name_or_uid.c_str());
@@ -175,39 +185,27 @@ void ClientSession::Read() {
 }
 
 void ClientSession::OnBytes(std::size_t n) {
-  std::size_t start = 0;
-  for (std::size_t i = 0; i < n && open_; ++i) {
-    if (buffer_[i] != '\n') continue;
-    if (discarding_) {
-      discarding_ = false;
-    } else {
-      line_.append(buffer_.data() + start, i - start);
-      if (!line_.empty() && line_.back() == '\r') line_.pop_back();
-      if (line_.size() > protocol::kMaxRequestBytes) {
-        Reply(protocol::ErrorMessage(
-            fmt::format("request longer than {} bytes: discarded", protocol::kMaxRequestBytes)));
-      } else if (line_.find_first_not_of(" \t") != std::string::npos) {
-        nlohmann::json request = nlohmann::json::parse(line_, nullptr, false);
-        if (request.is_discarded()) {
-          Reply(protocol::ErrorMessage("malformed request: not JSON (one object per line)"));
-        } else if (!request.is_object()) {
-          Reply(protocol::ErrorMessage("malformed request: a JSON object with \"cmd\" expected"));
-        } else {
-          server_->on_request_(shared_from_this(), request);
+  framer_.Push(
+      {buffer_.data(), n},
+      [this](const std::string& line) {
+        nlohmann::json request;
+        std::string error;
+        switch (protocol::ParseRequestLine(line, &request, &error)) {
+          case protocol::RequestLine::kBlank:
+            break;
+          case protocol::RequestLine::kError:
+            Reply(protocol::ErrorMessage(error));
+            break;
+          case protocol::RequestLine::kRequest:
+            server_->on_request_(shared_from_this(), request);
+            break;
         }
-      }
-    }
-    line_.clear();
-    start = i + 1;
-  }
-  if (!open_ || discarding_) return;
-  line_.append(buffer_.data() + start, n - start);
-  if (line_.size() > protocol::kMaxRequestBytes) {
-    Reply(protocol::ErrorMessage(fmt::format(
-        "request longer than {} bytes: discarded up to its end", protocol::kMaxRequestBytes)));
-    line_.clear();
-    discarding_ = true;
-  }
+        return open_;
+      },
+      [this](const std::string& message) {
+        Reply(protocol::ErrorMessage(message));
+        return open_;
+      });
 }
 
 void ClientSession::Reply(const nlohmann::json& message) {

@@ -19,6 +19,8 @@
 #include <string>
 #include <unordered_map>
 
+#include "protocol/messages.h"
+
 namespace turncal::daemon {
 
 struct SocketOptions {
@@ -35,15 +37,7 @@ bool ResolveUser(const std::string& name_or_uid, unsigned* uid, std::string* err
 
 class ClientSession;
 
-// What a watching client asked for.
-struct WatchSpec {
-  bool events = true;
-  bool corrected = false;
-  bool raw = false;
-  std::string device;        // empty: every device
-  double max_rate_hz = 0.0;  // per device, for samples; <= 0: every sample
-  bool uncertainty = false;  // corrected samples carry the calibration's 1 sigma per axis
-};
+using protocol::WatchSpec;  // what a watching client asked for
 
 class SocketServer {
  public:
@@ -121,8 +115,7 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
   bool known_ = false;  // SO_PEERCRED answered
   bool open_ = true;
   std::array<char, 8192> buffer_{};
-  std::string line_;
-  bool discarding_ = false;    // inside an oversized request, up to its newline
+  protocol::RequestFramer framer_;
   std::string pending_;        // queued bytes, whole lines, not yet handed to the socket
   bool writing_ = false;       // an asynchronous write is in flight
   bool flush_posted_ = false;  // a Write() is posted to the loop

@@ -23,8 +23,16 @@ class SolveWorker {
   // Blocks until every posted work has run (the station is about to be replaced).
   void Drain();
 
-  double longest_ms() const { return longest_ms_; }  // the longest work so far
-  double last_ms() const { return last_ms_; }
+  // The longest work so far, and the last (written by the worker under the mutex: read under it
+  // too; ThreadSanitizer found the unlocked reads of `status`).
+  double longest_ms() const {
+    std::lock_guard lock(mutex_);
+    return longest_ms_;
+  }
+  double last_ms() const {
+    std::lock_guard lock(mutex_);
+    return last_ms_;
+  }
   std::size_t queued() const;
 
  private:

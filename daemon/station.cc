@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <ctime>
 #include <limits>
@@ -340,11 +341,41 @@ void Station::Resume() {
              {"noise", devices_[i]->noise_stored ? "stored" : "to be measured"},
              {"journal_lines_skipped", skipped}});
   }
-  journal_ = std::make_unique<PoseJournal>();
+  journal_wanted_ = true;
+  EnsureJournal();
+}
+
+bool Station::EnsureJournal() {
+  if (journal_ || !journal_wanted_) return journal_ != nullptr;
+  std::string error;
+  journal_ = std::make_shared<PoseJournal>();
   if (!journal_->Open(options_.state_dir, &error)) {
-    Publish({{"class", "ERROR"}, {"message", error}});
     journal_.reset();
+    NoteWrite("", error + "; captured poses are not saved until it can be opened");
+    return false;
   }
+  return true;
+}
+
+void Station::NoteWrite(const std::string& device, const std::string& error) {
+  if (error.empty()) {
+    ++writes_ok_;
+    write_error_.clear();
+    return;
+  }
+  ++writes_failed_;
+  write_error_ = error;
+  nlohmann::json e = {{"class", "ERROR"}, {"message", error}};
+  if (!device.empty()) e["device"] = device;
+  Publish(e);
+}
+
+nlohmann::json Station::PersistenceStatus() const {
+  return {{"state_dir", options_.state_dir},
+          {"journal_open", journal_ != nullptr},
+          {"writes", writes_ok_},
+          {"failed_writes", writes_failed_},
+          {"last_error", write_error_}};
 }
 
 void Station::OnSample(int device, const Sample& sample) {
@@ -382,9 +413,14 @@ bool Station::AnnounceTo(int device, const Announcement& a, std::string* error) 
   return devices_[static_cast<std::size_t>(device)]->sequencer->Announce(a, error);
 }
 
-bool Station::OnAnnounce(const Announcement& a, std::string* error) {
+bool Station::OnAnnounce(const Announcement& a, const std::vector<int>& devices,
+                         std::string* error) {
   bool ok = true;
-  for (auto& d : devices_) ok = d->sequencer->Announce(a, error) && ok;
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    if (AnnouncedTo(devices, static_cast<int>(i))) {
+      ok = devices_[i]->sequencer->Announce(a, error) && ok;
+    }
+  }
   return ok;
 }
 
@@ -421,7 +457,8 @@ void Station::OnSequencerEvent(std::size_t device, const SequencerEvent& e) {
 void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) {
   // A captured pose is answered once its record is in the journal (below): a controller that
   // moves the table on POSE_CAPTURED must not lose the pose to a crash right after.
-  const bool journaled_answer = e.kind == SequencerEventKind::kCaptured && e.record && journal_;
+  const bool capture = e.kind == SequencerEventKind::kCaptured && e.record;
+  const bool journaled_answer = capture && EnsureJournal();
   if ((sink_ && !journaled_answer) || e.kind == SequencerEventKind::kPoseStarted ||
       e.kind == SequencerEventKind::kCollecting || e.kind == SequencerEventKind::kProgress) {
     nlohmann::json j = protocol::ToJson(e);
@@ -429,6 +466,12 @@ void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) 
     if (e.kind == SequencerEventKind::kPoseStarted || e.kind == SequencerEventKind::kCollecting ||
         e.kind == SequencerEventKind::kProgress) {
       devices_[device]->current = j;
+    }
+    if (capture) {
+      j["saved"] = false;
+      j["save_error"] = options_.state_dir.empty()
+                            ? "turncald runs without a state directory"
+                            : "the journal cannot be opened: " + write_error_;
     }
     if (sink_) sink_(j);
   }
@@ -438,10 +481,7 @@ void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) 
     const std::string name = devices_[device]->name;
     Defer([dir = options_.state_dir, name, noise = *devices_[device]->sequencer->noise(),
            error] { WriteNoiseProfile(dir, name, noise, error.get()); },
-          [this, name, error] {
-            if (!error->empty())
-              Publish({{"class", "ERROR"}, {"device", name}, {"message", *error}});
-          });
+          [this, name, error] { NoteWrite(name, *error); });
   }
   if (e.kind == SequencerEventKind::kCaptured && e.record) {
     // Journaled (fsynced) before it is used: the worker runs in order, so the append precedes the
@@ -451,11 +491,16 @@ void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) 
       const std::string name = devices_[device]->name;
       nlohmann::json answer = protocol::ToJson(e);
       answer["device"] = name;
-      Defer([journal = journal_.get(), name, record = *e.record,
+      Defer([journal = journal_, name, record = *e.record,
              error] { journal->Append(name, record, error.get()); },
-            [this, name, error, answer = std::move(answer)] {
+            [this, name, error, answer = std::move(answer)]() mutable {
+              NoteWrite(name, *error);
+              // Claimed saved only when the record is in the journal (fsynced).
+              answer["saved"] = error->empty();
               if (!error->empty()) {
-                Publish({{"class", "ERROR"}, {"device", name}, {"message", *error}});
+                answer["save_error"] = *error;
+                // An append that failed may have left a partial line: reopen before the next.
+                journal_.reset();
               }
               Publish(answer);
             });
@@ -631,12 +676,14 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
       },
       [this, &d, &m, event, write_error, version = m.active_version, theta = m.estimate.theta,
        covariance = m.estimate.covariance] {
-        if (!write_error->empty()) {
-          Publish({{"class", "ERROR"}, {"device", d.name}, {"message", *write_error}});
-        }
+        if (!options_.state_dir.empty()) NoteWrite(d.name, *write_error);
         if (version > m.applied_version) m.Apply(version, theta, covariance);
         if (write_error->empty()) d.report_due = true;  // TickDevice/OnTick write it
-        Publish(event);
+        // Claimed saved only when calibrations/DEVICE/MODEL.json holds it (renamed, fsynced).
+        nlohmann::json announced = event;
+        announced["saved"] = !options_.state_dir.empty() && write_error->empty();
+        if (!write_error->empty()) announced["save_error"] = *write_error;
+        Publish(announced);
       });
 }
 

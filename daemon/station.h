@@ -58,7 +58,8 @@ class Station : public ReplayTarget {
   ~Station() override;
 
   void OnSample(int device, const Sample& sample) override;
-  bool OnAnnounce(const Announcement& announcement, std::string* error) override;
+  bool OnAnnounce(const Announcement& announcement, const std::vector<int>& devices,
+                  std::string* error) override;
   // Timeouts of one device's sequencer, in that device's host clock (a replayed device's clock is
   // its capture's, so the service ticks only live devices).
   void TickDevice(int device, std::int64_t now_ns);
@@ -123,6 +124,12 @@ class Station : public ReplayTarget {
   double capture_cpu_ms_last() const { return capture_cpu_ms_last_; }
   double capture_cpu_ms_max() const { return capture_cpu_ms_max_; }
 
+  // What reached the state directory: writes that succeeded and failed (journal appends,
+  // calibrations, noise profiles, reports), and the last failure's message while the latest
+  // write failed ("" once a write succeeds again). A failed write is also an ERROR event, and
+  // POSE_CAPTURED / CALIBRATION_ACTIVE carry "saved": false.
+  nlohmann::json PersistenceStatus() const;
+
   struct ModelState;
   struct DeviceState;
 
@@ -141,12 +148,18 @@ class Station : public ReplayTarget {
   nlohmann::json CalibrationJson(const DeviceState& d, const ModelState& m) const;
   void Activate(DeviceState& d, ModelState& m, double t_s, const nlohmann::json& override_who);
   void LoadApplied();
+  // Counts a state-directory write's outcome; publishes ERROR when it failed.
+  void NoteWrite(const std::string& device, const std::string& error);
+  bool EnsureJournal();  // (re)opens the journal of a session with a state directory
 
   StationOptions options_;
   SensorClass sensor_;
   EventSink sink_;
   std::vector<std::unique_ptr<DeviceState>> devices_;
-  std::unique_ptr<class PoseJournal> journal_;
+  std::shared_ptr<class PoseJournal> journal_;  // shared with queued appends
+  bool journal_wanted_ = false;  // the session has a state directory: keep trying to open it
+  std::uint64_t writes_ok_ = 0, writes_failed_ = 0;
+  std::string write_error_;
   bool resuming_ = false;
   Executor executor_;
   std::shared_ptr<bool> alive_ = std::make_shared<bool>(true);

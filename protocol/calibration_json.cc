@@ -5,23 +5,12 @@
 #include <cmath>
 
 #include "core/synthetic.h"
+#include "core/units.h"
+#include "protocol/json_vec3.h"
 #include "protocol/sequencer_json.h"
 
 namespace turncal::protocol {
 namespace {
-
-constexpr double kDegToRad = M_PI / 180.0;
-
-nlohmann::json Vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
-
-bool ReadVec(const nlohmann::json& j, Eigen::Vector3d* v) {
-  if (!j.is_array() || j.size() != 3) return false;
-  for (std::size_t i = 0; i < 3; ++i) {
-    if (!j[i].is_number()) return false;
-    (*v)[static_cast<Eigen::Index>(i)] = j[i].get<double>();
-  }
-  return v->allFinite();
-}
 
 // A number, or NaN for null (an undetermined sigma or covariance entry).
 bool ReadNumberOrNull(const nlohmann::json& j, double* v) {
@@ -88,9 +77,9 @@ bool ReadCalibrator(const nlohmann::json& j, CalibratorOptions* o, std::string* 
 
 nlohmann::json ToJson(const ModelContext& c) {
   nlohmann::json mounting = nlohmann::json::array();
-  for (int r = 0; r < 3; ++r) mounting.push_back(Vec(c.mounting.row(r).transpose()));
-  return {{"g_ned", Vec(c.reference.g_ned)},
-          {"B_ned", Vec(c.reference.B_ned)},
+  for (int r = 0; r < 3; ++r) mounting.push_back(JsonVec3(c.mounting.row(r).transpose()));
+  return {{"g_ned", JsonVec3(c.reference.g_ned)},
+          {"B_ned", JsonVec3(c.reference.B_ned)},
           {"mounting", mounting},
           {"accel_output_frame", turncal::ToString(c.accel_output_frame)}};
 }
@@ -102,10 +91,10 @@ bool ParseModelContext(const nlohmann::json& j, ModelContext* out, std::string* 
   };
   if (!j.is_object()) return fail("not an object");
   ModelContext c = *out;
-  if (j.contains("g_ned") && !ReadVec(j["g_ned"], &c.reference.g_ned)) {
+  if (j.contains("g_ned") && !ReadJsonVec3(j["g_ned"], &c.reference.g_ned)) {
     return fail("g_ned must be 3 finite numbers");
   }
-  if (j.contains("B_ned") && !ReadVec(j["B_ned"], &c.reference.B_ned)) {
+  if (j.contains("B_ned") && !ReadJsonVec3(j["B_ned"], &c.reference.B_ned)) {
     return fail("B_ned must be 3 finite numbers");
   }
   if (j.contains("mounting")) {
@@ -113,7 +102,7 @@ bool ParseModelContext(const nlohmann::json& j, ModelContext* out, std::string* 
     if (!m.is_array() || m.size() != 3) return fail("mounting must be 3 rows of 3 numbers");
     for (std::size_t r = 0; r < 3; ++r) {
       Eigen::Vector3d row;
-      if (!ReadVec(m[r], &row)) return fail("mounting must be 3 rows of 3 numbers");
+      if (!ReadJsonVec3(m[r], &row)) return fail("mounting must be 3 rows of 3 numbers");
       c.mounting.row(static_cast<Eigen::Index>(r)) = row.transpose();
     }
   }
@@ -254,7 +243,7 @@ bool ParseCalibrationDocument(const nlohmann::json& j, CalibrationDocument* out,
         if (!p.is_object() || !p.contains(keys[i]) || !p[keys[i]].is_number()) {
           return bad("provenance.poses holds a pose without angles");
         }
-        a[i] = p[keys[i]].get<double>() * kDegToRad;
+        a[i] = p[keys[i]].get<double>() * kRadPerDeg;
       }
       d.poses.push_back(TablePose{a[0], a[1], a[2]});
     }

@@ -2,11 +2,11 @@
 
 #include <cmath>
 
+#include "core/units.h"
+
 namespace turncal {
 
 namespace {
-
-constexpr double kRadToDeg = 180.0 / M_PI;
 
 nlohmann::json Number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nullptr; }
 
@@ -97,9 +97,9 @@ nlohmann::json ToJson(const GateResult& g) {
 }
 
 nlohmann::json ToJson(const TablePose& p) {
-  return {{"phi_deg", p.phi_rad * kRadToDeg},
-          {"gamma_deg", p.gamma_rad * kRadToDeg},
-          {"psi_deg", p.psi_rad * kRadToDeg}};
+  return {{"phi_deg", p.phi_rad * kDegPerRad},
+          {"gamma_deg", p.gamma_rad * kDegPerRad},
+          {"psi_deg", p.psi_rad * kDegPerRad}};
 }
 
 nlohmann::json ToJson(const NextPoseAdvice& a) {

@@ -8,15 +8,15 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "core/units.h"
+
 namespace turncal {
 
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
-
 bool FromDegrees(double phi, double gamma, double psi, TablePose* out) {
   if (!std::isfinite(phi) || !std::isfinite(gamma) || !std::isfinite(psi)) return false;
-  *out = TablePose{phi * kDeg, gamma * kDeg, psi * kDeg};
+  *out = TablePose{phi * kRadPerDeg, gamma * kRadPerDeg, psi * kRadPerDeg};
   return true;
 }
 

@@ -4,17 +4,16 @@
 
 #include <cmath>
 
+#include "core/units.h"
+#include "protocol/json_vec3.h"
+
 namespace turncal::protocol {
 namespace {
 
-constexpr double kDegToRad = M_PI / 180.0;
-
-nlohmann::json Vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
-
 nlohmann::json Triad(const TriadStats& s) {
   nlohmann::json cov = nlohmann::json::array();
-  for (int r = 0; r < 3; ++r) cov.push_back(Vec(s.covariance.row(r).transpose()));
-  return {{"mean", Vec(s.mean)}, {"covariance", cov}, {"count", s.count}};
+  for (int r = 0; r < 3; ++r) cov.push_back(JsonVec3(s.covariance.row(r).transpose()));
+  return {{"mean", JsonVec3(s.mean)}, {"covariance", cov}, {"count", s.count}};
 }
 
 }  // namespace
@@ -36,7 +35,7 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
       if (error) *error = fmt::format("pose: '{}' must be a finite number (degrees)", keys[i]);
       return false;
     }
-    angles[i] = it->get<double>() * kDegToRad;
+    angles[i] = it->get<double>() * kRadPerDeg;
   }
   a.pose = TablePose{angles[0], angles[1], angles[2]};
   if (const auto it = j.find("index"); it != j.end()) {
@@ -62,9 +61,9 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
 
 nlohmann::json ToJson(const PoseRecord& r) {
   nlohmann::json j = {{"pose",
-                       {{"phi_deg", r.pose.phi_rad / kDegToRad},
-                        {"gamma_deg", r.pose.gamma_rad / kDegToRad},
-                        {"psi_deg", r.pose.psi_rad / kDegToRad}}},
+                       {{"phi_deg", r.pose.phi_rad / kRadPerDeg},
+                        {"gamma_deg", r.pose.gamma_rad / kRadPerDeg},
+                        {"psi_deg", r.pose.psi_rad / kRadPerDeg}}},
                       {"t_start", r.t_start_s},
                       {"t_end", r.t_end_s}};
   if (r.acc) j["acc"] = Triad(*r.acc);
@@ -76,26 +75,17 @@ nlohmann::json ToJson(const PoseRecord& r) {
 
 namespace {
 
-bool ReadVec(const nlohmann::json& j, Eigen::Vector3d* v) {
-  if (!j.is_array() || j.size() != 3) return false;
-  for (int i = 0; i < 3; ++i) {
-    if (!j[static_cast<std::size_t>(i)].is_number()) return false;
-    (*v)[i] = j[static_cast<std::size_t>(i)].get<double>();
-  }
-  return v->allFinite();
-}
-
 bool ReadTriad(const nlohmann::json& j, TriadStats* t) {
   if (!j.is_object() || !j.contains("mean") || !j.contains("covariance") || !j.contains("count")) {
     return false;
   }
-  if (!ReadVec(j["mean"], &t->mean) || !j["count"].is_number_integer()) return false;
+  if (!ReadJsonVec3(j["mean"], &t->mean) || !j["count"].is_number_integer()) return false;
   t->count = j["count"].get<std::int64_t>();
   const auto& c = j["covariance"];
   if (!c.is_array() || c.size() != 3 || t->count < 1) return false;
   for (int r = 0; r < 3; ++r) {
     Eigen::Vector3d row;
-    if (!ReadVec(c[static_cast<std::size_t>(r)], &row)) return false;
+    if (!ReadJsonVec3(c[static_cast<std::size_t>(r)], &row)) return false;
     t->covariance.row(r) = row.transpose();
   }
   return true;
@@ -117,7 +107,7 @@ bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* erro
     if (!p.is_object() || !p.contains(keys[i]) || !p[keys[i]].is_number()) {
       return fail("pose angles missing");
     }
-    a[i] = p[keys[i]].get<double>() * kDegToRad;
+    a[i] = p[keys[i]].get<double>() * kRadPerDeg;
   }
   r.pose = TablePose{a[0], a[1], a[2]};
   if (!j.contains("t_start") || !j.contains("t_end") || !j["t_start"].is_number() ||
@@ -145,10 +135,10 @@ bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* erro
 nlohmann::json ToJson(const NoiseProfile& p) {
   nlohmann::json sigma = nlohmann::json::object();
   for (int t = 0; t < 3; ++t) {
-    if (p.sigma[t]) sigma[TriadName(t)] = Vec(*p.sigma[t]);
+    if (p.sigma[t]) sigma[TriadName(t)] = JsonVec3(*p.sigma[t]);
   }
   nlohmann::json j = {{"sigma", sigma},
-                      {"gyr_bias_radps", Vec(p.gyr_bias_radps)},
+                      {"gyr_bias_radps", JsonVec3(p.gyr_bias_radps)},
                       {"gyr_bias_sigma_radps", p.gyr_bias_sigma_radps},
                       {"rate_hz", p.rate_hz},
                       {"source", p.source}};
@@ -169,10 +159,10 @@ bool ParseNoiseProfile(const nlohmann::json& j, NoiseProfile* out, std::string* 
   for (int t = 0; t < 3; ++t) {
     if (!j["sigma"].contains(TriadName(t))) continue;
     Eigen::Vector3d v;
-    if (!ReadVec(j["sigma"][TriadName(t)], &v)) return fail("a sigma is malformed");
+    if (!ReadJsonVec3(j["sigma"][TriadName(t)], &v)) return fail("a sigma is malformed");
     p.sigma[t] = v;
   }
-  if (!j.contains("gyr_bias_radps") || !ReadVec(j["gyr_bias_radps"], &p.gyr_bias_radps)) {
+  if (!j.contains("gyr_bias_radps") || !ReadJsonVec3(j["gyr_bias_radps"], &p.gyr_bias_radps)) {
     return fail("gyro bias malformed");
   }
   if (!j.contains("rate_hz") || !j["rate_hz"].is_number() || !j.contains("gyr_bias_sigma_radps") ||
@@ -197,9 +187,9 @@ nlohmann::json ToJson(const SequencerEvent& e) {
   nlohmann::json j = {{"class", ToString(e.kind)}, {"t", e.t_s}};
   if (e.index >= 0) {
     j["index"] = e.index;
-    j["pose"] = {{"phi_deg", e.pose.phi_rad / kDegToRad},
-                 {"gamma_deg", e.pose.gamma_rad / kDegToRad},
-                 {"psi_deg", e.pose.psi_rad / kDegToRad}};
+    j["pose"] = {{"phi_deg", e.pose.phi_rad / kRadPerDeg},
+                 {"gamma_deg", e.pose.gamma_rad / kRadPerDeg},
+                 {"psi_deg", e.pose.psi_rad / kRadPerDeg}};
   }
   if (e.needed > 0) {
     j["collected"] = e.collected;

@@ -14,7 +14,7 @@ namespace turncal::tools {
 
 namespace {
 
-struct Args {
+struct DecodeArgs {
   std::string file;
   std::string protocol;
   bool json = false;
@@ -157,7 +157,7 @@ bool ParseHex(const std::string& text, std::uint32_t* out) {
   }
 }
 
-bool MakeOptions(const Args& args, drivers::DecoderOptions* options) {
+bool MakeOptions(const DecodeArgs& args, drivers::DecoderOptions* options) {
   options->gx2.timer_ticks_per_s = args.gx2_ticks_per_s;
   options->gx2.little_endian_floats = args.gx2_little_endian;
   std::uint32_t mode = 0x0002, settings = 0x00000001;
@@ -198,7 +198,7 @@ void PrintSummary(const drivers::Decoder& decoder, const std::string& device, bo
 }
 
 // A .tcap capture: one decoder per device of the header, events printed as they come.
-int RunCapture(const Args& args, const drivers::DecoderOptions& base) {
+int RunCapture(const DecodeArgs& args, const drivers::DecoderOptions& base) {
   drivers::CaptureReader reader;
   std::string error;
   if (!reader.Open(args.file, &error)) {
@@ -265,7 +265,7 @@ int RunCapture(const Args& args, const drivers::DecoderOptions& base) {
   return reader.error().empty() ? 0 : 1;
 }
 
-int Run(const Args& args) {
+int RunDecode(const DecodeArgs& args) {
   drivers::DecoderOptions options;
   if (!MakeOptions(args, &options)) return 2;
   std::ifstream in(args.file, std::ios::binary);
@@ -313,7 +313,7 @@ int Run(const Args& args) {
 }  // namespace
 
 void AddDecodeCommand(CLI::App* app) {
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<DecodeArgs>();
   auto* cmd = app->add_subcommand(
       "decode", "decode a raw byte stream: frames and samples, then a summary of the counters");
   cmd->add_option("file", args->file, "a .tcap capture, or a raw byte stream (.bin)")->required();
@@ -334,7 +334,7 @@ void AddDecodeCommand(CLI::App* app) {
   cmd->add_option("--chunk", args->chunk, "bytes read and pushed at a time")
       ->check(CLI::Range(1, 1 << 24))
       ->capture_default_str();
-  cmd->callback([args] { throw CLI::RuntimeError(Run(*args)); });
+  cmd->callback([args] { throw CLI::RuntimeError(RunDecode(*args)); });
 }
 
 }  // namespace turncal::tools

@@ -11,6 +11,7 @@
 #include "core/pose_planner.h"
 #include "core/publish_gate.h"
 #include "core/synthetic.h"
+#include "core/units.h"
 #include "protocol/observability_json.h"
 #include "protocol/pose_file.h"
 
@@ -18,9 +19,7 @@ namespace turncal::tools {
 
 namespace {
 
-constexpr double kRadToDeg = 180.0 / M_PI;
-
-struct Args {
+struct ObservabilityArgs {
   std::vector<std::string> models = {"accel13"};
   bool structural = false;
   std::string poses_file;
@@ -36,7 +35,7 @@ struct Args {
   bool accept_gauge = false;
 };
 
-void AddCommonOptions(CLI::App* cmd, Args* args) {
+void AddCommonOptions(CLI::App* cmd, ObservabilityArgs* args) {
   cmd->add_option("--class", args->sensor_class,
                   "sensor class for noise, typical parameters and default tolerances "
                   "(SENSORS.md): industrial|consumer")
@@ -71,8 +70,8 @@ bool ReadPoses(const std::string& path, std::vector<TablePose>* poses, const cha
   return true;
 }
 
-Eigen::VectorXd Point(const MeasurementModel& model, const Args& args, const SensorClass& sensor,
-                      bool structural) {
+Eigen::VectorXd Point(const MeasurementModel& model, const ObservabilityArgs& args,
+                      const SensorClass& sensor, bool structural) {
   std::mt19937_64 rng(args.seed);
   const std::string point =
       args.point == "auto" ? (structural ? "generic" : "typical") : args.point;
@@ -81,7 +80,7 @@ Eigen::VectorXd Point(const MeasurementModel& model, const Args& args, const Sen
   return DrawTruth(model, sensor, &rng);
 }
 
-std::string PointName(const Args& args, bool structural) {
+std::string PointName(const ObservabilityArgs& args, bool structural) {
   const std::string point =
       args.point == "auto" ? (structural ? "generic" : "typical") : args.point;
   return point == "nominal" ? "the nominal parameters"
@@ -101,7 +100,8 @@ void PrintDirections(const char* title, const std::vector<NamedDirection>& list)
   }
 }
 
-int RunStructural(const MeasurementModel& model, const Args& args, const SensorClass& sensor) {
+int RunStructural(const MeasurementModel& model, const ObservabilityArgs& args,
+                  const SensorClass& sensor) {
   ObservabilityOptions options;
   const StructuralReport r = AnalyzeStructure(model, Point(model, args, sensor, true), options);
   if (args.json) {
@@ -118,7 +118,8 @@ int RunStructural(const MeasurementModel& model, const Args& args, const SensorC
   return 0;
 }
 
-int RunData(const MeasurementModel& model, const Args& args, const SensorClass& sensor) {
+int RunData(const MeasurementModel& model, const ObservabilityArgs& args,
+            const SensorClass& sensor) {
   std::vector<TablePose> poses;
   if (!ReadPoses(args.poses_file, &poses, "observability")) return 2;
   const Eigen::Matrix3d W = ExpectedWeight(model, sensor, args.dwell_s);
@@ -182,7 +183,7 @@ bool ParseRange(const std::string& text, AxisRange* out) {
   return true;
 }
 
-int RunPlan(const Args& args) {
+int RunPlan(const ObservabilityArgs& args) {
   SensorClass sensor;
   SensorClassByName(args.sensor_class, &sensor);
   PlannerOptions options;
@@ -229,8 +230,8 @@ int RunPlan(const Args& args) {
     return 1;
   }
   auto show = [](const TablePose& p) {
-    return fmt::format("phi {:7.1f}  gamma {:6.1f}  psi {:7.1f}", p.phi_rad * kRadToDeg,
-                       p.gamma_rad * kRadToDeg, p.psi_rad * kRadToDeg);
+    return fmt::format("phi {:7.1f}  gamma {:6.1f}  psi {:7.1f}", p.phi_rad * kDegPerRad,
+                       p.gamma_rad * kDegPerRad, p.psi_rad * kDegPerRad);
   };
   std::string names;
   for (const auto& m : args.models) names += (names.empty() ? "" : "+") + m;
@@ -281,8 +282,8 @@ int RunPoses(const std::string& design, int count, std::uint64_t seed) {
   }
   fmt::print("# turncal poses --design {}: phi, gamma, psi in degrees\nphi,gamma,psi\n", design);
   for (const auto& p : poses) {
-    fmt::print("{:.6f},{:.6f},{:.6f}\n", p.phi_rad * kRadToDeg, p.gamma_rad * kRadToDeg,
-               p.psi_rad * kRadToDeg);
+    fmt::print("{:.6f},{:.6f},{:.6f}\n", p.phi_rad * kDegPerRad, p.gamma_rad * kDegPerRad,
+               p.psi_rad * kDegPerRad);
   }
   return 0;
 }
@@ -306,7 +307,7 @@ void AddObservabilityCommands(CLI::App* app) {
   poses_cmd->callback(
       [design, count, seed] { throw CLI::RuntimeError(RunPoses(*design, *count, *seed)); });
 
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<ObservabilityArgs>();
   auto* obs = app->add_subcommand(
       "observability",
       "rank, null directions and Cramer-Rao sigma of a model: the seed's structural test "
@@ -334,7 +335,7 @@ void AddObservabilityCommands(CLI::App* app) {
                                              : RunData(*model, *args, sensor));
   });
 
-  auto plan_args = std::make_shared<Args>();
+  auto plan_args = std::make_shared<ObservabilityArgs>();
   auto* plan = app->add_subcommand(
       "plan",
       "D-optimal next pose over a grid of reachable table poses, and the greedy plan until the "

@@ -11,7 +11,7 @@ namespace turncal::tools {
 
 namespace {
 
-struct Args {
+struct PlanCompareArgs {
   std::string model = "accel13";
   std::string sensor_class = "consumer";
   int runs = 20;
@@ -33,7 +33,7 @@ struct Tally {
   }
 };
 
-int Run(const Args& args) {
+int RunPlanCompare(const PlanCompareArgs& args) {
   SensorClass sensor;
   SensorClassByName(args.sensor_class, &sensor);
   std::string error;
@@ -102,7 +102,7 @@ int Run(const Args& args) {
 }  // namespace
 
 void AddPlanCompareCommand(CLI::App* app) {
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<PlanCompareArgs>();
   auto* cmd = app->add_subcommand(
       "plan-vs-cube",
       "simulated sessions: poses the real calibrator and gate need along the 26-pose cube "
@@ -122,7 +122,7 @@ void AddPlanCompareCommand(CLI::App* app) {
       ->capture_default_str();
   cmd->add_option("--seed", args->seed, "first seed")->capture_default_str();
   cmd->add_flag("--json", args->json, "one JSON object");
-  cmd->callback([args] { throw CLI::RuntimeError(Run(*args)); });
+  cmd->callback([args] { throw CLI::RuntimeError(RunPlanCompare(*args)); });
 }
 
 }  // namespace turncal::tools

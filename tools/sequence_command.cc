@@ -16,7 +16,7 @@
 namespace turncal::tools {
 namespace {
 
-struct Args {
+struct SequenceArgs {
   std::string file;
   std::string schedule;
   std::string noise_class;  // empty: measured at start-up
@@ -26,6 +26,7 @@ struct Args {
   double timeout_s = SequencerOptions{}.still_timeout_s;
   double startup_s = NoiseMeterOptions{}.duration_s;
   double max_bad = SequencerOptions{}.max_bad_fraction;
+  double max_lost = SequencerOptions{}.max_lost_fraction;
   double false_alarm = StillnessOptions{}.false_alarm;
   double check_angle_deg = 0;  // 0: no pose check
   bool progress = false;
@@ -37,13 +38,14 @@ std::string PoseText(const TablePose& p) {
                      p.gamma_rad * 180 / M_PI, p.psi_rad * 180 / M_PI);
 }
 
-int Run(const Args& args) {
+int RunSequence(const SequenceArgs& args) {
   daemon::ReplayOptions options;
   SequencerOptions& o = options.sequencer;
   o.dwell_s = args.dwell_s;
   o.settle_guard_s = args.settle_guard_s;
   o.still_timeout_s = args.timeout_s;
   o.max_bad_fraction = args.max_bad;
+  o.max_lost_fraction = args.max_lost;
   o.stillness.window_s = args.window_s;
   o.stillness.false_alarm = args.false_alarm;
   o.noise_meter.duration_s = args.startup_s;
@@ -181,7 +183,7 @@ int Run(const Args& args) {
 }  // namespace
 
 void AddSequenceCommand(CLI::App* app) {
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<SequenceArgs>();
   auto* cmd = app->add_subcommand(
       "sequence",
       "replay a capture through the decoders and the position sequencer: which poses were "
@@ -212,8 +214,12 @@ void AddSequenceCommand(CLI::App* app) {
                   "take the noise from a datasheet class (industrial, consumer) instead of "
                   "measuring it");
   cmd->add_option("--max-bad", args->max_bad,
-                  "largest fraction of flagged, outlier and lost samples in a pose")
+                  "largest fraction of flagged and outlier samples in a pose")
       ->check(CLI::Range(0.0, 0.99))
+      ->capture_default_str();
+  cmd->add_option("--max-lost", args->max_lost,
+                  "fraction of a dwell's samples that may be lost (counter gaps) before the pose "
+                  "is rejected")
       ->capture_default_str();
   cmd->add_option("--false-alarm", args->false_alarm,
                   "probability that one stillness test calls a still window moving")
@@ -225,7 +231,7 @@ void AddSequenceCommand(CLI::App* app) {
       ->check(CLI::NonNegativeNumber);
   cmd->add_flag("--progress", args->progress, "also print progress events");
   cmd->add_flag("--json", args->json, "one JSON object a line (the daemon's event shapes)");
-  cmd->callback([args] { throw CLI::RuntimeError(Run(*args)); });
+  cmd->callback([args] { throw CLI::RuntimeError(RunSequence(*args)); });
 }
 
 }  // namespace turncal::tools

@@ -13,6 +13,7 @@
 
 #include "core/measurement_model.h"
 #include "core/reference.h"
+#include "core/units.h"
 #include "drivers/gx2/gx2_encoder.h"
 #include "drivers/mip/mip_encoder.h"
 #include "drivers/xbus/xbus_encoder.h"
@@ -22,7 +23,6 @@ namespace turncal::tools {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
-constexpr double kRadToDeg = 180.0 / M_PI;
 
 struct ProtocolDefaults {
   double rate_hz;
@@ -264,9 +264,9 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
       const std::string event = nlohmann::json{
           {"event", "pose"},
           {"index", e.index},
-          {"phi_deg", e.pose.phi_rad * kRadToDeg},
-          {"gamma_deg", e.pose.gamma_rad * kRadToDeg},
-          {"psi_deg", e.pose.psi_rad * kRadToDeg},
+          {"phi_deg", e.pose.phi_rad * kDegPerRad},
+          {"gamma_deg", e.pose.gamma_rad * kDegPerRad},
+          {"psi_deg", e.pose.psi_rad * kDegPerRad},
           {"hold_s",
            o.dwell_s + early}}.dump();
       append(drivers::RecordType::kEvent, te, Bytes(event.begin(), event.end()));

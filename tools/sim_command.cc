@@ -18,6 +18,7 @@
 
 #include "core/measurement_model.h"
 #include "core/session_sim.h"
+#include "core/units.h"
 #include "drivers/atomic_file.h"
 #include "drivers/capture/tcap.h"
 #include "protocol/pose_file.h"
@@ -28,9 +29,7 @@ namespace turncal::tools {
 
 namespace {
 
-constexpr double kRadToDeg = 180.0 / M_PI;
-
-struct Args {
+struct SimCommandArgs {
   std::vector<std::string> protocols;
   std::string protocol;  // the first of protocols
   std::vector<std::string> models = {"accel13", "mag13"};
@@ -53,7 +52,38 @@ struct Args {
   double live_speed = 1.0;
   std::string controller;  // turncald's socket: play the controller (tools/sim_live.h)
   double answer_timeout_s = 120;
+  int retries = 2;
+  double bit_error_rate = 0;
+  std::vector<std::string> unplugs;  // POSE:mid|between[:DEVICE]
+  double unplug_s = 2.0;
 };
+
+// "POSE:mid", "POSE:between", optionally ":DEVICE" (index among the --live devices).
+bool ParseUnplug(const std::string& text, LiveSimOptions::Unplug* u, std::string* error) {
+  std::vector<std::string> parts;
+  std::size_t at = 0;
+  for (;;) {
+    const std::size_t colon = text.find(':', at);
+    parts.push_back(text.substr(at, colon == std::string::npos ? colon : colon - at));
+    if (colon == std::string::npos) break;
+    at = colon + 1;
+  }
+  auto number = [](const std::string& t, int* v) {
+    if (t.empty() || t.size() > 6 || t.find_first_not_of("0123456789") != std::string::npos) {
+      return false;
+    }
+    *v = std::stoi(t);
+    return true;
+  };
+  if ((parts.size() != 2 && parts.size() != 3) || !number(parts[0], &u->pose) ||
+      (parts[1] != "mid" && parts[1] != "between") ||
+      (parts.size() == 3 && !number(parts[2], &u->device))) {
+    *error = fmt::format("--unplug '{}': give POSE:mid or POSE:between, optionally :DEVICE", text);
+    return false;
+  }
+  u->mid = parts[1] == "mid";
+  return true;
+}
 
 // Writes the received bytes of `records` to `path` at their times (divided by `speed`), as a
 // device would; pose events go to standard output as JSON lines at their times.
@@ -105,7 +135,7 @@ nlohmann::json TruthJson(const MeasurementModel& m, const Eigen::VectorXd& theta
 }
 
 nlohmann::json TruthFor(const SimCapture& capture, const std::vector<TablePose>& poses,
-                        const Args& args) {
+                        const SimCommandArgs& args) {
   std::string error;
   const SimulatedSession& session = capture.session;
   auto accel = MakeModel(capture.accel_model, ModelContext{}, &error);
@@ -119,9 +149,9 @@ nlohmann::json TruthFor(const SimCapture& capture, const std::vector<TablePose>&
         accel->Correct(session.accel_truth, accel->Predict(session.accel_truth, p));
     const Eigen::Vector3d field =
         mag->Correct(session.mag_truth, mag->Predict(session.mag_truth, p));
-    pose_list.push_back({{"phi_deg", p.phi_rad * kRadToDeg},
-                         {"gamma_deg", p.gamma_rad * kRadToDeg},
-                         {"psi_deg", p.psi_rad * kRadToDeg},
+    pose_list.push_back({{"phi_deg", p.phi_rad * kDegPerRad},
+                         {"gamma_deg", p.gamma_rad * kDegPerRad},
+                         {"psi_deg", p.psi_rad * kDegPerRad},
                          {"true_output", {{"acc", triad(acc)}, {"mag", triad(field)}}}});
   }
   return {{"acc_bias_instability", capture.session_options.sensor.acc_bias_instability},
@@ -148,7 +178,7 @@ nlohmann::json TruthFor(const SimCapture& capture, const std::vector<TablePose>&
           {"poses", pose_list}};
 }
 
-int RunController(const Args& args, SimCaptureOptions options) {
+int RunController(const SimCommandArgs& args, SimCaptureOptions options) {
   std::vector<LiveSimDevice> devices;
   std::string error;
   nlohmann::json truths = nlohmann::json::array();
@@ -169,7 +199,7 @@ int RunController(const Args& args, SimCaptureOptions options) {
       fmt::print(stderr, "turncal sim: {}\n", error);
       return 2;
     }
-    Args a = args;
+    SimCommandArgs a = args;
     a.protocol = name;
     a.seed = o.session.seed;
     nlohmann::json t = TruthFor(d.capture, o.poses, a);
@@ -190,6 +220,18 @@ int RunController(const Args& args, SimCaptureOptions options) {
   live.speed = args.live_speed;
   live.controller = args.controller;
   live.answer_timeout_s = args.answer_timeout_s;
+  live.retries = args.retries;
+  live.bit_error_rate = args.bit_error_rate;
+  live.fault_seed = args.seed * 7919 + 17;
+  live.unplug_s = args.unplug_s;
+  for (const auto& text : args.unplugs) {
+    LiveSimOptions::Unplug u;
+    if (!ParseUnplug(text, &u, &error)) {
+      fmt::print(stderr, "turncal sim: {}\n", error);
+      return 2;
+    }
+    live.unplugs.push_back(u);
+  }
   LiveSimReport report;
   if (!RunLiveSim(&devices, live, &report, &error)) {
     fmt::print(stderr, "turncal sim: {}\n", error);
@@ -206,10 +248,31 @@ int RunController(const Args& args, SimCaptureOptions options) {
              "table held {:.1f} s past the planned dwells; {}\n",
              report.poses, report.captured, report.unanswered, report.reconnects, report.held_s,
              frames);
+  // The same as a JSON line on standard output, with the line faults' figures: a test accounts
+  // for every byte (the daemon's bytes_read of a device equals its bytes_written here).
+  nlohmann::json summary = {{"event", "summary"},
+                            {"poses", report.poses},
+                            {"captured", report.captured},
+                            {"given_up", report.unanswered},
+                            {"reconnects", report.reconnects},
+                            {"bit_error_rate", args.bit_error_rate}};
+  for (std::size_t i = 0; i < devices.size(); ++i) {
+    summary["devices"].push_back({{"live", devices[i].path},
+                                  {"frames_sent", report.frames_sent[i]},
+                                  {"frames_withheld", report.frames_withheld[i]},
+                                  {"frames_dropped", report.frames_dropped[i]},
+                                  {"bytes_written", report.bytes_written[i]},
+                                  {"bits_flipped", report.bits_flipped[i]},
+                                  {"unplugs", report.unplugs[i]},
+                                  {"frames_unplugged", report.frames_unplugged[i]},
+                                  {"bytes_lost_unplugged", report.bytes_lost_unplugged[i]}});
+  }
+  fmt::print("{}\n", summary.dump());
+  std::fflush(stdout);
   return report.captured == report.poses ? 0 : 1;
 }
 
-int Run(const Args& args) {
+int RunSim(const SimCommandArgs& args) {
   const auto protocol = drivers::ParseProtocol(args.protocol);
   if (!protocol) {
     fmt::print(stderr, "turncal sim: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)\n",
@@ -310,7 +373,7 @@ int Run(const Args& args) {
 }  // namespace
 
 void AddSimCommand(CLI::App* app) {
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<SimCommandArgs>();
   auto* cmd = app->add_subcommand(
       "sim", "simulate a complete turntable session as a .tcap capture with a truth file");
   cmd->add_option("--protocol", args->protocols,
@@ -364,8 +427,27 @@ void AddSimCommand(CLI::App* app) {
   cmd->add_option("--controller", args->controller,
                   "turncald's socket: play the lab's controller too -- announce every pose there "
                   "and hold the table until every device answered (docs/SIMULATOR.md)");
-  cmd->add_option("--answer-timeout", args->answer_timeout_s,
-                  "with --controller: seconds the table waits for an answer before moving on")
+  cmd->add_option(
+         "--answer-timeout", args->answer_timeout_s,
+         "with --controller: wall-clock seconds the table waits for an answer before moving on "
+         "(the daemon's timeouts are wall-clock too, whatever --live-speed)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--retries", args->retries,
+                  "with --controller: a rejected pose is announced again this often, 0.25 s after "
+                  "the rejection")
+      ->check(CLI::Range(0, 100))
+      ->capture_default_str();
+  cmd->add_option("--bit-error-rate", args->bit_error_rate,
+                  "with --controller: flip each bit the devices send with this probability "
+                  "(line noise; e.g. 1e-4)")
+      ->check(CLI::Range(0.0, 0.5));
+  cmd->add_option("--unplug", args->unplugs,
+                  "with --controller: POSE:mid|between[:DEVICE] -- the device's pty goes away "
+                  "halfway through the pose's dwell, or when the table leaves the pose, and comes "
+                  "back --unplug-s later (repeatable)");
+  cmd->add_option("--unplug-s", args->unplug_s,
+                  "with --controller: session seconds a device stays unplugged")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_option("--live-speed", args->live_speed, "time scale of --live (2 = twice as fast)")
@@ -385,10 +467,12 @@ void AddSimCommand(CLI::App* app) {
       if (args->protocols.size() != 1 && args->protocols.size() != args->lives.size()) {
         throw CLI::ValidationError("sim", "give one --protocol, or one per --live");
       }
+    } else if (args->bit_error_rate > 0 || !args->unplugs.empty()) {
+      throw CLI::ValidationError("sim", "--bit-error-rate and --unplug need --controller");
     } else if (args->lives.size() > 1 || args->protocols.size() > 1) {
       throw CLI::ValidationError("sim", "several --live devices need --controller");
     }
-    throw CLI::RuntimeError(Run(*args));
+    throw CLI::RuntimeError(RunSim(*args));
   });
 }
 

@@ -4,26 +4,36 @@
 #include <fmt/format.h>
 #include <poll.h>
 #include <stdlib.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
 #include <termios.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <memory>
+#include <random>
 #include <set>
 
+#include "core/units.h"
 #include "tools/sim_device.h"
 
 namespace turncal::tools {
 
 namespace {
 
-constexpr std::size_t kMaxQueued = 64 * 1024;  // bytes a device holds back when nobody reads
+// What a device holds back while nobody reads: one wall-clock second of its stream at the
+// session's speed, at least 64 KiB (a serial port's kernel buffer, about 1.8 s of a MIP stream
+// at 500 Hz and 1x). Sized in wall time because the simulator's own process can stall: it then
+// writes the frames it owes at once, which a real device would have sent over that time. Bytes
+// beyond it are dropped and counted, as when the daemon is down.
+constexpr std::size_t kMinQueued = 64 * 1024;
+constexpr double kQueuedWallS = 1.0;
 
 struct Device {
   std::string path;
@@ -33,6 +43,8 @@ struct Device {
   const SimCapture* capture = nullptr;
   drivers::Protocol protocol = drivers::Protocol::kMip;
   double period_s = 0.01;
+  double speed = 1.0;          // session seconds per wall second
+  std::size_t max_queued = 0;  // bytes (kMinQueued, kQueuedWallS), set at the first frame
   std::unique_ptr<DeviceEmulator> emulator;
   std::size_t next = 0;       // next original sample
   double shift_s = 0;         // session-time shift of the original samples (holds so far)
@@ -45,6 +57,59 @@ struct Device {
   std::uint32_t last_counter = 0;
   std::string out;
   std::uint64_t sent = 0, withheld = 0, dropped = 0;
+  std::uint64_t episode_dropped = 0;  // frames dropped since the daemon last kept up
+  double episode_from_s = 0;          // session time of the episode's first dropped frame
+  std::chrono::steady_clock::time_point written_at;  // the pty last took bytes
+  double episode_blocked_s = 0;   // wall seconds the pty had taken nothing when dropping began
+  double episode_loop_gap_s = 0;  // wall seconds the simulator had not run when it began
+  // Faults.
+  std::uint64_t written = 0, flipped = 0, lost_unplugged = 0, unplugged_frames = 0, unplugs = 0;
+  std::uint64_t bits_to_flip = 0;  // clean bits before the next flipped one
+  bool unplugged = false;
+  double replug_vt = 0;
+};
+
+// One event of the session's log, a JSON line on standard output.
+void Say(const nlohmann::json& j) {
+  std::fputs((j.dump() + "\n").c_str(), stdout);
+  std::fflush(stdout);
+}
+
+// A run of dropped frames, for the log: when, for how long, how much, and how long the pty had
+// taken nothing and the simulator had not run when it began (equal: the simulator stalled).
+void SayDropped(const Device& d, double vt) {
+  Say({{"event", "dropped"},
+       {"device", d.path},
+       {"at_s", d.episode_from_s},
+       {"for_s", vt - d.episode_from_s},
+       {"pty_full_wall_s", d.episode_blocked_s},
+       {"turn_gap_wall_s", d.episode_loop_gap_s},
+       {"frames", d.episode_dropped}});
+}
+
+// The binary symmetric channel: flips the bits of `bytes` (appended to d->out) at `rate`.
+class BitErrors {
+ public:
+  BitErrors(double rate, std::uint64_t seed) : rate_(rate), rng_(seed) {}
+  bool on() const { return rate_ > 0; }
+  std::uint64_t Gap() { return std::geometric_distribution<std::uint64_t>(rate_)(rng_); }
+  void Apply(Device* d, std::size_t from) {
+    if (!on()) return;
+    const std::uint64_t bits = 8 * static_cast<std::uint64_t>(d->out.size() - from);
+    std::uint64_t at = 0;
+    while (d->bits_to_flip < bits - at) {
+      const std::uint64_t bit = at + d->bits_to_flip;
+      d->out[from + bit / 8] = static_cast<char>(d->out[from + bit / 8] ^ (1u << (bit % 8)));
+      ++d->flipped;
+      at = bit + 1;
+      d->bits_to_flip = Gap();
+    }
+    d->bits_to_flip -= bits - at;
+  }
+
+ private:
+  double rate_;
+  std::mt19937_64 rng_;
 };
 
 bool OpenDevice(Device* d, std::string* error) {
@@ -84,28 +149,74 @@ bool OpenDevice(Device* d, std::string* error) {
   return true;
 }
 
+// The device's dialogue state as at power-up: the i-th simulated device's identity.
+std::unique_ptr<DeviceEmulator> PowerUp(const Device& d, std::size_t i) {
+  EmulatedIdentity id;
+  id.serial = fmt::format("SIM{:04}", i + 1);
+  id.xbus_device_id = 0x03700001u + static_cast<std::uint32_t>(i);
+  return DeviceEmulator::Make(d.protocol, id, d.capture->session_options.rate_hz);
+}
+
 void Flush(Device* d) {
+  if (d->unplugged) return;
   while (!d->out.empty()) {
     const ssize_t n = ::write(d->fd, d->out.data(), d->out.size());
-    if (n <= 0) return;  // EAGAIN: nobody reads; the rest waits (bounded by kMaxQueued)
+    if (n <= 0) return;  // EAGAIN: nobody reads; the rest waits (bounded by max_queued)
     d->out.erase(0, static_cast<std::size_t>(n));
+    d->written += static_cast<std::uint64_t>(n);
+    d->written_at = std::chrono::steady_clock::now();
   }
 }
 
-void Emit(Device* d, Sample s) {
+// `vt`: session time now; `turn_gap_s`: wall seconds since the simulator's previous turn.
+void Emit(Device* d, Sample s, BitErrors* errors, double vt, double turn_gap_s) {
   if (s.t_device_s) d->last_device_s = *s.t_device_s;
   if (s.counter) d->last_counter = *s.counter;
+  if (d->unplugged) {
+    ++d->unplugged_frames;
+    return;
+  }
   if (!d->emulator->streaming()) {
     ++d->withheld;  // idle or in config state: the device sends nothing
     return;
   }
   const std::vector<std::uint8_t> frame = EncodeSimSample(d->protocol, s);
-  if (d->out.size() + frame.size() > kMaxQueued) {
+  if (d->max_queued == 0) {
+    d->max_queued =
+        std::max(kMinQueued, static_cast<std::size_t>(static_cast<double>(frame.size()) /
+                                                      d->period_s * d->speed * kQueuedWallS));
+  }
+  if (d->out.size() + frame.size() > d->max_queued) {
     ++d->dropped;  // nobody has read for a while (the daemon is down): the bytes are lost
+    if (d->episode_dropped++ == 0) {
+      d->episode_from_s = vt;
+      d->episode_blocked_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - d->written_at).count();
+      d->episode_loop_gap_s = turn_gap_s;
+    }
     return;
   }
+  if (d->episode_dropped > 0) {
+    SayDropped(*d, vt);  // the daemon reads again
+    d->episode_dropped = 0;
+  }
+  const std::size_t from = d->out.size();
   d->out.append(frame.begin(), frame.end());
+  errors->Apply(d, from);
   ++d->sent;
+}
+
+// The device goes away: its pty is closed and its link removed; what it had queued is lost.
+void Unplug(Device* d, double replug_vt) {
+  d->lost_unplugged += d->out.size();
+  d->out.clear();
+  if (d->slave_fd >= 0) ::close(d->slave_fd);
+  if (d->fd >= 0) ::close(d->fd);
+  d->fd = d->slave_fd = -1;
+  if (d->linked) ::unlink(d->path.c_str());
+  d->unplugged = true;
+  d->replug_vt = replug_vt;
+  ++d->unplugs;
 }
 
 class Controller {
@@ -170,13 +281,6 @@ class Controller {
   std::string buffer_;
 };
 
-void Say(const nlohmann::json& j) {
-  std::fputs((j.dump() + "\n").c_str(), stdout);
-  std::fflush(stdout);
-}
-
-constexpr double kRadToDeg = 180.0 / M_PI;
-
 }  // namespace
 
 bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
@@ -193,12 +297,31 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     d.capture = &(*sims)[i].capture;
     d.protocol = d.capture->header.devices.at(0).protocol;
     d.period_s = 1.0 / d.capture->session_options.rate_hz;
-    EmulatedIdentity id;
-    id.serial = fmt::format("SIM{:04}", i + 1);
-    id.xbus_device_id = 0x03700001u + static_cast<std::uint32_t>(i);
-    d.emulator = DeviceEmulator::Make(d.protocol, id, d.capture->session_options.rate_hz);
+    d.speed = options.speed;
+    d.emulator = PowerUp(d, i);
     if (!OpenDevice(&d, error)) return false;
   }
+  BitErrors errors(options.bit_error_rate, options.fault_seed);
+  for (Device& d : devices) d.bits_to_flip = errors.on() ? errors.Gap() : 0;
+  for (const auto& u : options.unplugs) {
+    if (u.device < 0 || static_cast<std::size_t>(u.device) >= devices.size()) {
+      *error = fmt::format("unplug: there is no device {} (0 to {})", u.device, devices.size() - 1);
+      return false;
+    }
+  }
+  std::vector<bool> unplug_done(options.unplugs.size(), false);
+  auto unplug = [&](std::size_t k, double vt) {
+    const auto& u = options.unplugs[k];
+    unplug_done[k] = true;
+    Device& d = devices[static_cast<std::size_t>(u.device)];
+    if (d.unplugged) return;
+    Unplug(&d, vt + options.unplug_s);
+    Say({{"event", "unplugged"},
+         {"device", d.path},
+         {"pose", u.pose},
+         {"where", u.mid ? "mid-pose" : "between poses"},
+         {"replug_in_s", options.unplug_s}});
+  };
   const auto& events = devices[0].capture->session.events;
   report->poses = static_cast<int>(events.size());
   report->frames_sent.assign(devices.size(), 0);
@@ -219,6 +342,9 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
   double shift_s = 0;      // session seconds of holds so far
   bool announced = false;  // pose p announced and not yet fully answered
   std::set<std::string> waiting, rejected_by;
+  std::set<std::string> skipped_by;     // devices the daemon left out (not streaming): again later
+  int outstanding = 0;                  // pose requests not yet accepted or refused
+  bool accepted_any = false;            // some device took this announcement
   std::set<std::string> retry_devices;  // a retry goes to these only (empty: every device)
   int retries_left = options.retries;
   bool holding = false;
@@ -256,18 +382,29 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
   };
 
   auto end_hold = [&](double vt) {
+    for (std::size_t k = 0; k < options.unplugs.size(); ++k) {
+      if (!unplug_done[k] && !options.unplugs[k].mid &&
+          options.unplugs[k].pose == static_cast<int>(p)) {
+        unplug(k, vt);
+      }
+    }
     if (holding) shift_past_hold(vt);
     holding = false;
     announced = false;
     waiting.clear();
     rejected_by.clear();
+    skipped_by.clear();
     retry_devices.clear();
     retries_left = options.retries;
     ++p;
   };
 
+  auto last_turn = Clock::now();
+  auto due_since = Clock::time_point::max();  // pose p could be announced since then (max: not)
   for (;;) {
     const double vt = vt_now();
+    const double turn_gap_s = std::chrono::duration<double>(Clock::now() - last_turn).count();
+    last_turn = Clock::now();
     // The daemon's socket: (re)connect.
     if (!controller.connected() &&
         Clock::now() - last_connect_try > std::chrono::milliseconds(200)) {
@@ -291,6 +428,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
         announced = false;  // announced again once the daemon is back
         waiting.clear();
         rejected_by.clear();
+        skipped_by.clear();
       }
       for (const auto& m : messages) {
         const std::string kind = m.value("class", "");
@@ -306,10 +444,21 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
             Say({{"event", "start_rest"}, {"state", "noise measured"}, {"after_s", vt}});
           }
         }
-        if (kind == "POSE_ACCEPTED" && m.value("index", -1) == static_cast<int>(p) && announced) {
+        const bool ours = announced && m.value("index", -1) == static_cast<int>(p);
+        if (kind == "POSE_ACCEPTED" && ours) {
+          --outstanding;
+          accepted_any = true;
           for (const auto& name : m["devices"]) waiting.insert(name.get<std::string>());
-        } else if ((kind == "POSE_CAPTURED" || kind == "POSE_REJECTED") &&
-                   m.value("index", -1) == static_cast<int>(p) && announced) {
+          // A device not streaming at the announcement (reconnecting, configuring) is left out:
+          // the pose goes to it again once the others have answered.
+          if (m.contains("skipped") && m["skipped"].is_object()) {
+            for (const auto& [name, state] : m["skipped"].items()) {
+              if (state.is_string() && state.get<std::string>().rfind("replays", 0) != 0) {
+                skipped_by.insert(name);
+              }
+            }
+          }
+        } else if ((kind == "POSE_CAPTURED" || kind == "POSE_REJECTED") && ours) {
           const std::string device = m.value("device", "");
           waiting.erase(device);
           if (kind == "POSE_REJECTED") rejected_by.insert(device);
@@ -317,26 +466,37 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
                {"index", p},
                {"device", device},
                {"class", kind},
+               {"saved", m.value("saved", false)},
                {"reason", m.value("reason", "")}});
-          if (waiting.empty()) {
-            if (rejected_by.empty()) {
-              ++report->captured;
-              end_hold(vt);
-            } else if (retries_left-- > 0) {
-              // Once more (the table holds still), to the devices that rejected it only.
-              announced = false;
-              retry_devices = rejected_by;
-              rejected_by.clear();
-            } else {
-              ++report->unanswered;
-              end_hold(vt);
-            }
-          }
-        } else if (kind == "ERROR" && announced && waiting.empty()) {
-          // Our pose was refused (e.g. no device streaming yet): again in a moment.
+        } else if (kind == "ERROR" && announced && outstanding > 0) {
+          // A pose request refused (e.g. its device is not streaming): that device again later.
+          // A retry to one device carries the device's name as its id.
+          --outstanding;
           Say({{"event", "refused"}, {"index", p}, {"message", m.value("message", "")}});
+          if (m.contains("id") && m["id"].is_string())
+            skipped_by.insert(m["id"].get<std::string>());
+        } else {
+          continue;
+        }
+        if (outstanding > 0 || !waiting.empty()) continue;
+        // Every request of this announcement answered.
+        if (!accepted_any) {
+          // Refused outright (no device streaming yet): the same again in a moment.
           announced = false;
           retry_at = Clock::now() + std::chrono::milliseconds(500);
+        } else if (rejected_by.empty() && skipped_by.empty()) {
+          ++report->captured;
+          end_hold(vt);
+        } else if (retries_left-- > 0) {
+          // Once more (the table holds still), to the devices that rejected it or were left out,
+          // after a moment: what interrupted the stream may not be over yet.
+          announced = false;
+          retry_at = Clock::now() + std::chrono::milliseconds(250);
+          retry_devices = rejected_by;
+          retry_devices.insert(skipped_by.begin(), skipped_by.end());
+        } else {
+          ++report->unanswered;
+          end_hold(vt);
         }
       }
     }
@@ -349,7 +509,9 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
       start_holding = true;
       begin_hold(0.0, start_s, start_s + shift_s);
     }
-    if (start_holding && start_rest && vt - hold_start_s > options.answer_timeout_s) {
+    // The daemon's timeouts run on the wall clock whatever the speed: so does the table's wait.
+    auto held_wall_s = [&] { return (vt - hold_start_s) / options.speed; };
+    if (start_holding && start_rest && held_wall_s() > options.answer_timeout_s) {
       Say({{"event", "start_rest"}, {"state", "gave up waiting for the noise"}, {"after_s", vt}});
       start_rest = false;
     }
@@ -357,45 +519,31 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
       start_holding = false;
       shift_past_hold(vt);
     }
-    // Announce the pose once the table has settled there.
-    if (p < events.size() && !announced && !start_holding && controller.connected() &&
-        Clock::now() >= retry_at && vt >= events[p].t_s + shift_s) {
-      const TablePose& pose = events[p].pose;
-      const nlohmann::json request = {{"cmd", "pose"},
-                                      {"index", p},
-                                      {"phi_deg", pose.phi_rad * kRadToDeg},
-                                      {"gamma_deg", pose.gamma_rad * kRadToDeg},
-                                      {"psi_deg", pose.psi_rad * kRadToDeg}};
-      bool sent = true;
-      if (retry_devices.empty()) {
-        sent = controller.Send(request);
-      } else {
-        for (const auto& device : retry_devices) {
-          nlohmann::json one = request;
-          one["device"] = device;
-          sent = sent && controller.Send(one);
-        }
-      }
-      if (sent) {
-        announced = true;
-        waiting.clear();
-        rejected_by.clear();
-        Say({{"event", "pose"},
-             {"index", p},
-             {"phi_deg", pose.phi_rad * kRadToDeg},
-             {"gamma_deg", pose.gamma_rad * kRadToDeg},
-             {"psi_deg", pose.psi_rad * kRadToDeg}});
-      }
-    }
     // The table holds while the pose is not answered.
     if (p < events.size() && !holding && !start_holding && vt >= events[p].dwell_end_s + shift_s) {
       holding = true;
       begin_hold(events[p].t_s, events[p].dwell_end_s, events[p].dwell_end_s + shift_s);
     }
-    if (holding && vt - hold_start_s > options.answer_timeout_s) {
+    if (holding && held_wall_s() > options.answer_timeout_s) {
       Say({{"event", "gave_up"}, {"index", p}, {"after_s", vt - hold_start_s}});
       ++report->unanswered;
       end_hold(vt);
+    }
+    // Unplugs halfway through a pose's dwell (announced, not yet answered); replugs.
+    for (std::size_t k = 0; k < options.unplugs.size(); ++k) {
+      if (!unplug_done[k] && options.unplugs[k].mid &&
+          options.unplugs[k].pose == static_cast<int>(p) && p < events.size() && announced &&
+          vt >= 0.5 * (events[p].t_s + events[p].dwell_end_s) + shift_s) {
+        unplug(k, vt);
+      }
+    }
+    for (std::size_t i = 0; i < devices.size(); ++i) {
+      Device& d = devices[i];
+      if (!d.unplugged || vt < d.replug_vt) continue;
+      if (!OpenDevice(&d, error)) return false;
+      d.emulator = PowerUp(d, i);
+      d.unplugged = false;
+      Say({{"event", "replugged"}, {"device", d.path}});
     }
     // The devices stream.
     bool done = p >= events.size();
@@ -408,7 +556,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
           Sample s = samples[d.hold_samples[at < n ? at : 2 * n - 1 - at]];
           s.t_device_s = d.last_device_s + d.period_s;
           if (s.counter) s.counter = d.last_counter + 1;
-          Emit(&d, s);
+          Emit(&d, s, &errors, vt, turn_gap_s);
           ++d.clones;
           d.clone_due_s += d.period_s;
         }
@@ -420,33 +568,109 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
           Sample s = samples[d.next++];
           if (s.t_device_s) *s.t_device_s += d.device_shift_s;
           if (s.counter) *s.counter += d.counter_shift;
-          Emit(&d, s);
+          Emit(&d, s, &errors, vt, turn_gap_s);
         }
       }
       done = done && d.next >= samples.size();
       Flush(&d);
     }
+    // Announce the pose once the table has settled there, after the samples sent before (they
+    // are in the ptys unless the daemon has not read for a while; then after at most 0.5 s).
+    bool flushed = true;
+    for (const Device& d : devices) flushed = flushed && d.out.empty();
+    const bool due = p < events.size() && !announced && !start_holding && controller.connected() &&
+                     Clock::now() >= retry_at && vt >= events[p].t_s + shift_s;
+    if (!due) {
+      due_since = Clock::time_point::max();
+    } else if (due_since == Clock::time_point::max()) {
+      due_since = Clock::now();
+    }
+    if (due && (flushed || Clock::now() - due_since >= std::chrono::milliseconds(500))) {
+      due_since = Clock::time_point::max();
+      const TablePose& pose = events[p].pose;
+      const nlohmann::json request = {{"cmd", "pose"},
+                                      {"index", p},
+                                      {"phi_deg", pose.phi_rad * kDegPerRad},
+                                      {"gamma_deg", pose.gamma_rad * kDegPerRad},
+                                      {"psi_deg", pose.psi_rad * kDegPerRad}};
+      bool sent = true;
+      outstanding = 0;
+      if (retry_devices.empty()) {
+        sent = controller.Send(request);
+        outstanding = 1;
+      } else {
+        for (const auto& device : retry_devices) {
+          nlohmann::json one = request;
+          one["device"] = device;
+          one["id"] = device;
+          sent = sent && controller.Send(one);
+          ++outstanding;
+        }
+      }
+      if (sent) {
+        announced = true;
+        accepted_any = false;
+        waiting.clear();
+        rejected_by.clear();
+        skipped_by.clear();
+        Say({{"event", "pose"},
+             {"index", p},
+             {"phi_deg", pose.phi_rad * kDegPerRad},
+             {"gamma_deg", pose.gamma_rad * kDegPerRad},
+             {"psi_deg", pose.psi_rad * kDegPerRad}});
+      }
+    }
     if (done) break;
     // Wait for the device's commands (or 1 ms).
     std::vector<pollfd> fds;
-    for (const Device& d : devices) fds.push_back({d.fd, POLLIN, 0});
+    for (const Device& d : devices) fds.push_back({d.fd, POLLIN, 0});  // fd -1: ignored
     ::poll(fds.data(), fds.size(), 1);
     for (std::size_t i = 0; i < devices.size(); ++i) {
       if (!(fds[i].revents & POLLIN)) continue;
       std::uint8_t buffer[4096];
+      if (devices[i].fd < 0) continue;
       const ssize_t n = ::read(devices[i].fd, buffer, sizeof(buffer));
       if (n <= 0) continue;
       const auto reply = devices[i].emulator->OnHostBytes({buffer, static_cast<std::size_t>(n)});
+      const std::size_t from = devices[i].out.size();
       devices[i].out.append(reply.begin(), reply.end());
+      errors.Apply(&devices[i], from);
       Flush(&devices[i]);
     }
   }
+  // Before the ptys close (closing discards what the daemon has not read): wait until every
+  // queued byte is written and the slave side has held nothing for 100 ms, up to 5 s. One empty
+  // look is not enough: a pty hands what the master wrote to the slave's line discipline from a
+  // kernel work queue, so FIONREAD can read 0 just after a write, before the bytes arrive.
+  int quiet_ms = 0;
+  for (int waited_ms = 0; waited_ms < 5000 && quiet_ms < 100; waited_ms += 10) {
+    bool quiet = true;
+    for (Device& d : devices) {
+      const std::uint64_t before = d.written;
+      Flush(&d);
+      int unread = 0;
+      if (d.slave_fd >= 0 && ::ioctl(d.slave_fd, FIONREAD, &unread) == 0 && unread > 0) {
+        quiet = false;
+      }
+      quiet = quiet && d.written == before && (d.out.empty() || d.fd < 0);
+    }
+    quiet_ms = quiet ? quiet_ms + 10 : 0;
+    ::usleep(10'000);
+  }
   for (std::size_t i = 0; i < devices.size(); ++i) {
+    if (devices[i].episode_dropped > 0) {  // still dropping when the session ended
+      SayDropped(devices[i], vt_now());
+    }
     report->frames_sent[i] = devices[i].sent;
     report->frames_withheld[i] = devices[i].withheld;
     report->frames_dropped[i] = devices[i].dropped;
+    report->bytes_written.push_back(devices[i].written);
+    report->bits_flipped.push_back(devices[i].flipped);
+    report->bytes_lost_unplugged.push_back(devices[i].lost_unplugged);
+    report->frames_unplugged.push_back(devices[i].unplugged_frames);
+    report->unplugs.push_back(devices[i].unplugs);
     if (devices[i].slave_fd >= 0) ::close(devices[i].slave_fd);
-    ::close(devices[i].fd);
+    if (devices[i].fd >= 0) ::close(devices[i].fd);
     if (devices[i].linked) ::unlink(devices[i].path.c_str());
   }
   return true;

@@ -11,12 +11,14 @@
 // at home, streaming the start's samples the same way, until the daemon's status says every
 // device has measured its noise (or `answer_timeout_s` passed), as a controller that waits for
 // NOISE_MEASURED would. A rejected pose is
-// announced again (up to `retries` times). A daemon that goes away (kill -9) is reconnected,
-// and the pose it did not answer is announced again.
+// announced again (up to `retries` times) to the devices that rejected it, and so is a pose to a
+// device POSE_ACCEPTED lists as skipped (not streaming). A daemon that goes away (kill -9) is
+// reconnected, and the pose it did not answer is announced again.
 //
 // PTY: a path that does not exist (or is a symlink) gets a new pseudo-terminal, linked there; an
 // existing character device (a socat pty, a real serial port) is used as it is.
 
+#include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -34,8 +36,23 @@ struct LiveSimOptions {
   double speed = 1.0;
   std::string controller;         // turncald's socket; empty: pose events on stdout only
   double connect_timeout_s = 60;  // real seconds to wait for the daemon's socket
-  double answer_timeout_s = 120;  // session seconds the table waits for an answer
+  double answer_timeout_s = 120;  // wall seconds the table waits for an answer (as the daemon)
   int retries = 2;                // a rejected pose is announced again this often
+  // Line faults (docs/RELIABILITY.md). Each bit written to a pty (samples and dialogue replies)
+  // is flipped with this probability, independently (a binary symmetric channel).
+  double bit_error_rate = 0;
+  std::uint64_t fault_seed = 1;
+  // Unplugs: the device's pty goes away (its master is closed and the link removed, as a USB
+  // adapter's node does) and a new one appears at the same path `unplug_s` session seconds
+  // later, the device powered up afresh. `mid`: halfway through the pose's planned dwell (the
+  // pose announced, its answer outstanding); otherwise when the table leaves the pose.
+  struct Unplug {
+    int pose = 0;
+    bool mid = true;
+    int device = 0;  // index among the --live devices
+  };
+  std::vector<Unplug> unplugs;
+  double unplug_s = 2.0;
 };
 
 struct LiveSimReport {
@@ -45,6 +62,10 @@ struct LiveSimReport {
   int reconnects = 0;
   double held_s = 0;  // session seconds the table waited past the planned dwells
   std::vector<std::uint64_t> frames_sent, frames_withheld, frames_dropped;
+  // Per device: bytes the pty took (what the daemon can read), bits flipped in them, bytes lost
+  // in the sim's queue when a pty went away, frames not sent while unplugged, unplugs done.
+  std::vector<std::uint64_t> bytes_written, bits_flipped, bytes_lost_unplugged, frames_unplugged,
+      unplugs;
 };
 
 // Runs the session to its end. Pose answers and progress go to stdout as JSON lines. False with

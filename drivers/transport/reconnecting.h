@@ -6,6 +6,7 @@
 #include <boost/asio/steady_timer.hpp>
 
 #include <array>
+#include <memory>
 
 #include "drivers/transport/transport.h"
 
@@ -14,6 +15,10 @@ namespace turncal::drivers {
 template <class Stream>
 class Reconnecting : public Transport {
  public:
+  // A handler already queued (a read that completed, a timer that expired before it was
+  // cancelled, an open's result) may run after the transport is gone: each checks this first.
+  ~Reconnecting() override { *alive_ = false; }
+
   void Start(DataHandler on_data, StatusHandler on_status) override {
     on_data_ = std::move(on_data);
     on_status_ = std::move(on_status);
@@ -65,39 +70,39 @@ class Reconnecting : public Transport {
  private:
   void TryOpen() {
     if (stopped_) return;
-    BeginOpen(
-        [this](std::unique_ptr<Stream> stream, const std::string& how, const std::string& error) {
-          if (stopped_) return;
-          if (stream) {
-            stream_ = std::move(stream);
-            ++counters_.opens;
-            delay_ = options_.reconnect_initial;
-            if (on_status_)
-              on_status_(TransportStatus::kOpened, Describe() + " opened (" + how + ")");
-            Read();
-            return;
-          }
-          ++counters_.open_failures;
-          if (on_status_) {
-            on_status_(TransportStatus::kOpenFailed,
-                       fmt::format("{}: {}; retrying in {} ms", Describe(), error, delay_.count()));
-          }
-          Retry();
-        });
+    BeginOpen([this, alive = alive_](std::unique_ptr<Stream> stream, const std::string& how,
+                                     const std::string& error) {
+      if (!*alive || stopped_) return;
+      if (stream) {
+        stream_ = std::move(stream);
+        ++counters_.opens;
+        delay_ = options_.reconnect_initial;
+        if (on_status_) on_status_(TransportStatus::kOpened, Describe() + " opened (" + how + ")");
+        Read();
+        return;
+      }
+      ++counters_.open_failures;
+      if (on_status_) {
+        on_status_(TransportStatus::kOpenFailed,
+                   fmt::format("{}: {}; retrying in {} ms", Describe(), error, delay_.count()));
+      }
+      Retry();
+    });
   }
 
   void Retry() {
     timer_.expires_after(delay_);
     delay_ = std::min(delay_ * 2, options_.reconnect_max);
-    timer_.async_wait([this](const boost::system::error_code& ec) {
-      if (!ec) TryOpen();
+    timer_.async_wait([this, alive = alive_](const boost::system::error_code& ec) {
+      if (!ec && *alive) TryOpen();
     });
   }
 
   void Read() {
     stream_->async_read_some(
-        boost::asio::buffer(buffer_), [this](const boost::system::error_code& ec, std::size_t n) {
-          if (ec == boost::asio::error::operation_aborted || stopped_) return;
+        boost::asio::buffer(buffer_),
+        [this, alive = alive_](const boost::system::error_code& ec, std::size_t n) {
+          if (!*alive || ec == boost::asio::error::operation_aborted || stopped_) return;
           if (n > 0) {
             counters_.bytes_read += n;
             on_data_(std::span<const std::uint8_t>(buffer_.data(), n), MonotonicNowNs());
@@ -135,6 +140,7 @@ class Reconnecting : public Transport {
   std::array<std::uint8_t, 4096> buffer_{};
   TransportCounters counters_;
   bool stopped_ = false;
+  std::shared_ptr<bool> alive_ = std::make_shared<bool>(true);
 };
 
 }  // namespace turncal::drivers

@@ -5,6 +5,7 @@
 #include <boost/asio/post.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <fstream>
+#include <memory>
 
 #include "drivers/capture/tcap.h"
 #include "drivers/transport/transport_impl.h"
@@ -18,6 +19,10 @@ class ReplayTransport final : public Transport {
   ReplayTransport(boost::asio::io_context& io, std::string file, double speed,
                   std::vector<CaptureRecord> records)
       : io_(io), file_(std::move(file)), speed_(speed), records_(std::move(records)), timer_(io) {}
+  // A handler already queued (a posted Deliver, a timer that expired before it was cancelled)
+  // may run after the transport is gone: it checks this first (ThreadSanitizer found the
+  // use after free when turncald stopped during a replay).
+  ~ReplayTransport() override { *alive_ = false; }
 
   void Start(DataHandler on_data, StatusHandler on_status) override {
     on_data_ = std::move(on_data);
@@ -55,15 +60,17 @@ class ReplayTransport final : public Transport {
       return;
     }
     if (speed_ <= 0) {
-      boost::asio::post(io_, [this] { Deliver(); });
+      boost::asio::post(io_, [this, alive = alive_] {
+        if (*alive) Deliver();
+      });
       return;
     }
     const auto due =
         start_ns_ + static_cast<std::int64_t>(static_cast<double>(records_[next_].t_ns) / speed_);
     timer_.expires_after(
         std::chrono::nanoseconds(std::max<std::int64_t>(0, due - MonotonicNowNs())));
-    timer_.async_wait([this](const boost::system::error_code& ec) {
-      if (!ec) Deliver();
+    timer_.async_wait([this, alive = alive_](const boost::system::error_code& ec) {
+      if (!ec && *alive) Deliver();
     });
   }
 
@@ -93,6 +100,7 @@ class ReplayTransport final : public Transport {
   std::int64_t start_ns_ = 0;
   bool stopped_ = false;
   TransportCounters counters_;
+  std::shared_ptr<bool> alive_ = std::make_shared<bool>(true);
 };
 
 }  // namespace

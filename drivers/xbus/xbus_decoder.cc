@@ -107,9 +107,33 @@ Examination XbusDecoder::Examine(const std::uint8_t* p, std::size_t n) {
 }
 
 void XbusDecoder::CountGap(std::uint16_t counter) {
-  if (last_counter_) {
-    const auto gap = static_cast<std::uint16_t>(counter - *last_counter_ - 1);
-    if (gap != 0 && gap < 0x8000) counters_.lost_samples += gap;
+  // Steps forward from a to b (1: b follows a), or 0 when b is not ahead of a.
+  const auto ahead = [](std::uint16_t a, std::uint16_t b) -> std::uint32_t {
+    const auto d = static_cast<std::uint16_t>(b - a);
+    return d != 0 && d < 0x8000 ? d : 0u;
+  };
+  // A counter that breaks the sequence is believed when the next one continues from it. When the
+  // next continues the old sequence instead (closer to it), the jump was a corrupted counter (two
+  // bit errors the 8-bit checksum missed) and is not counted as lost samples. A jump in the last
+  // message of a stream stays unconfirmed (not counted).
+  if (jumped_) {
+    const std::uint32_t from_last = ahead(*last_counter_, counter);
+    const std::uint32_t from_jump = ahead(*jumped_, counter);
+    if (from_last != 0 && (from_jump == 0 || from_last < from_jump)) {
+      // The corrupted message stood for one of the samples in between.
+      counters_.lost_samples += from_last > 2 ? from_last - 2 : 0u;
+      last_counter_ = counter;
+      jumped_.reset();
+      return;
+    }
+    const std::uint32_t gap = ahead(*last_counter_, *jumped_);
+    if (gap > 1) counters_.lost_samples += gap - 1;
+    last_counter_ = jumped_;
+    jumped_.reset();
+  }
+  if (last_counter_ && ahead(*last_counter_, counter) != 1) {
+    jumped_ = counter;
+    return;
   }
   last_counter_ = counter;
 }

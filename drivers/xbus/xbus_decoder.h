@@ -57,6 +57,7 @@ class XbusDecoder final : public ScanningDecoder<XbusDecoder> {
   std::optional<XbusLegacyLayout> legacy_;
   std::size_t legacy_size_ = 0;
   std::optional<std::uint16_t> last_counter_;
+  std::optional<std::uint16_t> jumped_;  // a counter out of sequence, until the next one
   std::optional<std::uint8_t> bus_id_;
 };
 

@@ -788,7 +788,9 @@ int Measure(const Args& args) {
   const json before = DeviceCounters(status_before), after = DeviceCounters(status_after);
   double samples_per_s = 0;
   std::uint64_t lost = 0, bad = 0;
-  for (const auto& [name, a] : after.items()) {
+  for (const auto& item : after.items()) {
+    const std::string& name = item.key();
+    const json& a = item.value();
     const json b = before.value(name, json::object());
     const auto delta = [&](const char* key) { return a.value(key, 0ULL) - b.value(key, 0ULL); };
     devices[name] = {{"samples", delta("samples")},

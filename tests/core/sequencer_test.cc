@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstdio>
@@ -14,6 +15,7 @@
 #include <map>
 #include <random>
 
+#include "core/host_clock.h"
 #include "core/session_sim.h"
 #include "core/synthetic.h"
 #include "core/triad_accumulator.h"
@@ -67,6 +69,15 @@ PosePredictor NominalAccPredictor(const MeasurementModel& accel) {
 
 std::int64_t Ns(double t_s) { return static_cast<std::int64_t>(std::llround(t_s * 1e9)); }
 
+// The controller's announcement of a simulated pose event, at `t_s` (host seconds).
+Announcement AnnouncementOf(const SessionPoseEvent& ev, double t_s) {
+  Announcement a;
+  a.index = ev.index;
+  a.pose = ev.pose;
+  a.t_host_ns = Ns(t_s);
+  return a;
+}
+
 // Feeds the session with its pose events as announcements (optionally `early` seconds early for
 // one pose), through `transform` for each sample.
 template <typename Transform>
@@ -78,12 +89,9 @@ void Replay(const Session& s, Sequencer* seq, Transform transform, int early_ind
   };
   for (const Sample& raw : s.sim.samples) {
     while (next < s.sim.events.size() && Ns(announce_time(next)) <= raw.t_host_ns) {
-      Announcement a;
-      a.index = s.sim.events[next].index;
-      a.pose = s.sim.events[next].pose;
-      a.t_host_ns = Ns(announce_time(next));
       std::string error;
-      EXPECT_TRUE(seq->Announce(a, &error)) << error;
+      EXPECT_TRUE(seq->Announce(AnnouncementOf(s.sim.events[next], announce_time(next)), &error))
+          << error;
       ++next;
     }
     Sample x = raw;
@@ -153,6 +161,49 @@ TEST(NoiseMeter, MeasuresTheNoiseOfAStillSensorWithinItsSamplingError) {
   EXPECT_NEAR(p.rate_hz, 200.0, 1e-6);
   ASSERT_TRUE(p.device_period_s);
   EXPECT_NEAR(*p.device_period_s, 0.005, 1e-9);
+}
+
+// A frame that passed its checksum corrupted may lack a triad (an Xbus item id flipped under
+// the 8-bit checksum; found at a bit-error rate of 1e-3, docs/RELIABILITY.md). Such a sample
+// is left out; the triad stays in the profile (it used to drop out for the whole session).
+TEST(NoiseMeter, ASampleMissingATriadIsLeftOutNotTheTriad) {
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> n(0, 1e-3);
+  NoiseMeter meter(NoiseMeterOptions{});
+  NoiseMeter::Status status = NoiseMeter::Status::kCollecting;
+  int k = 0;
+  for (; status == NoiseMeter::Status::kCollecting; ++k) {
+    StillSample s;
+    s.t_host_ns = Ns(k * 0.01);
+    s.v[kTriadAcc] = Eigen::Vector3d(n(rng), n(rng), -9.8 + n(rng));
+    s.v[kTriadGyr] = Eigen::Vector3d(n(rng), n(rng), n(rng));
+    s.present = k % 37 == 5 ? 0b010 : 0b011;  // every 37th sample without its accelerometer
+    status = meter.Add(s);
+  }
+  ASSERT_EQ(status, NoiseMeter::Status::kMeasured) << meter.failure();
+  ASSERT_TRUE(meter.profile().sigma[kTriadAcc]);
+  EXPECT_NEAR((*meter.profile().sigma[kTriadAcc])[2], 1e-3, 4e-3 / std::sqrt(2.0 * k));
+  EXPECT_GE(meter.outliers(), k / 37);
+}
+
+// Host times that do not advance (a burst, a capture with broken stamps) cannot make the meter
+// keep samples without bound: it decides after 600 000 (60 s at 10 kHz).
+TEST(NoiseMeter, KeepsAtMostSixHundredThousandSamples) {
+  NoiseMeter meter(NoiseMeterOptions{});
+  std::mt19937_64 rng(6);
+  std::normal_distribution<double> n(0, 1e-3);
+  int k = 0;
+  NoiseMeter::Status status = NoiseMeter::Status::kCollecting;
+  for (; status == NoiseMeter::Status::kCollecting && k < 700000; ++k) {
+    StillSample s;
+    s.t_host_ns = Ns(1.0);
+    s.t_device_s = k * 1e-4;
+    s.v[kTriadAcc] = Eigen::Vector3d(n(rng), n(rng), -9.8 + n(rng));
+    s.present = 0b001;
+    status = meter.Add(s);
+  }
+  EXPECT_EQ(k, 600001);
+  EXPECT_NE(status, NoiseMeter::Status::kCollecting);
 }
 
 TEST(NoiseMeter, RefusesAStartUpWhileTheTableTurns) {
@@ -455,24 +506,37 @@ TEST(Sequencer, BitFlipsBeyondTheNoiseAreExcludedAndTheRestAreBounded) {
       flipper.flips, gross_in_windows, small_in_windows, worst);
 }
 
-TEST(Sequencer, TooManyLostSamplesRejectThePose) {
+TEST(Sequencer, LostSamplesAreCountedAndTooManyRejectThePose) {
   const Session s = Simulate();
-  Collected c;
-  Sequencer seq(SequencerOptions{}, Collect(&c));
-  // During pose 5's dwell, every 10th sample is lost (its counter skips).
+  // During pose 5's dwell, every 10th sample is lost (its counter skips): 10 % lost at random
+  // leaves the mean unbiased, the pose is captured with the loss counted. With 2 of every 3
+  // lost (67 % > max_lost_fraction 50 %) it is rejected.
   const auto& ev = s.sim.events[5];
-  Replay(s, &seq, [&](Sample* x) {
-    const double t = x->t_host_ns * 1e-9;
-    return !(t > ev.t_s && t < ev.dwell_end_s && *x->counter % 10 == 0);
-  });
-  ASSERT_EQ(c.captured.size(), 25u);
-  ASSERT_EQ(c.rejected.size(), 1u);
-  EXPECT_EQ(c.rejected[0].index, 5);
-  EXPECT_NE(c.rejected[0].reason.find("too many bad samples"), std::string::npos)
-      << c.rejected[0].reason;
-  EXPECT_NEAR(
-      static_cast<double>(c.rejected[0].counts.lost) / static_cast<double>(c.rejected[0].needed),
-      0.1, 0.02);
+  for (const int keep_one_in : {0, 3}) {
+    Collected c;
+    Sequencer seq(SequencerOptions{}, Collect(&c));
+    Replay(s, &seq, [&](Sample* x) {
+      const double t = x->t_host_ns * 1e-9;
+      if (!(t > ev.t_s && t < ev.dwell_end_s)) return true;
+      return keep_one_in == 0 ? *x->counter % 10 != 0 : *x->counter % 3 == 0;
+    });
+    if (keep_one_in == 0) {
+      ASSERT_EQ(c.captured.size(), 26u);
+      ASSERT_TRUE(c.rejected.empty()) << c.rejected[0].reason;
+      const auto& r = c.captured[5];
+      EXPECT_EQ(r.index, 5);
+      EXPECT_NEAR(static_cast<double>(r.counts.lost) / static_cast<double>(r.needed), 0.1, 0.02);
+      continue;
+    }
+    ASSERT_EQ(c.captured.size(), 25u);
+    ASSERT_EQ(c.rejected.size(), 1u);
+    EXPECT_EQ(c.rejected[0].index, 5);
+    EXPECT_NE(c.rejected[0].reason.find("too many lost samples"), std::string::npos)
+        << c.rejected[0].reason;
+    EXPECT_NEAR(
+        static_cast<double>(c.rejected[0].counts.lost) / static_cast<double>(c.rejected[0].needed),
+        2.0 / 3.0, 0.03);
+  }
 }
 
 TEST(Sequencer, SaturatedSamplesAreExcludedAndCounted) {
@@ -668,6 +732,200 @@ TEST(Sequencer, FlaggedSampleAfterAGapStillInterruptsThePose) {
       << c.rejected[0].reason;
 }
 
+// Two bit errors that an 8-bit checksum misses can corrupt a sample's counter (or, for a device
+// without one, its time stamp): a jump of thousands of samples, then the next sample continues the
+// old sequence. That sample is dropped (counted as flagged), not taken for an interruption; a
+// real gap, after which the stream continues from the jump, still interrupts the pose.
+TEST(Sequencer, CorruptedCounterOrTimeStampIsNotAnInterruption) {
+  const Session s = Simulate();
+  for (const bool by_clock : {false, true}) {
+    SCOPED_TRACE(by_clock ? "device clock" : "counter");
+    Collected c;
+    Sequencer seq(SequencerOptions{}, Collect(&c));
+    int corrupted = 0;
+    const auto middle = [&](int pose, const Sample& x) {
+      const auto& ev = s.sim.events[pose];
+      const double t = x.t_host_ns * 1e-9;
+      return t >= 0.5 * (ev.t_s + ev.dwell_end_s) && t < 0.5 * (ev.t_s + ev.dwell_end_s) + 0.01;
+    };
+    Replay(s, &seq, [&](Sample* x) {
+      if (by_clock) x->counter.reset();
+      const double t = x->t_host_ns * 1e-9;
+      if (middle(5, *x) || middle(9, *x)) {
+        ++corrupted;
+        const std::uint32_t bit = middle(5, *x) ? 0x4000 : 0x0100;
+        if (by_clock) {
+          *x->t_device_s += (middle(5, *x) ? 1.0 : -1.0) * bit / s.options.rate_hz;
+        } else {
+          *x->counter ^= bit;
+        }
+      }
+      // Pose 13: 30 samples really lost.
+      const auto& ev = s.sim.events[13];
+      return !(t > ev.t_s + 1.0 && t < ev.t_s + 1.3);
+    });
+    ASSERT_EQ(corrupted, 2);
+    ASSERT_EQ(c.rejected.size(), 1u);
+    EXPECT_EQ(c.rejected[0].index, 13);
+    EXPECT_NE(c.rejected[0].reason.find("the stream was interrupted ("), std::string::npos)
+        << c.rejected[0].reason;
+    ASSERT_EQ(c.captured.size(), 25u);
+    for (const auto& e : c.captured) {
+      const std::int64_t flagged = e.index == 5 || e.index == 9 ? 1 : 0;
+      EXPECT_EQ(e.counts.flagged, flagged) << "pose " << e.index;
+      EXPECT_EQ(e.counts.lost, 0) << "pose " << e.index;
+    }
+    EXPECT_EQ(seq.totals().flagged, 2);
+    EXPECT_NEAR(static_cast<double>(seq.totals().lost), 30.0, 1.0);  // pose 13's gap only
+  }
+}
+
+// HostClock: samples read promptly (0.2-3 ms late), then a 2 s backlog read at once, then
+// promptly again; the device clock runs 50 ppm fast with an arbitrary origin. The mapped time of
+// every sample is within the smallest latency seen plus the drift allowance of when it was
+// sent; never after it was read, never backwards.
+TEST(HostClock, MapsABacklogToWhenItWasSent) {
+  HostClock clock;
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> latency_s(0.2e-3, 3e-3);
+  std::int64_t last_mapped = 0;
+  double worst_backlog_s = 0, worst_prompt_s = 0;
+  for (int k = 0; k < 1500; ++k) {
+    const double sent_s = 10.0 + 0.01 * k;
+    const double device_s = 1234.5 + sent_s * (1 + 50e-6);
+    const double read_s = k >= 500 && k < 700 ? 10.0 + 7.0 + 1e-3 : sent_s + latency_s(rng);
+    const std::int64_t mapped = clock.Map(Ns(read_s), device_s);
+    ASSERT_LE(mapped, Ns(read_s)) << k;
+    ASSERT_GE(mapped, last_mapped) << k;
+    last_mapped = mapped;
+    const double error_s = mapped * 1e-9 - sent_s;
+    EXPECT_GE(error_s, -1e-6) << k;  // 50 ppm over 15 s is below the smallest latency
+    (k >= 500 && k < 700 ? worst_backlog_s : worst_prompt_s) =
+        std::max(k >= 500 && k < 700 ? worst_backlog_s : worst_prompt_s, error_s);
+  }
+  // Prompt: at most the latency of the sample itself. Backlog: the best latency before it (well
+  // under 1 ms after 500 samples) plus 1e-3 of the 2 s since it was seen.
+  EXPECT_LE(worst_prompt_s, 3e-3);
+  EXPECT_LE(worst_backlog_s, 1e-3 + 2e-3);
+  EXPECT_EQ(clock.resets(), 0u);
+  EXPECT_EQ(clock.rate(), 1.0);  // 50 ppm is real time: drift
+}
+
+// A device clock that restarts (replug) or has no time: the read time, and the estimate starts
+// again from there.
+TEST(HostClock, ADeviceClockResetFallsBackToTheReadTime) {
+  HostClock clock;
+  for (int k = 0; k < 100; ++k) clock.Map(Ns(1.0 + 0.01 * k + 1e-3), 500.0 + 0.01 * k);
+  // The device restarts at 0, read 2 s later.
+  EXPECT_EQ(clock.Map(Ns(4.0), 0.0), Ns(4.0));
+  EXPECT_EQ(clock.resets(), 1u);
+  // A later sample read sooner after it was sent: the new estimate; one read late: mapped by it.
+  EXPECT_EQ(clock.Map(Ns(4.005), 0.01), Ns(4.005));
+  EXPECT_NEAR(clock.Map(Ns(4.5), 0.02) * 1e-9, 4.015, 1e-4);
+  EXPECT_EQ(clock.Map(Ns(5.0), std::nullopt), Ns(5.0));
+  // A time stamp far ahead (corrupted) is a reset too, and so is the next one going back.
+  EXPECT_EQ(clock.Map(Ns(5.02), 1e6), Ns(5.02));
+  EXPECT_EQ(clock.Map(Ns(5.03), 0.03 + 1.0), Ns(5.03));
+  EXPECT_EQ(clock.resets(), 3u);
+}
+
+// A device clock that is not real time: the simulator at --live-speed 10 (its device clocks run
+// ten times faster than the host's). Reads are prompt (0.2-3 ms), except a 0.3 s stall every 2 s
+// (read at once after it) and, after the rate is measured, a 1.5 s backlog. The rate is measured
+// to within the slope error of 3 ms over 4 s (1e-3); the backlog is mapped within the smallest
+// latency seen plus the drift allowance of when it was sent.
+TEST(HostClock, MeasuresTheRateOfAClockThatIsNotRealTime) {
+  HostClock clock;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> latency_s(0.2e-3, 3e-3);
+  const double speed = 10, period_s = 0.002;  // device seconds per sample (500 Hz)
+  std::int64_t last_mapped = 0;
+  double last_read_s = 0;  // reads are in order
+  double worst_backlog_s = 0, worst_late_s = 0;
+  for (int k = 0; k < 200000; ++k) {
+    const double sent_s = 1.0 + k * period_s / speed;
+    const double device_s = 77.0 + k * period_s;
+    double read_s = sent_s + latency_s(rng);
+    const double in_cycle = std::fmod(sent_s, 2.0);
+    if (in_cycle >= 1.0 && in_cycle < 1.3) read_s = sent_s - in_cycle + 1.3 + 1e-3;
+    const bool backlog = sent_s >= 30.0 && sent_s < 31.5;
+    if (backlog) read_s = 31.5 + 1e-3;
+    read_s = last_read_s = std::max(read_s, last_read_s);
+    const std::int64_t mapped = clock.Map(Ns(read_s), device_s);
+    ASSERT_LE(mapped, Ns(read_s)) << k;
+    ASSERT_GE(mapped, last_mapped) << k;
+    last_mapped = mapped;
+    const double error_s = mapped * 1e-9 - sent_s;
+    if (sent_s > 15.0) {
+      EXPECT_GE(error_s, -2e-3) << k;
+      (backlog ? worst_backlog_s : worst_late_s) =
+          std::max(backlog ? worst_backlog_s : worst_late_s, error_s);
+    }
+  }
+  EXPECT_NEAR(clock.rate(), 1 / speed, 1e-3 / speed);
+  EXPECT_LE(worst_backlog_s, 1e-3 + 1.5e-3 + 1.5e-3);  // latency, drift, rate error over 1.5 s
+  // The stalls are mapped too (a stall is a backlog of 0.3 s).
+  EXPECT_LE(worst_late_s, 3e-3);
+}
+
+// A stalled daemon reads a backlog after the next pose was announced: pose 4's still samples,
+// the move and the start of pose 5, all at once, 0.5 s after pose 5 settled (pose 4 and 5 were
+// both announced during the stall). By read times every one of them came after pose 5's
+// announcement, and pose 4's still samples made pose 5's record (live on 2026-11-22, "300 samples
+// over 0.01 s"). By the device clock, pose 5's record holds only samples sent after it was
+// announced, and is within 4 sigma of pose 5's truth.
+//
+// At `speed` the session runs that many times faster than the host's clock, as in the live
+// simulator (the device clock keeps session time): the sequencer measures the device clock's rate
+// first (HostClock) and maps the backlog by it.
+void ExpectABacklogToBelongBeforeTheAnnouncement(double speed) {
+  const Session s = Simulate();
+  Collected c;
+  SequencerOptions options;
+  options.noise_meter.duration_s /= speed;  // the same samples (the session's rest is short)
+  Sequencer seq(options, Collect(&c));
+  const auto& ev4 = s.sim.events[4];
+  const auto& ev5 = s.sim.events[5];
+  auto host_ns = [&](double session_s) { return Ns(session_s / speed); };
+  const std::int64_t burst_ns = host_ns(ev5.t_s + 0.5);
+  std::size_t next = 0;
+  for (const Sample& raw : s.sim.samples) {
+    Sample x = raw;
+    x.t_host_ns = host_ns(raw.t_host_ns * 1e-9);
+    if (x.t_host_ns >= host_ns(ev4.t_s) && x.t_host_ns < burst_ns) x.t_host_ns = burst_ns;
+    while (next < s.sim.events.size() && host_ns(s.sim.events[next].t_s) <= x.t_host_ns) {
+      std::string error;
+      ASSERT_TRUE(
+          seq.Announce(AnnouncementOf(s.sim.events[next], s.sim.events[next].t_s / speed), &error))
+          << error;
+      ++next;
+    }
+    seq.Push(x);
+  }
+  seq.Finish(host_ns(s.sim.samples.back().t_host_ns * 1e-9));
+  ASSERT_EQ(c.rejected.size(), 1u);
+  EXPECT_EQ(c.rejected[0].index, 4);  // superseded by pose 5 before any of its samples came
+  ASSERT_EQ(c.captured.size(), 25u);
+  const auto it = std::find_if(c.captured.begin(), c.captured.end(),
+                               [](const SequencerEvent& e) { return e.index == 5; });
+  ASSERT_NE(it, c.captured.end());
+  const PoseRecord& r = *it->record;
+  EXPECT_GE(r.t_start_s, ev5.t_s / speed - 1e-9);
+  const Eigen::Vector3d truth = s.accel->Predict(s.sim.accel_truth, ev5.pose);
+  const double se = AccSigma(s) / std::sqrt(static_cast<double>(r.acc->count));
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(r.acc->mean[a], truth[a], 4 * se) << "axis " << a;
+}
+
+TEST(Sequencer, ABacklogReadAfterAnAnnouncementBelongsBeforeIt) {
+  ExpectABacklogToBelongBeforeTheAnnouncement(1.0);
+}
+
+// The live simulator's failure in CI (2026-11-23, faults_unplug at --live-speed 10): imu1's
+// poses 1 and 7 were poses 0 and 6 again, normalised residuals 3 388 and 5 581.
+TEST(Sequencer, ABacklogOfAFasterThanRealTimeDeviceBelongsBeforeTheAnnouncement) {
+  ExpectABacklogToBelongBeforeTheAnnouncement(10.0);
+}
+
 // A creep too slow for one window (0.03 deg/s, gyro still) shows between the dwell's halves.
 TEST(Sequencer, CreepDuringTheDwellIsRejected) {
   const Session s = Simulate();
@@ -697,22 +955,55 @@ TEST(Sequencer, StreamThatStopsDuringTheDwellIsRejectedByTick) {
   for (const Sample& x : s.sim.samples) {
     if (x.t_host_ns * 1e-9 > ev.t_s + 2.0) break;
     if (next == 0 && Ns(ev.t_s) <= x.t_host_ns) {
-      Announcement a;
-      a.index = 0;
-      a.pose = ev.pose;
-      a.t_host_ns = Ns(ev.t_s);
       std::string error;
-      ASSERT_TRUE(seq.Announce(a, &error));
+      ASSERT_TRUE(seq.Announce(AnnouncementOf(ev, ev.t_s), &error));
       ++next;
     }
     seq.Push(x);
   }
   EXPECT_TRUE(seq.busy());
-  seq.Tick(Ns(ev.t_s + 3.0));
+  // Silent for a window and 1 s: perhaps the daemon stalled, the bytes may be waiting to be read.
+  seq.Tick(Ns(ev.t_s + 3.5));
+  EXPECT_TRUE(seq.busy());
+  // A window and the 2 s allowance for stalls: stopped.
+  seq.Tick(Ns(ev.t_s + 4.6));
   EXPECT_FALSE(seq.busy());
   ASSERT_EQ(c.rejected.size(), 1u);
   EXPECT_NE(c.rejected[0].reason.find("stopped during the dwell"), std::string::npos)
       << c.rejected[0].reason;
+}
+
+// The daemon stalls 0.8 s during a dwell (a loaded host); a tick runs before the bytes that came
+// meanwhile are read (the replay of a live capture ticked so, 2026-11-23, and rejected a pose the
+// live daemon had captured). The backlog is then read: the pose is captured, within 4 sigma.
+TEST(Sequencer, ATickAfterADaemonStallIsNotAStoppedStream) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const auto& ev = s.sim.events[0];
+  const std::int64_t stall_from = Ns(ev.t_s + 1.5), stall_to = Ns(ev.t_s + 2.3);
+  bool announced = false, ticked = false;
+  for (const Sample& raw : s.sim.samples) {
+    Sample x = raw;
+    if (x.t_host_ns >= stall_from && x.t_host_ns < stall_to) x.t_host_ns = stall_to;
+    if (!announced && Ns(ev.t_s) <= x.t_host_ns) {
+      std::string error;
+      ASSERT_TRUE(seq.Announce(AnnouncementOf(ev, ev.t_s), &error));
+      announced = true;
+    }
+    if (!ticked && x.t_host_ns >= stall_to) {
+      seq.Tick(stall_to);
+      ticked = true;
+    }
+    seq.Push(x);
+    if (!c.captured.empty() || !c.rejected.empty()) break;
+  }
+  ASSERT_TRUE(c.rejected.empty()) << c.rejected[0].reason;
+  ASSERT_EQ(c.captured.size(), 1u);
+  const PoseRecord& r = *c.captured[0].record;
+  const Eigen::Vector3d truth = s.accel->Predict(s.sim.accel_truth, ev.pose);
+  const double se = AccSigma(s) / std::sqrt(static_cast<double>(r.acc->count));
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(r.acc->mean[a], truth[a], 4 * se) << "axis " << a;
 }
 
 TEST(Sequencer, ConfiguredNoiseForADeviceWithoutMagnetometer) {

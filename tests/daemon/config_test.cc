@@ -138,5 +138,48 @@ INSTANTIATE_TEST_SUITE_P(
         Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nrate_hz = 0\n",
             "'rate_hz' must be in (0, 4000]"}));
 
+// Found by config_fuzz (tests/fuzz), from its crashing inputs: each was accepted with another
+// value than the file's, refused without the file and line, threw out of ParseConfig (turncald
+// died at start or on SIGHUP), or was undefined behaviour.
+INSTANTIATE_TEST_SUITE_P(
+    FoundByFuzzing, ConfigErrors,
+    ::testing::Values(
+        // Taken as the default 115200.
+        Bad{"[[device]]\nname = \"imu2\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nbaud = -921600\n",
+            "t.toml:5: 'baud' must be a whole number from 300 to 4000000"},
+        // Converted to long long: undefined.
+        Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nbaud = 1e300\n",
+            "t.toml:5: 'baud' must be a whole number from 300 to 4000000"},
+        // Taken as xbus on the port ":/dev/ttyUSB1".
+        Bad{"[[device]]\nname = \"imu1\"\nprotocol = \"xbus:\"\nport = \"/dev/ttyUSB1\"\nbaud = "
+            "115200\n",
+            "t.toml:1: device: unknown protocol 'xbus:'"},
+        // The gate's own check said neither file nor line.
+        Bad{"[gate]\nmax_normalized_residual = 0.0\n",
+            "t.toml:1: [gate]: max_normalized_residual must be > 0"},
+        // toml++ converted the float to int64_t: undefined.
+        Bad{"control_users = [1e301]\n", "t.toml:1: 'control_users' holds user names or uids"},
+        // Wrapped to another uid beyond 2^32; std::stoul threw beyond 2^64.
+        Bad{"control_users = [\"root\", 1000429496727296]\n",
+            "t.toml:1: control_users: uid 1000429496727296 is out of range"},
+        Bad{"control_users = [\"99999999999999999999\"]\n",
+            "uid 99999999999999999999 is out of range"}));
+
+TEST(Config, APortKeepsItsAtSign) {
+  // Without a baud, "/dev/odd@9600" was the port "/dev/odd" at 9600 baud.
+  for (const char* baud : {"", "baud = 57600\n"}) {
+    Config c;
+    std::string error;
+    ASSERT_TRUE(ParseConfig(std::string("[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = "
+                                        "\"/dev/odd@9600\"\n") +
+                                baud,
+                            "t.toml", &c, &error))
+        << error;
+    ASSERT_EQ(c.devices.size(), 1u);
+    EXPECT_EQ(c.devices[0].port, "/dev/odd@9600");
+    EXPECT_EQ(c.devices[0].baud, *baud ? 57600 : 115200);
+  }
+}
+
 }  // namespace
 }  // namespace turncal::daemon

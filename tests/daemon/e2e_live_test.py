@@ -27,29 +27,17 @@ import sys
 import tempfile
 import time
 
+from live_session import check, failures, wait_for
+import live_session
+
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
 WHICH = sys.argv[3] if len(sys.argv) > 3 else "all"
 SPEED = 10
 N_POSES = 26
-failures = []
 
 
-def check(ok, message):
-    print(("ok   " if ok else "FAIL ") + message, flush=True)
-    if not ok:
-        failures.append(message)
 
 
-def cube_poses(path):
-    """The first 26 poses of the simulator's default plan (the cube directions), as CSV."""
-    with tempfile.TemporaryDirectory() as d:
-        subprocess.run([TURNCAL, "sim", "--protocol", "gx2", "-o", f"{d}/p.tcap",
-                        "--truth-out", f"{d}/t.json"], check=True, capture_output=True)
-        poses = json.load(open(f"{d}/t.json"))["poses"][:N_POSES]
-    with open(path, "w") as f:
-        f.write("phi,gamma,psi\n")
-        for p in poses:
-            f.write(f"{p['phi_deg']},{p['gamma_deg']},{p['psi_deg']}\n")
 
 
 def start_daemon(d, log_name, record=None):
@@ -60,20 +48,8 @@ def start_daemon(d, log_name, record=None):
     return subprocess.Popen(args, stdout=open(f"{d}/{log_name}", "w"), stderr=subprocess.STDOUT)
 
 
-def start_sim(d, seed):
-    return subprocess.Popen(
-        [TURNCAL, "sim", "--protocol", "mip", "--protocol", "xbus", "--live", f"{d}/mip",
-         "--live", f"{d}/xbus", "--controller", f"{d}/t.sock", "--live-speed", str(SPEED),
-         "--poses", f"{d}/poses.csv", "--seed", str(seed), "--truth-out", f"{d}/truth.json",
-         "--answer-timeout", "60"],
-        stdout=open(f"{d}/sim.out", "w"), stderr=open(f"{d}/sim.err", "w"))
 
 
-def wait_for(path, seconds=10):
-    end = time.time() + seconds
-    while time.time() < end and not os.path.exists(path):
-        time.sleep(0.05)
-    return os.path.exists(path)
 
 
 def answers(d):
@@ -102,31 +78,45 @@ def check_truth(result, truth, label):
             check(m["active_version"] >= 1 and m["gate"]["pass"],
                   f"{label}: {name} {model} active (v{m['active_version']}), gate "
                   f"{'pass' if m['gate']['pass'] else m['gate']['reasons']}")
-            wander = t["accel_bias_wander_mean" if model.startswith("accel") else "mag_bias_wander_mean"]
-            worst = (0.0, "")
-            for p, v in m["params"].items():
-                true = t["models"][model][p]
-                if p in ("bx", "by", "bz"):
-                    true += wander["xyz".index(p[1])]
-                if v["sigma"] is None:
-                    continue
-                z = abs(v["value"] - true) / v["sigma"]
-                worst = max(worst, (z, p))
+            worst = live_session.worst_sigma(m, t, model)
             check(worst[0] <= 4.0, f"{label}: {name} {model}: largest |estimate - truth| = "
                   f"{worst[0]:.2f} sigma ({worst[1]})")
+
+
+def sending_times(samples):
+    """When each sample was sent, on the host clock: a record's window is in sending times
+    (docs/SEQUENCER.md), a CORRECTED line carries its read time and its device time. The device
+    clock runs at --live-speed times real time: its rate is the median slope (pairs >= 2 s
+    apart) between the promptest reads of each 0.25 s; the offset is the smallest seen."""
+    pts = [(j["t_host_ns"] * 1e-9, j["t_device"]) for j in samples]
+    rate0 = (pts[-1][0] - pts[0][0]) / (pts[-1][1] - pts[0][1])
+    best = {}
+    for h, dv in pts:
+        k = int(h / 0.25)
+        if k not in best or h - rate0 * dv < best[k][0] - rate0 * best[k][1]:
+            best[k] = (h, dv)
+    b = sorted(best.values())
+    slopes = sorted((q[0] - p[0]) / (q[1] - p[1]) for i, p in enumerate(b) for q in b[i + 1:]
+                    if q[0] - p[0] >= 2.0 and q[1] > p[1])
+    rate = slopes[len(slopes) // 2] if slopes else rate0
+    offset = min(h - rate * dv for h, dv in pts)
+    return [min(h, offset + rate * dv) for h, dv in pts]
 
 
 def check_corrected(d, truth, result):
     """Corrected samples in each captured window against the pose's true output."""
     windows = {}  # (device, index) -> (t_start, t_end)
-    corrected = {}  # device -> [(t_host_s, sample)]
+    lines = {}  # device -> [CORRECTED line]
     for line in open(f"{d}/watch.jsonl"):
         j = json.loads(line)
         if j.get("class") == "POSE_CAPTURED":
             r = j["record"]
             windows[(j["device"], j["index"])] = (r["t_start"], r["t_end"])
         elif j.get("class") == "CORRECTED":
-            corrected.setdefault(j["device"], []).append((j["t_host_ns"] * 1e-9, j))
+            lines.setdefault(j["device"], []).append(j)
+    corrected = {}  # device -> [(t_sent_s, sample)]
+    for name, js in lines.items():
+        corrected[name] = list(zip(sending_times(js), js))
     compared = 0
     worst = (0.0, "")
     for i, name in enumerate(["imu1", "imu2"]):
@@ -156,7 +146,7 @@ def check_corrected(d, truth, result):
 
 def scenario_clean(d):
     daemon = start_daemon(d, "daemon.log", record=f"{d}/live.tcap")
-    sim = start_sim(d, seed=11)
+    sim = live_session.start_sim(TURNCAL, d, 11, SPEED)
     wait_for(f"{d}/t.sock")
     time.sleep(0.3)
     watch = subprocess.Popen([TURNCAL, "watch", "--json", "--corrected", "--uncertainty",
@@ -219,7 +209,7 @@ def scenario_clean(d):
 
 def scenario_kill(d):
     daemon = start_daemon(d, "daemon1.log")
-    sim = start_sim(d, seed=12)
+    sim = live_session.start_sim(TURNCAL, d, 12, SPEED)
     deadline = time.time() + 200
     while time.time() < deadline:
         a = answers(d)
@@ -251,7 +241,7 @@ for name, fn in (("clean", scenario_clean), ("kill", scenario_kill)):
         continue
     d = tempfile.mkdtemp(prefix=f"turncal-e2e-{name}-")
     try:
-        cube_poses(f"{d}/poses.csv")
+        live_session.cube_poses(TURNCAL, f"{d}/poses.csv", N_POSES)
         fn(d)
     finally:
         for p in subprocess.run(["pgrep", "-f", d], capture_output=True, text=True).stdout.split():

@@ -21,6 +21,9 @@ import time
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
 failures = []
+# Under AddressSanitizer (TURNCAL_SANITIZED=1) the quarantine and red zones inflate RSS: the
+# bound is checked in the normal build only.
+SANITIZED = os.environ.get("TURNCAL_SANITIZED") == "1"
 
 
 def check(ok, message):
@@ -105,21 +108,28 @@ try:
 
     # Other clients are served promptly while the slow one is not reading.
     b = Client(sock)
-    worst = 0.0
+    latencies = []
     samples_before = None
     for _ in range(30):
         t0 = time.monotonic()
         b.send({"cmd": "status"})
         r = b.reply()
-        worst = max(worst, time.monotonic() - t0)
+        latencies.append(time.monotonic() - t0)
         samples = r["devices"]["imu"]["counters"]["samples"]
         samples_before = samples_before if samples_before is not None else samples
         time.sleep(0.2)
-    check(worst < 0.5, f"status answered within {worst * 1000:.1f} ms while a subscriber stalls")
+    # A server blocked by the stalled subscriber would answer late every time, or never: the
+    # median says whether it is served promptly; the worst only bounds a loaded host's stalls
+    # (796 ms once beside 200 unit tests, 2026-11-23).
+    latencies.sort()
+    median, worst = latencies[len(latencies) // 2], latencies[-1]
+    check(median < 0.1 and worst < 2.0,
+          f"status answered in {median * 1000:.1f} ms (median), {worst * 1000:.1f} ms at worst, "
+          "while a subscriber stalls")
     check(samples - samples_before > 10000,
           f"the pipeline kept going: {samples - samples_before} samples decoded during the stall")
     rss = rss_kb(daemon.pid)
-    check(rss < 100 * 1024, f"daemon RSS {rss / 1024:.1f} MiB with a stalled subscriber")
+    check(SANITIZED or rss < 100 * 1024, f"daemon RSS {rss / 1024:.1f} MiB with a stalled subscriber")
     # The stalled subscriber now reads: it is told how much it lost.
     dropped = 0
     slow.s.settimeout(5)

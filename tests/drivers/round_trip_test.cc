@@ -119,6 +119,29 @@ TEST(XbusEncoder, PacketCounterGapsAreLostSamples) {
   EXPECT_EQ(d.counters().lost_samples, 2u);
 }
 
+// A message whose counter two bit errors corrupted (the 8-bit checksum still sums to 0) is not a
+// gap: the next counter continues the old sequence. A real jump is counted when the next counter
+// continues from it.
+TEST(XbusEncoder, CorruptedPacketCounterIsNotAGap) {
+  const auto lost = [](std::initializer_list<std::uint32_t> counters) {
+    CollectingSink sink;
+    XbusDecoder d("mti", &sink);
+    for (std::uint32_t counter : counters) {
+      Sample s = Full();
+      s.counter = counter;
+      d.Push(xbus::MtData2(s), 0);
+    }
+    EXPECT_EQ(d.counters().samples, counters.size());
+    return d.counters().lost_samples;
+  };
+  EXPECT_EQ(lost({10, 11, 11 ^ 0x4000, 13, 14}), 0u);  // bit 14 of sample 12's counter
+  EXPECT_EQ(lost({10, 11, 12 ^ 0x0100, 13, 14}), 0u);  // backwards
+  EXPECT_EQ(lost({10, 11, 12 ^ 0x0100, 15, 16}), 2u);  // corrupted, then 13 and 14 lost
+  EXPECT_EQ(lost({10, 11, 1011, 1012, 1013}), 999u);   // a real gap
+  EXPECT_EQ(lost({10, 11, 1011, 1015, 1016}), 1002u);  // a real gap, then 3 more lost
+  EXPECT_EQ(lost({65535, 3, 4}), 3u);                  // across the wrap
+}
+
 TEST(XbusEncoder, ExtendedLengthAndConfigurationRoundTrip) {
   std::vector<std::pair<std::uint16_t, std::uint16_t>> outputs(32, {0x4020, 100});
   const auto set = xbus::SetOutputConfiguration(outputs);

@@ -2,6 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "core/sequencer.h"
 #include "turncal/version.h"
 
 namespace turncal::protocol {
@@ -21,6 +26,198 @@ TEST(Messages, ErrorCarriesItsMessage) {
   const auto e = ErrorMessage("unknown command 'foo'");
   EXPECT_EQ(e["class"], "ERROR");
   EXPECT_EQ(e["message"], "unknown command 'foo'");
+}
+
+// The lines and refusals a framer gives for `stream` pushed in reads of `read` bytes. A refusal
+// says "discarded" when the line ended in the read, "discarded up to its end" when it had not:
+// with `messages` false, only that it was refused.
+std::vector<std::string> Frame(const std::string& stream, std::size_t read, std::size_t cap,
+                               bool messages = true) {
+  RequestFramer framer(cap);
+  std::vector<std::string> out;
+  for (std::size_t at = 0; at < stream.size(); at += read) {
+    framer.Push(
+        std::string_view(stream).substr(at, read),
+        [&](const std::string& line) {
+          out.push_back("line " + line);
+          return true;
+        },
+        [&](const std::string& message) {
+          out.push_back(messages ? "refused " + message : "refused");
+          return true;
+        });
+  }
+  return out;
+}
+
+TEST(Requests, LinesAndRefusalsDoNotDependOnTheReads) {
+  // Found by request_fuzz: a line of exactly the cap ending in "\r\n" was refused when a read
+  // ended between '\r' and '\n', and accepted otherwise.
+  const std::string stream =
+      "\x90{\"cmd\":\"ose\"}\n{\":dm\"n\"cext_poiohn\",\"id\"phi:2,\"pad\":"
+      "\"xxxxxxxxxxxxxxx\xfe\xff\xff\xffx\"}\n{\"cmd\xcc:\"resul\xb2t\"}\r\n"
+      "{\"cmd\":\"devic";
+  const std::string lines = stream.substr(1);  // byte 0 chose the cap of 17 in the fuzzer
+  const auto whole = Frame(lines, lines.size(), 17);
+  ASSERT_EQ(whole.size(), 3u);
+  EXPECT_EQ(whole[0], "line {\"cmd\":\"ose\"}");
+  EXPECT_EQ(whole[1], "refused request longer than 17 bytes: discarded");
+  EXPECT_EQ(whole[2], "line {\"cmd\xcc:\"resul\xb2t\"}");
+  const std::vector<std::string> kinds = {whole[0], "refused", whole[2]};
+  for (std::size_t read = 1; read <= lines.size(); ++read) {
+    EXPECT_EQ(Frame(lines, read, 17, false), kinds) << read;
+  }
+  // One byte more is refused, in one read or as soon as it is there.
+  EXPECT_EQ(Frame("0123456789abcdefgh\r\n", 100, 17),
+            std::vector<std::string>{"refused request longer than 17 bytes: discarded"});
+  EXPECT_EQ(
+      Frame("0123456789abcdefgh\r\n", 1, 17),
+      std::vector<std::string>{"refused request longer than 17 bytes: discarded up to its end"});
+}
+
+TEST(Requests, LinesParseToObjectsOrErrors) {
+  nlohmann::json request;
+  std::string error;
+  EXPECT_EQ(ParseRequestLine(" \t", &request, &error), RequestLine::kBlank);
+  EXPECT_EQ(ParseRequestLine("hello", &request, &error), RequestLine::kError);
+  EXPECT_EQ(error, "malformed request: not JSON (one object per line)");
+  EXPECT_EQ(ParseRequestLine("[1,2]", &request, &error), RequestLine::kError);
+  EXPECT_EQ(error, "malformed request: a JSON object with \"cmd\" expected");
+  ASSERT_EQ(ParseRequestLine(R"({"cmd":"calibrate","id":6})", &request, &error),
+            RequestLine::kRequest);
+  std::string cmd;
+  EXPECT_FALSE(ParseCommand(request, &cmd, &error));
+  EXPECT_EQ(error.rfind("unknown command 'calibrate' (commands: status,", 0), 0u) << error;
+  EXPECT_FALSE(ParseCommand({{"id", 5}}, &cmd, &error));
+  EXPECT_EQ(error.rfind("malformed request: no \"cmd\"", 0), 0u) << error;
+  EXPECT_TRUE(ParseCommand({{"cmd", "next_pose"}}, &cmd, &error));
+  EXPECT_EQ(cmd, "next_pose");
+}
+
+TEST(Requests, ArgumentsOfTheWrongTypeAreErrorsNotExceptions) {
+  // Found by request_fuzz: json::value() threw on these, and the exception out of the request
+  // handler ended turncald -- for next_pose, from any client that may connect.
+  std::string device = "x", note = "x", error;
+  EXPECT_NO_THROW(EXPECT_FALSE(ParseNextPoseRequest(
+      nlohmann::json::parse(R"({"cmd":"next_pose","device":1})"), &device, &error)));
+  EXPECT_EQ(error, "next_pose: 'device' must be a device name");
+  EXPECT_NO_THROW(EXPECT_FALSE(
+      ParseResetRequest(nlohmann::json::parse(R"({"cmd":"reset","note":null})"), &note, &error)));
+  EXPECT_EQ(error, "reset: 'note' must be a string");
+  PublishRequest p;
+  error.clear();
+  EXPECT_NO_THROW(EXPECT_FALSE(ParsePublishRequest(
+      nlohmann::json::parse(
+          R"({"cmd":"publish","override":"imu1","mgdel":"accel13","operator":)"
+          R"("A. Enginee2147483648r","reason":"re-issue after the fixture audit","id":3})"),
+      &p, &error)));
+  EXPECT_EQ(error.rfind("publish: an explicit operator override needs", 0), 0u) << error;
+  EXPECT_NO_THROW(EXPECT_FALSE(ParsePublishRequest(
+      {{"override", true}, {"device", "imu1"}, {"model", 13}, {"operator", "A"}, {"reason", "r"}},
+      &p, &error)));
+  // What was valid stays valid.
+  EXPECT_TRUE(ParseNextPoseRequest({{"cmd", "next_pose"}}, &device, &error));
+  EXPECT_EQ(device, "");
+  EXPECT_TRUE(ParseNextPoseRequest({{"device", "imu2"}}, &device, &error));
+  EXPECT_EQ(device, "imu2");
+  EXPECT_TRUE(ParseResetRequest({{"note", "new IMU batch"}}, &note, &error));
+  EXPECT_EQ(note, "new IMU batch");
+  ASSERT_TRUE(ParsePublishRequest({{"override", true},
+                                   {"device", "imu1"},
+                                   {"model", "accel13"},
+                                   {"operator", "A"},
+                                   {"reason", "r"}},
+                                  &p, &error));
+  EXPECT_EQ(p.model, "accel13");
+}
+
+TEST(Requests, ALineWithANulByteIsNotJson) {
+  // nlohmann::json takes a NUL byte for the end of its input: this was a status request
+  // (tests/daemon/hostile_clients_test.py; request_fuzz checks it since).
+  nlohmann::json request;
+  std::string error;
+  for (const std::string& line :
+       {std::string("{\"cmd\":\"status\"}\0garbage", 24), std::string("{\"cmd\":\"status\"}\0", 17),
+        std::string("{\"cmd\":\"sta\0tus\"}", 17)}) {
+    EXPECT_EQ(ParseRequestLine(line, &request, &error), RequestLine::kError) << line.size();
+    EXPECT_EQ(error, "malformed request: not JSON (one object per line)");
+  }
+}
+
+TEST(Requests, NestingDeeperThanTheLimitIsRefusedBeforeParsing) {
+  // 64 levels pass; 65 are refused, however the line ends; brackets inside strings do not count.
+  nlohmann::json request;
+  std::string error;
+  auto nested = [](int depth) {
+    return "{\"cmd\":\"status\",\"id\":" + std::string(depth - 1, '[') +
+           std::string(depth - 1, ']') + "}";
+  };
+  EXPECT_EQ(ParseRequestLine(nested(kMaxRequestDepth), &request, &error), RequestLine::kRequest);
+  for (const std::string& line :
+       {nested(kMaxRequestDepth + 1), std::string(30000, '['), std::string(70, '{')}) {
+    EXPECT_EQ(ParseRequestLine(line, &request, &error), RequestLine::kError) << line.size();
+    EXPECT_EQ(error, "malformed request: nested deeper than 64 levels");
+  }
+  const std::string quoted = "{\"cmd\":\"status\",\"id\":\"" + std::string(1000, '[') + "\\\"\"}";
+  EXPECT_EQ(ParseRequestLine(quoted, &request, &error), RequestLine::kRequest) << error;
+}
+
+TEST(Requests, ADocumentedArgumentOfAnotherTypeIsRefused) {
+  // These were read as absent: a pose for one device went to every device, and a watch with
+  // "enable":[] started watching (tests/daemon/hostile_clients_test.py; request_fuzz checks every
+  // documented argument since).
+  Announcement a;
+  std::string device, error;
+  EXPECT_FALSE(ParsePoseRequest(
+      nlohmann::json::parse(
+          R"({"cmd":"pose","phi_deg":0,"gamma_deg":90,"psi_deg":45,"device":{"name":"imu"}})"),
+      0, &a, &device, &error));
+  EXPECT_EQ(error, "pose: 'device' must be a device name");
+  std::optional<WatchSpec> spec;
+  EXPECT_FALSE(
+      ParseWatchRequest(nlohmann::json::parse(R"({"cmd":"watch","enable":[]})"), &spec, &error));
+  EXPECT_EQ(error, "watch: 'enable' must be true or false");
+  ASSERT_TRUE(
+      ParseWatchRequest({{"cmd", "watch"}, {"enable", true}, {"raw", true}}, &spec, &error));
+  ASSERT_TRUE(spec);
+  EXPECT_TRUE(spec->raw);
+}
+
+TEST(Requests, APoseRequestIgnoresAnEventKey) {
+  // Found while writing request_fuzz: "event" (which names a capture's events) made the request
+  // "not a pose", and the daemon answered an ERROR without a message.
+  Announcement a;
+  std::string device, error;
+  ASSERT_TRUE(ParsePoseRequest(
+      nlohmann::json::parse(
+          R"({"cmd":"pose","event":"x","phi_deg":90,"gamma_deg":0,"psi_deg":45,"device":"imu"})"),
+      5, &a, &device, &error))
+      << error;
+  EXPECT_NEAR(a.pose.phi_rad, M_PI / 2, 1e-15);
+  EXPECT_EQ(a.t_host_ns, 5);
+  EXPECT_EQ(device, "imu");
+  EXPECT_FALSE(
+      ParsePoseRequest({{"cmd", "pose"}, {"event", 1}, {"phi_deg", "x"}}, 5, &a, &device, &error));
+  EXPECT_EQ(error, "pose: 'phi_deg' must be a finite number (degrees)");
+}
+
+TEST(Requests, WatchIntervalsOfTinyRatesAreDefined) {
+  // Found while writing request_fuzz: 1e9 / max_rate_hz beyond 2^63 was converted to int64
+  // (undefined; UBSan: "inf is outside the range of representable values").
+  std::optional<WatchSpec> spec;
+  std::string error;
+  ASSERT_TRUE(ParseWatchRequest(
+      nlohmann::json::parse(R"({"cmd":"watch","raw":true,"max_rate_hz":1e-300})"), &spec, &error));
+  ASSERT_TRUE(spec);
+  EXPECT_EQ(spec->MinIntervalNs(), std::numeric_limits<std::int64_t>::max());
+  spec->max_rate_hz = 2;
+  EXPECT_EQ(spec->MinIntervalNs(), 500'000'000);
+  spec->max_rate_hz = 0;
+  EXPECT_EQ(spec->MinIntervalNs(), 0);
+  EXPECT_FALSE(ParseWatchRequest({{"max_rate_hz", -1}}, &spec, &error));
+  EXPECT_FALSE(error.empty());
+  ASSERT_TRUE(ParseWatchRequest({{"enable", false}}, &spec, &error));
+  EXPECT_FALSE(spec);
 }
 
 }  // namespace

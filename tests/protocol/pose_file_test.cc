@@ -5,17 +5,16 @@
 #include <cmath>
 
 #include "core/synthetic.h"
+#include "core/units.h"
 #include "protocol/observability_json.h"
 
 namespace turncal {
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
-
 void ExpectPose(const TablePose& p, double phi, double gamma, double psi) {
-  EXPECT_NEAR(p.phi_rad, phi * kDeg, 1e-12);
-  EXPECT_NEAR(p.gamma_rad, gamma * kDeg, 1e-12);
-  EXPECT_NEAR(p.psi_rad, psi * kDeg, 1e-12);
+  EXPECT_NEAR(p.phi_rad, phi * kRadPerDeg, 1e-12);
+  EXPECT_NEAR(p.gamma_rad, gamma * kRadPerDeg, 1e-12);
+  EXPECT_NEAR(p.psi_rad, psi * kRadPerDeg, 1e-12);
 }
 
 TEST(PoseFile, CsvWithHeaderCommentsAndMixedSeparators) {

@@ -1,0 +1,61 @@
+"""What the end-to-end scripts share (e2e_live_test.py, faults_test.py): ok/FAIL lines, the cube
+poses as CSV, waiting for a path, and `turncal sim --live --controller` with a simulated MIP and
+Xbus IMU on one table (ptys DIR/mip and DIR/xbus, turncald's socket DIR/t.sock)."""
+import json
+import os
+import subprocess
+import tempfile
+import time
+
+failures = []
+
+
+def check(ok, message):
+    print(("ok   " if ok else "FAIL ") + message, flush=True)
+    if not ok:
+        failures.append(message)
+
+
+def cube_poses(turncal, path, n_poses):
+    """The first n_poses of the simulator's default plan (the cube directions), as CSV."""
+    with tempfile.TemporaryDirectory() as d:
+        subprocess.run([turncal, "sim", "--protocol", "gx2", "-o", f"{d}/p.tcap",
+                        "--truth-out", f"{d}/t.json"], check=True, capture_output=True)
+        poses = json.load(open(f"{d}/t.json"))["poses"][:n_poses]
+    with open(path, "w") as f:
+        f.write("phi,gamma,psi\n")
+        for p in poses:
+            f.write(f"{p['phi_deg']},{p['gamma_deg']},{p['psi_deg']}\n")
+
+
+def wait_for(path, seconds=10):
+    end = time.time() + seconds
+    while time.time() < end and not os.path.exists(path):
+        time.sleep(0.05)
+    return os.path.exists(path)
+
+
+def start_sim(turncal, d, seed, speed, *extra):
+    """The simulated table with its two IMUs, playing the controller on DIR/t.sock."""
+    return subprocess.Popen(
+        [turncal, "sim", "--protocol", "mip", "--protocol", "xbus", "--live", f"{d}/mip",
+         "--live", f"{d}/xbus", "--controller", f"{d}/t.sock", "--live-speed", str(speed),
+         "--poses", f"{d}/poses.csv", "--seed", str(seed), "--truth-out", f"{d}/truth.json",
+         "--answer-timeout", "60", "--retries", "5", *extra],
+        stdout=open(f"{d}/sim.out", "w"), stderr=open(f"{d}/sim.err", "w"))
+
+
+def worst_sigma(model_result, device_truth, model):
+    """Largest |estimate - truth| / sigma over a model's parameters, and which parameter. The
+    bias truth is the model's plus the mean of the simulated bias wander over the session."""
+    wander = device_truth["accel_bias_wander_mean" if model.startswith("accel")
+                          else "mag_bias_wander_mean"]
+    worst = (0.0, "")
+    for p, v in model_result["params"].items():
+        true = device_truth["models"][model][p]
+        if p in ("bx", "by", "bz"):
+            true += wander["xyz".index(p[1])]
+        if v["sigma"] is None:
+            continue
+        worst = max(worst, (abs(v["value"] - true) / v["sigma"], p))
+    return worst
