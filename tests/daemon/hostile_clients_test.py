@@ -754,14 +754,16 @@ try:
     watcher.send({"cmd": "status", "id": "s3a"})
     decoded0 = watcher.reply(want_id="s3a")["devices"]["imu"]["counters"]["samples"]
     sub0 = sub.samples
-    peak, worst_status = rss3, 0.0
+    peak, status_s = rss3, []
     while time.monotonic() - t3 < 10:
         time.sleep(0.25)
         peak = max(peak, rss_kb(daemon.proc.pid))
         q = time.monotonic()
         watcher.send({"cmd": "status", "id": "s3"})
         r = watcher.reply(want_id="s3")
-        worst_status = max(worst_status, time.monotonic() - q)
+        status_s.append(time.monotonic() - q)
+    status_s.sort()
+    median_status, worst_status = status_s[len(status_s) // 2], status_s[-1]
     decoded = r["devices"]["imu"]["counters"]["samples"] - decoded0
     received = sub.samples - sub0
     # The bound: each stalled connection holds at most stream_queue_bytes (1 MiB) queued plus the
@@ -773,9 +775,12 @@ try:
           f"stalled subscribers: RSS {rss3 / 1024:.1f} -> peak {peak / 1024:.1f} MiB over 10 s "
           f"(+{(peak - rss3) / 1024:.1f} MiB; bound {bound / 1024:.0f} MiB = 2 x (1 MiB queue + "
           f"1 MiB batch in flight) + 4 MiB; unbounded queues would hold ~{would:.0f} MB)")
-    check(received > 0 and received >= 0.5 * decoded and worst_status < 1.0,
+    # Served promptly: the median; the worst only bounds a loaded host's stalls of this script
+    # or the daemon (as in socket_protocol_test.py).
+    check(received > 0 and received >= 0.5 * decoded and median_status < 0.1 and worst_status < 2.0,
           f"meanwhile the reading subscriber got {received} of {decoded} samples decoded and "
-          f"status was answered within {worst_status * 1000:.0f} ms")
+          f"status was answered in {median_status * 1000:.0f} ms (median), "
+          f"{worst_status * 1000:.0f} ms at worst")
     # The stalled ones now read: their queues drain (2 MiB each at most), and DROPPED tells them
     # what they lost (a first DROPPED can come early, when the batch in flight was taken; the
     # last one read after the drain carries the total).
