@@ -135,20 +135,7 @@ TEST(SerialTransport, PtyCarriesASimulatedStreamAndSurvivesItsPeerDying) {
     }
     out.flush();
   });
-  boost::asio::steady_timer deadline(io);
-  std::function<void()> poll = [&] {
-    deadline.expires_after(std::chrono::milliseconds(10));
-    deadline.async_wait([&](const boost::system::error_code& ec) {
-      if (ec) return;
-      if (sink.samples.size() >= kSamples) {
-        io.stop();
-        return;
-      }
-      poll();
-    });
-  };
-  poll();
-  io.run_for(std::chrono::seconds(10));
+  RunUntil(io, [&] { return sink.samples.size() >= kSamples; });
   writer.join();
   ASSERT_EQ(sink.samples.size(), static_cast<std::size_t>(kSamples));
   for (int i = 0; i < kSamples; ++i) {
