@@ -8,6 +8,7 @@
 #include <boost/math/special_functions/gamma.hpp>
 #include <cmath>
 
+#include "core/gls_whitening.h"
 #include "core/linear_start.h"
 #include "core/mag22_gauge.h"
 #include "core/observability.h"
@@ -16,7 +17,11 @@ namespace turncal {
 
 struct Calibrator::Pose {
   WeightedPose weighted;
-  std::unique_ptr<ceres::CostFunction> cost;
+  std::unique_ptr<ceres::CostFunction> cost;  // whitened by the pose's own covariance
+  // With a drift model: the unwhitened residual, the pose's own (white) covariance and its window.
+  std::unique_ptr<ceres::CostFunction> raw;
+  Eigen::Matrix3d white = Eigen::Matrix3d::Identity();
+  TimeWindow window;
 };
 
 const char* ToString(RobustLoss loss) {
@@ -53,6 +58,7 @@ bool CalibratorOptions::IsValid(std::string* error) const {
   if (!(noise_density >= 0) || !(pose_offset_sigma >= 0)) {
     return fail("noise_density and pose_offset_sigma must be >= 0");
   }
+  if (!drift.IsValid(error)) return false;
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
   if (!(rank_tolerance > 0 && rank_tolerance < 1)) return fail("rank_tolerance must be in (0, 1)");
   if (!(outlier_threshold > 0)) return fail("outlier_threshold must be > 0");
@@ -147,6 +153,28 @@ std::vector<WeightedPose> Calibrator::weighted_poses() const {
   std::vector<WeightedPose> out;
   out.reserve(poses_.size());
   for (const auto& p : poses_) out.push_back(p.weighted);
+  if (!options_.drift.enabled() || poses_.empty()) return out;
+  // With drift the information is not per pose; each pose is weighed here by its own white
+  // covariance plus the variance of its drift from the latest pose (the marginal), which is what
+  // the observability analysis and the planner use.
+  std::vector<TimeWindow> windows;
+  for (const auto& p : poses_) windows.push_back(p.window);
+  int ref = 0;
+  for (int i = 1; i < num_poses(); ++i)
+    if (windows[static_cast<std::size_t>(i)].t0_s >= windows[static_cast<std::size_t>(ref)].t0_s)
+      ref = i;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> marginal(num_poses(), 3);
+  for (int axis = 0; axis < 3; ++axis) {
+    marginal.col(axis) = DriftIncrementCovariance(options_.drift, axis, windows, ref).diagonal();
+  }
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    Eigen::Matrix3d cov = poses_[i].white;
+    cov.diagonal() += marginal.row(static_cast<Eigen::Index>(i)).transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    out[i].sqrt_information = eig.eigenvectors() *
+                              eig.eigenvalues().cwiseInverse().cwiseSqrt().asDiagonal() *
+                              eig.eigenvectors().transpose();
+  }
   return out;
 }
 
@@ -169,6 +197,11 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
     return fail("the record holds a non-finite mean or covariance");
   }
   if (triad->count < 1) return fail("the record has no samples");
+  const TimeWindow window{record.t_start_s, record.t_end_s};
+  if (options_.drift.enabled() &&
+      !(std::isfinite(window.t0_s) && std::isfinite(window.t1_s) && window.t1_s > window.t0_s)) {
+    return fail("the drift model needs the record's time window (t_start_s < t_end_s)");
+  }
 
   Eigen::Matrix3d sigma =
       triad->mean_covariance
@@ -196,6 +229,11 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   w.sqrt_information = eig.eigenvectors() * lambda.cwiseInverse().cwiseSqrt().asDiagonal() *
                        eig.eigenvectors().transpose();
   pose.cost = model_->MakeResidual(p, w.measured, w.sqrt_information);
+  if (options_.drift.enabled()) {
+    pose.white = eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
+    pose.raw = model_->MakeResidual(p, w.measured, Eigen::Matrix3d::Identity());
+    pose.window = window;
+  }
   poses_.push_back(std::move(pose));
   return true;
 }
@@ -210,6 +248,38 @@ bool Calibrator::StartFromLinearForm(Eigen::VectorXd* theta, std::string* error)
   LinearStart start;
   if (!SolveLinearStart(poses, measured, model_->excitation_ned(), &start, error)) return false;
   return model_->FromLinear(start.G, start.beta, start.b, theta, error);
+}
+
+bool Calibrator::BuildBlocks(std::string* error) {
+  blocks_.clear();
+  gls_blocks_.clear();
+  order_.clear();
+  if (!options_.drift.enabled()) {
+    for (auto& p : poses_) blocks_.push_back(p.cost.get());
+    return true;
+  }
+  std::vector<TimeWindow> windows;
+  std::vector<Eigen::Matrix3d> white;
+  for (const auto& p : poses_) {
+    windows.push_back(p.window);
+    white.push_back(p.white);
+  }
+  GlsWhitening gls;
+  if (!BuildGlsWhitening(windows, white, options_.drift, &gls, error)) return false;
+  order_ = gls.order;
+  gls_w_ = gls.W;
+  const int n = num_poses();
+  for (int k = 0; k < n; ++k) {
+    auto cost = std::make_unique<InnovationCost>(model_->num_parameters());
+    for (int j = 0; j <= k; ++j) {
+      const Eigen::Matrix3d weight = gls.W.block<3, 3>(3 * k, 3 * j);
+      if (weight.isZero(0.0)) continue;
+      cost->Add(poses_[static_cast<std::size_t>(gls.order[j])].raw.get(), weight);
+    }
+    blocks_.push_back(cost.get());
+    gls_blocks_.push_back(std::move(cost));
+  }
+  return true;
 }
 
 Estimate Calibrator::solve() {
@@ -231,6 +301,14 @@ Estimate Calibrator::solve() {
     return est;
   }
 
+  {
+    std::string error;
+    if (!BuildBlocks(&error)) {
+      est.error = error;
+      return est;
+    }
+  }
+
   ceres::Problem::Options problem_options;
   problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
@@ -247,7 +325,7 @@ Estimate Calibrator::solve() {
 
   auto run = [&](Eigen::VectorXd* theta, ceres::Solver::Summary* summary) {
     ceres::Problem problem(problem_options);
-    for (auto& p : poses_) problem.AddResidualBlock(p.cost.get(), loss_.get(), theta->data());
+    for (auto* block : blocks_) problem.AddResidualBlock(block, loss_.get(), theta->data());
     ceres::Solve(solver_options, &problem, summary);
   };
 
@@ -296,7 +374,7 @@ Estimate Calibrator::solve() {
 
   // Jacobian at the estimate, as the solver sees it (whitened, robust loss applied).
   ceres::Problem problem(problem_options);
-  for (auto& p : poses_) problem.AddResidualBlock(p.cost.get(), loss_.get(), theta.data());
+  for (auto* block : blocks_) problem.AddResidualBlock(block, loss_.get(), theta.data());
   const Eigen::MatrixXd J = DenseJacobian(&problem);
   Eigen::VectorXd scale = J.colwise().norm().transpose();
   for (int j = 0; j < N; ++j) scale[j] = scale[j] > 0 ? 1.0 / scale[j] : 1.0;
@@ -343,15 +421,32 @@ Estimate Calibrator::solve() {
   }
 
   // Residuals, chi^2 (without the robust loss: the likelihood of the data as they are).
+  // With drift a pose's whitened residual is its innovation (what the earlier poses did not
+  // predict of it), so chi^2 = r^T C^-1 r and an outlier is judged against its own sigma.
   est.chi2 = 0;
   for (const auto& p : poses_) {
     PoseResidual r;
     r.raw = p.weighted.measured - model_->Predict(theta, p.weighted.pose);
     r.whitened = p.weighted.sqrt_information * r.raw;
+    est.residuals.push_back(r);
+  }
+  if (options_.drift.enabled()) {
+    Eigen::VectorXd stacked(3 * n);
+    for (int k = 0; k < n; ++k) {
+      stacked.segment<3>(3 * k) = est.residuals[static_cast<std::size_t>(order_[k])].raw;
+    }
+    const Eigen::VectorXd innovations = gls_w_.triangularView<Eigen::Lower>() * stacked;
+    for (int k = 0; k < n; ++k) {
+      est.residuals[static_cast<std::size_t>(order_[k])].whitened = innovations.segment<3>(3 * k);
+    }
+    const TimeWindow& ref = poses_[static_cast<std::size_t>(order_.back())].window;
+    est.bias_window = ref;
+    est.drift = options_.drift;
+  }
+  for (auto& r : est.residuals) {
     r.normalized = std::sqrt(r.whitened.squaredNorm() / 3.0);
     r.outlier = r.normalized > options_.outlier_threshold;
     est.chi2 += r.whitened.squaredNorm();
-    est.residuals.push_back(r);
   }
   est.dof = 3 * n - est.rank;
   est.p_value = est.dof > 0 ? boost::math::gamma_q(est.dof / 2.0, est.chi2 / 2.0) : 1.0;

@@ -10,9 +10,11 @@
 
 #include <Eigen/Core>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "core/bias_drift.h"
 #include "core/measurement_model.h"
 #include "core/pose_record.h"
 
@@ -52,6 +54,13 @@ struct CalibratorOptions {
   // between poses (~4e-4 m/s^2 for an industrial MEMS accelerometer, SENSORS.md).
   double noise_density = 0.0;
   double pose_offset_sigma = 0.0;
+
+  // Bias drift as a process in time (core/bias_drift.h). When enabled, the poses' errors are
+  // correlated through it and the calibrator solves by generalised least squares over all poses
+  // (core/gls_whitening.h); the bias parameters are then the bias over the latest pose's window
+  // (Estimate::bias_window). Every record needs its time window. pose_offset_sigma, if also set,
+  // stays an independent per-pose offset (e.g. the table's repositioning).
+  BiasDrift drift;
 
   int max_iterations = 100;
   double function_tolerance = 1e-12;
@@ -103,7 +112,11 @@ struct Estimate {
   double p_value = 1.0;
   double covariance_scale = 1.0;  // > 1 when inflated by chi^2/dof
   std::string gauge;              // mag22: the gauge applied; empty otherwise
-  bool linear_start = false;      // this solve started from the linear form
+  // With a drift model: the time window the bias parameters hold for (the latest pose's) and
+  // the drift model, so a user of the estimate can grow the bias sigma with time since.
+  std::optional<TimeWindow> bias_window;
+  BiasDrift drift;
+  bool linear_start = false;  // this solve started from the linear form
   int iterations = 0;
   std::string termination;
   double solve_time_s = 0.0;  // Ceres' own measurement of the solve
@@ -141,6 +154,14 @@ class Calibrator {
  private:
   struct Pose;
   bool StartFromLinearForm(Eigen::VectorXd* theta, std::string* error) const;
+
+  // The residual blocks the solver sees: each pose's own (no drift), or each pose's whitened
+  // innovation (drift; rebuilt for every solve, order_ gives the poses' time order).
+  bool BuildBlocks(std::string* error);
+  std::vector<ceres::CostFunction*> blocks_;
+  std::vector<std::unique_ptr<ceres::CostFunction>> gls_blocks_;
+  Eigen::MatrixXd gls_w_;
+  std::vector<int> order_;
 
   CalibratorOptions options_;
   std::unique_ptr<MeasurementModel> model_;

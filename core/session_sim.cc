@@ -13,7 +13,11 @@ bool SessionSimOptions::IsValid(std::string* error) const {
   if (!(dwell_s > 0) || !(move_s > 0) || !(settle_s >= 0) || !(start_s >= 0)) {
     return fail("dwell and move times must be > 0, settle and start >= 0");
   }
-  if (!(bias_time_constant_s > 0)) return fail("bias time constant must be > 0");
+  if (!(sensor.bias_tau_s > 0)) return fail("bias time constant must be > 0");
+  if (!(acc_random_walk >= 0 && mag_random_walk >= 0 && acc_warmup >= 0 && mag_warmup >= 0)) {
+    return fail("random walk and warm-up must be >= 0");
+  }
+  if (!(warmup_tau_s > 0)) return fail("the warm-up time constant must be > 0");
   return true;
 }
 
@@ -98,12 +102,22 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   const double white_acc = c.acc_noise_density * std::sqrt(o.rate_hz / 2.0);
   const double white_gyr = c.gyr_noise_density * std::sqrt(o.rate_hz / 2.0);
   const double white_mag = c.mag_noise_rms;
-  const double phi = std::exp(-dt / o.bias_time_constant_s);
+  const double phi = std::exp(-dt / c.bias_tau_s);
   const double drive = std::sqrt(1.0 - phi * phi);
   Eigen::Vector3d wander_acc, wander_mag;
   for (int i = 0; i < 3; ++i) {
     wander_acc[i] = c.acc_bias_instability * normal(rng);
     wander_mag[i] = c.mag_bias_instability * normal(rng);
+  }
+  // Random walk and warm-up (drawn only when asked for, so that sessions without them keep the
+  // random stream, and the bytes, they had).
+  Eigen::Vector3d walk_acc = Eigen::Vector3d::Zero(), walk_mag = Eigen::Vector3d::Zero();
+  Eigen::Vector3d warm_acc = Eigen::Vector3d::Zero(), warm_mag = Eigen::Vector3d::Zero();
+  const double walk_acc_step = o.acc_random_walk * std::sqrt(dt);
+  const double walk_mag_step = o.mag_random_walk * std::sqrt(dt);
+  for (int i = 0; i < 3; ++i) {
+    if (o.acc_warmup > 0) warm_acc[i] = o.acc_warmup * normal(rng);
+    if (o.mag_warmup > 0) warm_mag[i] = o.mag_warmup * normal(rng);
   }
   const auto n = static_cast<std::size_t>(std::floor(out.duration_s * o.rate_hz));
   out.samples.reserve(n);
@@ -136,11 +150,16 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     for (int i = 0; i < 3; ++i) {
       wander_acc[i] = phi * wander_acc[i] + drive * c.acc_bias_instability * normal(rng);
       wander_mag[i] = phi * wander_mag[i] + drive * c.mag_bias_instability * normal(rng);
+      if (walk_acc_step > 0) walk_acc[i] += walk_acc_step * normal(rng);
+      if (walk_mag_step > 0) walk_mag[i] += walk_mag_step * normal(rng);
     }
+    const double settle = std::exp(-tk / o.warmup_tau_s);
+    const Eigen::Vector3d drift_acc = wander_acc + walk_acc + settle * warm_acc;
+    const Eigen::Vector3d drift_mag = wander_mag + walk_mag + settle * warm_mag;
     for (std::size_t e = 0; e < out.events.size(); ++e) {
       if (tk >= out.events[e].t_s && tk < out.events[e].dwell_end_s) {
-        out.events[e].acc_wander_mean += wander_acc;
-        out.events[e].mag_wander_mean += wander_mag;
+        out.events[e].acc_wander_mean += drift_acc;
+        out.events[e].mag_wander_mean += drift_mag;
         ++dwell_counts[e];
       }
     }
@@ -148,8 +167,8 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     smp.t_host_ns = static_cast<std::int64_t>(std::llround(tk * 1e9));
     smp.t_device_s = o.clock_offset_s + tk * (1.0 + o.clock_drift_ppm * 1e-6);
     smp.counter = static_cast<std::uint32_t>(k);
-    Eigen::Vector3d acc = accel_model.Predict(out.accel_truth, pose) + wander_acc;
-    Eigen::Vector3d mag = mag_model.Predict(out.mag_truth, pose) + wander_mag;
+    Eigen::Vector3d acc = accel_model.Predict(out.accel_truth, pose) + drift_acc;
+    Eigen::Vector3d mag = mag_model.Predict(out.mag_truth, pose) + drift_mag;
     Eigen::Vector3d gyr = accel_model.context().mounting * BodyRate(a) + out.gyro_bias_radps;
     for (int i = 0; i < 3; ++i) {
       acc[i] = Quantise(acc[i] + white_acc * normal(rng), c.acc_quantum);
@@ -175,6 +194,14 @@ Eigen::Vector3d SimulatedSession::EffectiveAccBiasOffset() const {
   Eigen::Vector3d m = Eigen::Vector3d::Zero();
   for (const auto& e : events) m += e.acc_wander_mean;
   return events.empty() ? m : Eigen::Vector3d(m / static_cast<double>(events.size()));
+}
+
+Eigen::Vector3d SimulatedSession::LastPoseAccBiasOffset() const {
+  return events.empty() ? Eigen::Vector3d::Zero() : events.back().acc_wander_mean;
+}
+
+Eigen::Vector3d SimulatedSession::LastPoseMagBiasOffset() const {
+  return events.empty() ? Eigen::Vector3d::Zero() : events.back().mag_wander_mean;
 }
 
 Eigen::Vector3d SimulatedSession::EffectiveMagBiasOffset() const {

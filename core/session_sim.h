@@ -10,9 +10,10 @@
 // acceleration), its gyro sees the table's angular rate (Earth rate not included).
 //
 // Noise per sample: white noise (density x sqrt(rate / 2)), bias instability as a first-order
-// Gauss-Markov process (1 sigma = the class's bias instability, correlation time
-// `bias_time_constant_s`), quantisation for classes with a 16-bit ADC. The device clock runs
-// `clock_drift_ppm` fast and starts at `clock_offset_s`.
+// Gauss-Markov process (1 sigma = the class's bias instability, correlation time the class's
+// bias_tau_s), optionally a bias random walk and a warm-up transient (an offset drawn per axis
+// that settles exponentially after power-on, which is time 0), quantisation for classes with a
+// 16-bit ADC. The device clock runs `clock_drift_ppm` fast and starts at `clock_offset_s`.
 
 #include <random>
 #include <vector>
@@ -31,7 +32,14 @@ struct SessionSimOptions {
   double move_s = 3.0;
   double settle_s = 1.0;
   double dwell_s = 5.0;
-  double bias_time_constant_s = 100.0;
+  // Bias random walk, triad unit per sqrt(s) (0: none).
+  double acc_random_walk = 0.0;  // m/s^2/sqrt(s)
+  double mag_random_walk = 0.0;  // Gauss/sqrt(s)
+  // Warm-up: at power-on the bias is off by a draw of this 1 sigma per axis, settling as
+  // exp(-t / warmup_tau_s) (0: none).
+  double acc_warmup = 0.0;  // m/s^2
+  double mag_warmup = 0.0;  // Gauss
+  double warmup_tau_s = 60.0;
   double clock_drift_ppm = 20.0;
   double clock_offset_s = 10.0;
   double settle_amplitude_rad = 2e-4;  // of the decaying oscillation after a move
@@ -45,8 +53,9 @@ struct SessionPoseEvent {
   int index = 0;
   TablePose pose;
   double dwell_end_s = 0.0;
-  // Mean of the bias-instability wander over this dwell (what a calibration sees as the bias at
-  // this pose, on top of the turn-on bias in the truth).
+  // Mean of the bias's departure from the turn-on bias over this dwell (Gauss-Markov wander,
+  // random walk and warm-up: what a calibration sees as the bias at this pose, on top of the
+  // turn-on bias in the truth).
   Eigen::Vector3d acc_wander_mean = Eigen::Vector3d::Zero();
   Eigen::Vector3d mag_wander_mean = Eigen::Vector3d::Zero();
 };
@@ -59,10 +68,14 @@ struct SimulatedSession {
   Eigen::Vector3d gyro_bias_radps = Eigen::Vector3d::Zero();
   double duration_s = 0.0;
 
-  // The bias a calibration over all the dwells should find: the turn-on bias plus the wander
-  // averaged over the dwells (the wander is slow, so it does not average out over one session).
+  // The wander averaged over all the dwells (the bias a calibration that treats every pose's
+  // offset as independent finds: turn-on bias plus this).
   Eigen::Vector3d EffectiveAccBiasOffset() const;
   Eigen::Vector3d EffectiveMagBiasOffset() const;
+  // The wander over the last pose's dwell: with the drift-aware calibrator the bias parameters
+  // are the bias there (truth "bias_truth": "at_last_pose").
+  Eigen::Vector3d LastPoseAccBiasOffset() const;
+  Eigen::Vector3d LastPoseMagBiasOffset() const;
 };
 
 // The session for `poses` with the truths drawn from the class (DrawTruth) from the seed.

@@ -98,6 +98,14 @@ CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorCla
   return o;
 }
 
+CalibratorOptions DriftOptionsForClass(const MeasurementModel& model, const SensorClass& sensor) {
+  CalibratorOptions o = OptionsForClass(model, sensor);
+  o.drift.gm_sigma = Eigen::Vector3d::Constant(o.pose_offset_sigma);
+  o.drift.gm_tau_s = sensor.bias_tau_s;
+  o.pose_offset_sigma = 0.0;
+  return o;
+}
+
 std::vector<TablePose> RandomPoses(int n, std::mt19937_64* rng) {
   std::uniform_real_distribution<double> uniform(-1.0, 1.0);
   std::vector<TablePose> poses;

@@ -29,6 +29,9 @@ struct SensorClass {
   double mag_hard_iron_sigma = 0.0;  // 1 sigma of b
   double mag_soft_iron_sigma = 0.0;  // 1 sigma of G's deviation from the mounting
   double rate_hz = 100.0;
+  // Correlation time of the bias instability (first-order Gauss-Markov, both triads): minutes
+  // for MEMS (SENSORS.md); the session simulator's default.
+  double bias_tau_s = 100.0;
   // Gyroscope (for the byte-level simulator; not calibrated here), rad/s.
   double gyr_noise_density = 0.0;  // per sqrt(Hz)
   double gyr_turn_on_bias = 0.0;   // 1 sigma
@@ -60,6 +63,11 @@ std::vector<TablePose> AboutZPoses(int n);
 // Calibrator options matching the class's noise for `model` (the pose-to-pose offset and the
 // white-noise density of the triad the model uses).
 CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorClass& sensor);
+
+// The same with the bias instability as a Gauss-Markov process in time (sigma = the class's bias
+// instability, tau = bias_tau_s) instead of an independent offset per pose: what the station
+// uses, for records that carry their time windows.
+CalibratorOptions DriftOptionsForClass(const MeasurementModel& model, const SensorClass& sensor);
 
 // The record a stationary window of `dwell_s` at `pose` would give: the true measurement plus
 // white noise averaged over the window and a bias-instability offset, with the sample covariance

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 
@@ -25,7 +26,9 @@ struct SimArgs {
   std::uint64_t seed = 1;
   int runs = 200;
   bool json = false;
-  std::string noise = "white";  // montecarlo: white | session
+  std::string noise = "white";               // montecarlo: white | session
+  std::string drift_model = "gauss-markov";  // montecarlo --noise session: | independent
+  bool shuffle = false;                      // montecarlo: the design's poses in random order
 };
 
 void AddSimOptions(CLI::App* cmd, SimArgs* args) {
@@ -168,7 +171,8 @@ int RunMonteCarlo(const SimArgs& args) {
   // One pose design for every run (the Cramer-Rao bound depends on it); new truth and noise each
   // run.
   std::mt19937_64 design_rng(args.seed);
-  const auto poses = Design(args, &design_rng);
+  auto poses = Design(args, &design_rng);
+  if (args.shuffle) std::shuffle(poses.begin(), poses.end(), design_rng);
   Eigen::VectorXd sum_sq_err = Eigen::VectorXd::Zero(N), sum_var = Eigen::VectorXd::Zero(N),
                   sum_z = Eigen::VectorXd::Zero(N), sum_z2 = Eigen::VectorXd::Zero(N);
   int ok = 0, failed = 0;
@@ -179,7 +183,9 @@ int RunMonteCarlo(const SimArgs& args) {
   for (int run = 0; run < args.runs; ++run) {
     std::mt19937_64 rng(args.seed * 1000003 + static_cast<std::uint64_t>(run));
     Eigen::VectorXd truth;
-    Calibrator calibrator(OptionsForClass(*model, sensor));
+    const bool drift = args.noise == "session" && args.drift_model == "gauss-markov";
+    Calibrator calibrator(drift ? DriftOptionsForClass(*model, sensor)
+                                : OptionsForClass(*model, sensor));
     if (args.noise == "session") {
       // The simulator's full noise model: Gauss-Markov bias wander sampled at the output rate,
       // quantisation, settling; dwell windows cut at the known times.
@@ -191,8 +197,15 @@ int RunMonteCarlo(const SimArgs& args) {
       const SimulatedSession session = accel ? SimulateSession(*model, *other, poses, o)
                                              : SimulateSession(*other, *model, poses, o);
       truth = accel ? session.accel_truth : session.mag_truth;
-      truth.tail<3>() +=
-          accel ? session.EffectiveAccBiasOffset() : session.EffectiveMagBiasOffset();
+      // The bias the calibration estimates: over the last pose with the drift model, averaged
+      // over the dwells with independent offsets.
+      if (drift) {
+        truth.tail<3>() +=
+            accel ? session.LastPoseAccBiasOffset() : session.LastPoseMagBiasOffset();
+      } else {
+        truth.tail<3>() +=
+            accel ? session.EffectiveAccBiasOffset() : session.EffectiveMagBiasOffset();
+      }
       for (const auto& e : session.events) {
         calibrator.add_pose(DwellRecord(session, e, model->sensor()), &error);
       }
@@ -285,6 +298,13 @@ void AddSimFitCommands(CLI::App* app) {
                  "session simulator's full noise model (turncal sim), 100 Hz")
       ->check(CLI::IsMember({"white", "session"}))
       ->capture_default_str();
+  mc->add_option("--drift-model", mc_args->drift_model,
+                 "with --noise session, the calibrator's model of the bias instability: "
+                 "gauss-markov (a process in time, generalised least squares) | independent (an "
+                 "independent offset per pose, the model before issue 19)")
+      ->check(CLI::IsMember({"gauss-markov", "independent"}))
+      ->capture_default_str();
+  mc->add_flag("--shuffle", mc_args->shuffle, "the design's poses in a random order");
   mc->add_option("--runs", mc_args->runs, "number of sessions")
       ->check(CLI::Range(2, 1000000))
       ->capture_default_str();
