@@ -34,6 +34,10 @@ struct Station::ModelState {
   int applied_version = 0;
   Eigen::VectorXd applied_theta;
   Eigen::MatrixXd applied_covariance;  // empty when unknown
+  // With a drift model: when the applied bias held, and how the bias wanders since (the
+  // corrected output's sigma grows with the time since).
+  std::optional<TimeWindow> applied_bias_window;
+  BiasDrift applied_drift;
   // The correction as y = A raw + c, when the model's correction is affine in the raw sample (all
   // four models are: checked numerically when the calibration is applied). Live samples are
   // corrected with it, without the model's per-sample matrix solves.
@@ -41,10 +45,13 @@ struct Station::ModelState {
   Eigen::Matrix3d applied_A = Eigen::Matrix3d::Identity();
   Eigen::Vector3d applied_c = Eigen::Vector3d::Zero();
 
-  void Apply(int version, const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance) {
+  void Apply(int version, const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance,
+             const std::optional<TimeWindow>& bias_window, const BiasDrift& drift) {
     applied_version = version;
     applied_theta = theta;
     applied_covariance = covariance;
+    applied_bias_window = bias_window;
+    applied_drift = drift;
     applied_c = model->Correct(theta, Eigen::Vector3d::Zero());
     for (int i = 0; i < 3; ++i) {
       applied_A.col(i) = model->Correct(theta, Eigen::Vector3d::Unit(i)) - applied_c;
@@ -154,7 +161,7 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
       ModelState m;
       std::string error;
       m.model = MakeModel(name, options_.context, &error);
-      m.calibrator = std::make_unique<Calibrator>(OptionsForClass(*m.model, sensor_));
+      m.calibrator = std::make_unique<Calibrator>(DriftOptionsForClass(*m.model, sensor_));
       d->models.push_back(std::move(m));
     }
     devices_.push_back(std::move(d));
@@ -188,7 +195,17 @@ void Station::LoadApplied() {
                  {"message", "the stored calibration is unreadable and is not applied"}});
         continue;
       }
-      m.Apply(stored["version"].get<int>(), theta, Eigen::MatrixXd());
+      std::optional<TimeWindow> window;
+      TimeWindow w;
+      if (stored.contains("bias_window") && protocol::ParseTimeWindow(stored["bias_window"], &w)) {
+        window = w;
+      }
+      BiasDrift drift;
+      if (stored.contains("calibrator") && stored["calibrator"].is_object() &&
+          stored["calibrator"].contains("drift")) {
+        protocol::ParseBiasDrift(stored["calibrator"]["drift"], &drift);
+      }
+      m.Apply(stored["version"].get<int>(), theta, Eigen::MatrixXd(), window, drift);
       const auto& cov = stored.value("covariance", nlohmann::json());
       if (cov.is_array() && cov.size() == params.size()) {
         Eigen::MatrixXd c(theta.size(), theta.size());
@@ -231,13 +248,22 @@ namespace {
 
 // 1 sigma per axis of model.Correct(theta, raw) from cov(theta): J cov J^T with J by central
 // differences (steps of 1e-6 of each parameter's scale); nullopt without a usable covariance.
+// `bias_drift_var`, per axis, is added to the bias parameters' variance: how far the bias may
+// have wandered since the calibration.
 std::optional<Eigen::Vector3d> CorrectionSigma(const MeasurementModel& model,
                                                const Eigen::VectorXd& theta,
-                                               const Eigen::MatrixXd& covariance,
-                                               const Eigen::Vector3d& raw) {
+                                               Eigen::MatrixXd covariance,
+                                               const Eigen::Vector3d& raw,
+                                               const Eigen::Vector3d& bias_drift_var) {
   const Eigen::Index n = theta.size();
   if (covariance.rows() != n || covariance.cols() != n || !covariance.allFinite()) {
     return std::nullopt;
+  }
+  const auto& params = model.parameters();
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const std::string& name = params[static_cast<std::size_t>(k)].name;
+    if (name == "bx" || name == "by" || name == "bz")
+      covariance(k, k) += bias_drift_var[name[1] - 'x'];
   }
   Jacobian3 jacobian(3, n);
   Eigen::VectorXd t = theta;
@@ -268,8 +294,19 @@ bool Station::Correct(int device, const Sample& sample, Corrected* out, bool wit
     target = m.applied_affine ? Eigen::Vector3d(m.applied_A * *raw + m.applied_c)
                               : m.model->Correct(m.applied_theta, *raw);
     if (with_sigma) {
+      Eigen::Vector3d drift_var = Eigen::Vector3d::Zero();
+      if (m.applied_bias_window && m.applied_drift.enabled()) {
+        const double t_s = static_cast<double>(sample.t_host_ns) * 1e-9;
+        const TimeWindow& w = *m.applied_bias_window;
+        // A clock before the calibration's (the host restarted since): the time since is
+        // unknown, so the wander's long-term limit (infinite for a random walk).
+        const double since_s = t_s >= w.t0_s ? t_s : w.t1_s + 1e9;
+        for (int axis = 0; axis < 3; ++axis) {
+          drift_var[axis] = m.applied_drift.VarianceSince(axis, w, since_s);
+        }
+      }
       (accel ? out->acc_sigma : out->mag_sigma) =
-          CorrectionSigma(*m.model, m.applied_theta, m.applied_covariance, *raw);
+          CorrectionSigma(*m.model, m.applied_theta, m.applied_covariance, *raw, drift_var);
     }
     (accel ? out->acc_frame : out->mag_frame) = ToString(m.model->corrected_frame());
     out->versions.emplace_back(m.model->name(), m.applied_version);
@@ -553,6 +590,7 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
           {"parameter_order", order},
           {"covariance", covariance},
           {"gauge", e.gauge},
+          {"bias_window", e.bias_window ? protocol::ToJson(*e.bias_window) : nlohmann::json()},
           {"rank", m.rank},
           {"chi2", e.chi2},
           {"dof", e.dof},
@@ -649,7 +687,8 @@ void Station::Apply(std::size_t device, std::size_t model, double t_s, const Upd
     Activate(d, m, t_s, nullptr);
   } else if (m.gate.pass) {
     m.active = m.estimate;
-    m.Apply(m.active_version, m.estimate.theta, m.estimate.covariance);
+    m.Apply(m.active_version, m.estimate.theta, m.estimate.covariance, m.estimate.bias_window,
+            m.estimate.drift);
   }
 }
 
@@ -675,9 +714,10 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
           WriteActiveCalibration(dir, device, model, calibration, write_error.get());
       },
       [this, &d, &m, event, write_error, version = m.active_version, theta = m.estimate.theta,
-       covariance = m.estimate.covariance] {
+       covariance = m.estimate.covariance, window = m.estimate.bias_window,
+       drift = m.estimate.drift] {
         if (!options_.state_dir.empty()) NoteWrite(d.name, *write_error);
-        if (version > m.applied_version) m.Apply(version, theta, covariance);
+        if (version > m.applied_version) m.Apply(version, theta, covariance, window, drift);
         if (write_error->empty()) d.report_due = true;  // TickDevice/OnTick write it
         // Claimed saved only when calibrations/DEVICE/MODEL.json holds it (renamed, fsynced).
         nlohmann::json announced = event;
@@ -735,8 +775,12 @@ nlohmann::json Station::NextPose(const std::string& device) const {
     t.model = m.model.get();
     t.theta = m.estimate.ok ? m.estimate.theta : m.model->nominal();
     const auto& opt = m.calibrator->options();
-    t.sqrt_information = ExpectedSqrtInformation(opt.noise_density, opt.pose_offset_sigma,
-                                                 options_.sequencer.dwell_s);
+    // A new pose weighs as the white noise over the dwell plus, for the drift between poses, an
+    // independent offset of the drift's stationary sigma (the planner's model before issue 19;
+    // docs/ACCURACY.md "Drift").
+    const double offset = std::hypot(opt.pose_offset_sigma, opt.drift.gm_sigma.maxCoeff());
+    t.sqrt_information =
+        ExpectedSqrtInformation(opt.noise_density, offset, options_.sequencer.dwell_s);
     {
       std::lock_guard lock(*m.calibrator_mutex);  // a solve in progress finishes first
       t.captured = m.calibrator->weighted_poses();

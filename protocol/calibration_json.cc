@@ -70,6 +70,8 @@ bool ReadCalibrator(const nlohmann::json& j, CalibratorOptions* o, std::string* 
     if (!j["sensor_class"].is_string()) return false;
     *sensor_class = j["sensor_class"].get<std::string>();
   }
+  // Documents written before the drift model have none: they were solved without one.
+  if (j.contains("drift") && !ParseBiasDrift(j["drift"], &o->drift)) return false;
   return o->IsValid(nullptr);
 }
 
@@ -123,11 +125,48 @@ bool ParseModelContext(const nlohmann::json& j, ModelContext* out, std::string* 
 }
 
 nlohmann::json CalibratorJson(const CalibratorOptions& o, const std::string& sensor_class) {
-  return {{"sensor_class", sensor_class},
-          {"noise_density", o.noise_density},
-          {"pose_offset_sigma", o.pose_offset_sigma},
-          {"loss", ToString(o.loss)},
-          {"loss_scale", o.loss_scale}};
+  nlohmann::json j = {{"sensor_class", sensor_class},
+                      {"noise_density", o.noise_density},
+                      {"pose_offset_sigma", o.pose_offset_sigma},
+                      {"loss", ToString(o.loss)},
+                      {"loss_scale", o.loss_scale}};
+  if (o.drift.enabled()) j["drift"] = ToJson(o.drift);
+  return j;
+}
+
+nlohmann::json ToJson(const BiasDrift& d) {
+  return {{"gauss_markov_sigma", JsonVec3(d.gm_sigma)},
+          {"gauss_markov_tau_s", d.gm_tau_s},
+          {"random_walk", JsonVec3(d.rw_density)}};
+}
+
+bool ParseBiasDrift(const nlohmann::json& j, BiasDrift* out) {
+  if (!j.is_object()) return false;
+  BiasDrift d;
+  if (j.contains("gauss_markov_sigma") && !ReadJsonVec3(j["gauss_markov_sigma"], &d.gm_sigma)) {
+    return false;
+  }
+  if (j.contains("random_walk") && !ReadJsonVec3(j["random_walk"], &d.rw_density)) return false;
+  if (j.contains("gauss_markov_tau_s")) {
+    if (!j["gauss_markov_tau_s"].is_number()) return false;
+    d.gm_tau_s = j["gauss_markov_tau_s"].get<double>();
+  }
+  if (!d.IsValid(nullptr)) return false;
+  *out = d;
+  return true;
+}
+
+nlohmann::json ToJson(const TimeWindow& w) { return {{"t0_s", w.t0_s}, {"t1_s", w.t1_s}}; }
+
+bool ParseTimeWindow(const nlohmann::json& j, TimeWindow* out) {
+  if (!j.is_object() || !j.contains("t0_s") || !j.contains("t1_s") || !j["t0_s"].is_number() ||
+      !j["t1_s"].is_number()) {
+    return false;
+  }
+  const TimeWindow w{j["t0_s"].get<double>(), j["t1_s"].get<double>()};
+  if (!std::isfinite(w.t0_s) || !std::isfinite(w.t1_s) || !(w.t1_s > w.t0_s)) return false;
+  *out = w;
+  return true;
 }
 
 nlohmann::json TolerancesJson(const MeasurementModel& model, const GateOptions& gate) {

@@ -4,7 +4,10 @@
 // re-evaluated offline without the daemon's configuration:
 //
 //   "context":    {"g_ned":[3], "B_ned":[3], "mounting":[[3]x3], "accel_output_frame":"case"}
-//   "calibrator": {"sensor_class", "noise_density", "pose_offset_sigma", "loss", "loss_scale"}
+//   "calibrator": {"sensor_class", "noise_density", "pose_offset_sigma", "loss", "loss_scale",
+//                  "drift": {"gauss_markov_sigma":[3], "gauss_markov_tau_s", "random_walk":[3]}}
+//   "bias_window": {"t0_s", "t1_s"}: when the bias parameters hold (the latest pose's window, on
+//                  the station's host clock), with a drift model
 //   "tolerances": {NAME: 1-sigma tolerance} for every gated parameter, in the parameter's units
 //   "provenance": {"poses":[...], "records":[pose record, as ToJson(PoseRecord)], ...}
 //
@@ -29,6 +32,12 @@ bool ParseModelContext(const nlohmann::json& j, ModelContext* out, std::string* 
 
 // The calibrator's noise model and loss, with the sensor class it came from.
 nlohmann::json CalibratorJson(const CalibratorOptions& options, const std::string& sensor_class);
+
+// The calibrator's drift model, and the time window of a calibration's bias.
+nlohmann::json ToJson(const BiasDrift& drift);
+bool ParseBiasDrift(const nlohmann::json& j, BiasDrift* out);
+nlohmann::json ToJson(const TimeWindow& window);
+bool ParseTimeWindow(const nlohmann::json& j, TimeWindow* out);
 
 // Every gated parameter's tolerance (GatedParameters, ToleranceFor).
 nlohmann::json TolerancesJson(const MeasurementModel& model, const GateOptions& gate);

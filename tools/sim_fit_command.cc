@@ -12,6 +12,7 @@
 #include "core/session_sim.h"
 #include "core/synthetic.h"
 #include "protocol/observability_json.h"
+#include "tools/pipeline_montecarlo.h"
 
 namespace turncal::tools {
 
@@ -308,7 +309,49 @@ void AddSimFitCommands(CLI::App* app) {
   mc->add_option("--runs", mc_args->runs, "number of sessions")
       ->check(CLI::Range(2, 1000000))
       ->capture_default_str();
-  mc->callback([mc_args] { throw CLI::RuntimeError(RunMonteCarlo(*mc_args)); });
+  auto pipe = std::make_shared<PipelineMonteCarloArgs>();
+  auto pipeline = std::make_shared<bool>(false);
+  mc->add_flag("--pipeline", *pipeline,
+               "through the whole pipeline: each run a session as bytes (turncal sim), replayed "
+               "through the station as turncald --replay --once does, with only --model "
+               "configured (options below; --poses, --design and --noise do not apply)");
+  mc->add_option("--protocol", pipe->protocol, "with --pipeline: mip | gx2 | xbus | xbus-legacy")
+      ->check(CLI::IsMember({"mip", "gx2", "xbus", "xbus-legacy"}))
+      ->capture_default_str();
+  mc->add_option("--plan", pipe->plan,
+                 "with --pipeline: default (26 cube directions in loop order + 10) | shuffled "
+                 "(the same poses, a new order each run) | planner (the D-optimal plan to the "
+                 "gate)")
+      ->check(CLI::IsMember({"default", "shuffled", "planner"}))
+      ->capture_default_str();
+  mc->add_option("--jobs", pipe->jobs, "with --pipeline: runs in parallel")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  mc->add_option("--warmup", pipe->warmup,
+                 "with --pipeline: warm-up transient of both triads, 1 sigma at power-on in units "
+                 "of the class's bias instability (0: none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  mc->add_option("--warmup-tau", pipe->warmup_tau_s, "with --pipeline: warm-up time constant, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  mc->add_option("--random-walk", pipe->random_walk,
+                 "with --pipeline: bias random walk of both triads, in units of the class's bias "
+                 "instability per sqrt(100 s) (0: none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  mc->callback([mc_args, pipe, pipeline] {
+    if (*pipeline) {
+      pipe->model = mc_args->model;
+      pipe->sensor_class = mc_args->sensor_class;
+      pipe->runs = mc_args->runs;
+      pipe->seed = mc_args->seed;
+      pipe->dwell_s = mc_args->dwell_s;
+      pipe->json = mc_args->json;
+      throw CLI::RuntimeError(RunPipelineMonteCarlo(*pipe));
+    }
+    throw CLI::RuntimeError(RunMonteCarlo(*mc_args));
+  });
 }
 
 }  // namespace turncal::tools

@@ -69,7 +69,7 @@ TEST(SessionSim, GyroSeesTheTableMoveAndOnlyItsBiasAtRest) {
 }
 
 // The simulated stream, cut into dwell windows, calibrates to the truth within 4 sigma: the
-// simulator's Gauss-Markov bias wander and the calibrator's noise model agree.
+// simulator's Gauss-Markov bias wander and the calibrator's drift model agree.
 TEST(SessionSim, DwellWindowsCalibrateToTheTruth) {
   for (const SensorClass& sensor : {IndustrialClass(), ConsumerClass()}) {
     SessionSimOptions o;
@@ -80,10 +80,11 @@ TEST(SessionSim, DwellWindowsCalibrateToTheTruth) {
     for (bool accel : {true, false}) {
       const MeasurementModel& model = accel ? *r.accel : *r.mag;
       Eigen::VectorXd truth = accel ? r.session.accel_truth : r.session.mag_truth;
-      // The bias the data can show is the turn-on bias plus the slow wander's session mean.
+      // The bias the drift-aware calibrator reports: the turn-on bias plus the wander over the
+      // last pose.
       truth.tail<3>() +=
-          accel ? r.session.EffectiveAccBiasOffset() : r.session.EffectiveMagBiasOffset();
-      CalibratorOptions options = OptionsForClass(model, sensor);
+          accel ? r.session.LastPoseAccBiasOffset() : r.session.LastPoseMagBiasOffset();
+      CalibratorOptions options = DriftOptionsForClass(model, sensor);
       Calibrator calibrator(options);
       std::string error;
       for (const auto& e : r.session.events) {

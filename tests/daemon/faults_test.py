@@ -109,7 +109,7 @@ def result(d):
 
 
 def check_truth(res, truth, label, want_poses=N_POSES):
-    """Every active model within 4 sigma of the truth (bias truth: plus the wander's mean)."""
+    """Every active model within 4 sigma of the truth (the truth file's biases: over the last pose)."""
     if res is None:
         check(False, f"{label}: no result")
         return

@@ -1,0 +1,269 @@
+#include "tools/pipeline_montecarlo.h"
+
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <thread>
+
+#include "core/pose_planner.h"
+#include "core/session_sim.h"
+#include "core/synthetic.h"
+#include "daemon/replay_once.h"
+#include "drivers/capture/tcap.h"
+#include "tools/sim_capture.h"
+
+namespace turncal::tools {
+
+namespace {
+
+// The D-optimal planner's plan to the gate from nominal values, for the accelerometer and
+// magnetometer models a station calibrates together (what `turncal plan --model accel13 --model
+// mag13` prints): the recommended pose and its continuation.
+std::vector<TablePose> PlannerSequence(const SensorClass& sensor, const std::string& class_name,
+                                       double dwell_s, std::string* error) {
+  std::vector<std::unique_ptr<MeasurementModel>> models;
+  std::vector<PlanningTarget> targets;
+  for (const char* name : {"accel13", "mag13"}) {
+    auto model = MakeModel(name, ModelContext{}, error);
+    if (!model) return {};
+    PlanningTarget t;
+    t.model = model.get();
+    t.theta = model->nominal();
+    const CalibratorOptions o = OptionsForClass(*model, sensor);
+    t.sqrt_information = ExpectedSqrtInformation(o.noise_density, o.pose_offset_sigma, dwell_s);
+    GateTolerancesForClass(class_name, &t.gate.tolerances);
+    targets.push_back(t);
+    models.push_back(std::move(model));
+  }
+  const NextPoseAdvice a = PlanNextPose(targets, PlannerOptions{});
+  if (!a.ok) {
+    *error = "the planner: " + a.error;
+    return {};
+  }
+  return a.continuation;
+}
+
+// Kolmogorov-Smirnov test of `p` against the uniform distribution on [0, 1]: the statistic D and
+// its asymptotic p-value (Stephens' small-sample correction).
+std::pair<double, double> KsUniform(std::vector<double> p) {
+  std::sort(p.begin(), p.end());
+  const double n = static_cast<double>(p.size());
+  double d = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    d = std::max({d, (static_cast<double>(i) + 1) / n - p[i], p[i] - static_cast<double>(i) / n});
+  }
+  const double lambda = (std::sqrt(n) + 0.12 + 0.11 / std::sqrt(n)) * d;
+  double q = 0;
+  for (int k = 1; k <= 100; ++k) {
+    q += 2 * ((k % 2) ? 1.0 : -1.0) * std::exp(-2.0 * k * k * lambda * lambda);
+  }
+  return {d, std::clamp(q, 0.0, 1.0)};
+}
+
+struct RunOutcome {
+  bool ok = false;
+  std::string error;
+  Eigen::VectorXd z;
+  double p_value = 1.0;
+  bool gate_pass = false;
+  int poses = 0;
+  double session_s = 0.0;
+};
+
+}  // namespace
+
+int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
+  const auto protocol = drivers::ParseProtocol(args.protocol);
+  std::string error;
+  auto model = MakeModel(args.model, ModelContext{}, &error);
+  SensorClass sensor;
+  if (!protocol || !model || !SensorClassByName(args.sensor_class, &sensor)) {
+    fmt::print(stderr, "turncal montecarlo: {}\n",
+               !protocol ? "unknown protocol '" + args.protocol + "'"
+               : !model  ? error
+                         : "unknown class '" + args.sensor_class + "'");
+    return 2;
+  }
+  const bool accel = model->sensor() == SensorKind::kAccelerometer;
+  std::vector<TablePose> plan = DefaultSessionPoses();
+  if (args.plan == "planner") {
+    plan = PlannerSequence(sensor, args.sensor_class, args.dwell_s, &error);
+    if (plan.empty()) {
+      fmt::print(stderr, "turncal montecarlo: {}\n", error);
+      return 1;
+    }
+  }
+  const int N = model->num_parameters();
+  const auto dir = std::filesystem::temp_directory_path() /
+                   fmt::format("turncal-montecarlo-{}", static_cast<long>(::getpid()));
+  std::filesystem::create_directories(dir);
+
+  std::vector<RunOutcome> outcomes(static_cast<std::size_t>(args.runs));
+  std::atomic<int> next{0}, done{0};
+  std::mutex print_mutex;
+  const auto start = std::chrono::steady_clock::now();
+  auto worker = [&] {
+    for (int run = next++; run < args.runs; run = next++) {
+      RunOutcome& out = outcomes[static_cast<std::size_t>(run)];
+      const std::uint64_t seed = args.seed * 1000003 + static_cast<std::uint64_t>(run);
+      SimCaptureOptions o;
+      o.protocol = *protocol;
+      (accel ? o.accel_model : o.mag_model) = args.model;
+      o.poses = plan;
+      if (args.plan == "shuffled") {
+        std::mt19937_64 rng(seed ^ 0x5eed);
+        std::shuffle(o.poses.begin(), o.poses.end(), rng);
+      }
+      o.session.sensor = sensor;
+      o.session.dwell_s = args.dwell_s;
+      o.session.seed = seed;
+      o.session.acc_warmup = args.warmup * sensor.acc_bias_instability;
+      o.session.mag_warmup = args.warmup * sensor.mag_bias_instability;
+      o.session.warmup_tau_s = args.warmup_tau_s;
+      o.session.acc_random_walk = args.random_walk * sensor.acc_bias_instability / 10.0;
+      o.session.mag_random_walk = args.random_walk * sensor.mag_bias_instability / 10.0;
+      SimCapture capture;
+      std::string e;
+      if (!BuildSimCapture(o, &capture, &e)) {
+        out.error = e;
+        continue;
+      }
+      const std::string path = (dir / fmt::format("run-{}.tcap", run)).string();
+      auto writer = drivers::CaptureWriter::Create(path, capture.header, &e);
+      bool written = writer != nullptr;
+      for (std::size_t i = 0; written && i < capture.records.size(); ++i) {
+        const auto& r = capture.records[i];
+        written = writer->Append(r.type, r.device, r.t_ns, r.payload, &e);
+      }
+      if (!written || !writer->Close(&e)) {
+        out.error = e;
+        continue;
+      }
+      daemon::StationOptions station;
+      station.models = {args.model};
+      station.sensor_class = args.sensor_class;
+      daemon::ReplayOnceOutcome replay;
+      const bool replayed = daemon::ReplayOnce(path, station, "", {}, &replay, &e);
+      std::filesystem::remove(path);
+      if (!replayed) {
+        out.error = e;
+        continue;
+      }
+      const std::string& device = capture.header.devices.at(0).name;
+      const nlohmann::json& m = replay.result["devices"][device]["models"][args.model];
+      if (!m.value("ok", false)) {
+        out.error = "no estimate";
+        continue;
+      }
+      Eigen::VectorXd truth = accel ? capture.session.accel_truth : capture.session.mag_truth;
+      truth.tail<3>() +=
+          accel ? capture.session.LastPoseAccBiasOffset() : capture.session.LastPoseMagBiasOffset();
+      out.z.resize(N);
+      for (int i = 0; i < N; ++i) {
+        const auto& p = m["params"][model->parameters()[static_cast<std::size_t>(i)].name];
+        const double sigma = p["sigma"].is_number() ? p["sigma"].get<double>() : NAN;
+        out.z[i] = (p["value"].get<double>() - truth[i]) / sigma;
+      }
+      out.ok = out.z.allFinite();
+      out.p_value = m.value("p_value", 1.0);
+      out.gate_pass = m["gate"].value("pass", false);
+      out.poses = m.value("poses", 0);
+      out.session_s = capture.session.duration_s;
+      if (const int finished = ++done; !args.json && finished % 20 == 0) {
+        std::lock_guard lock(print_mutex);
+        fmt::print(stderr, "turncal montecarlo: {} of {} runs\n", finished, args.runs);
+      }
+    }
+  };
+  std::vector<std::thread> threads;
+  for (int j = 0; j < std::max(1, args.jobs); ++j) threads.emplace_back(worker);
+  for (auto& t : threads) t.join();
+  std::filesystem::remove_all(dir);
+  const double wall_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  Eigen::VectorXd s1 = Eigen::VectorXd::Zero(N), s2 = Eigen::VectorXd::Zero(N);
+  std::vector<double> p_values;
+  int ok = 0, gate_pass = 0;
+  double poses = 0, session_s = 0;
+  std::string first_error;
+  for (const auto& r : outcomes) {
+    if (!r.ok) {
+      if (first_error.empty()) first_error = r.error;
+      continue;
+    }
+    ++ok;
+    s1 += r.z;
+    s2 += r.z.cwiseAbs2();
+    p_values.push_back(r.p_value);
+    gate_pass += r.gate_pass;
+    poses += r.poses;
+    session_s += r.session_s;
+  }
+  if (ok < 2) {
+    fmt::print(stderr, "turncal montecarlo: {} of {} runs gave an estimate ({})\n", ok, args.runs,
+               first_error);
+    return 1;
+  }
+  const Eigen::VectorXd mean = s1 / ok;
+  const Eigen::VectorXd std_z = (s2 / ok - mean.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
+  const auto [ks_d, ks_p] = KsUniform(p_values);
+  int bad = 0;
+  nlohmann::json rows = nlohmann::json::array();
+  std::string table = "| param | mean z | std z | verdict |\n|---|---|---|---|\n";
+  for (int i = 0; i < N; ++i) {
+    const bool honest = std_z[i] >= 0.9 && std_z[i] <= 1.1 && std::abs(mean[i]) <= 0.15;
+    bad += !honest;
+    const std::string& name = model->parameters()[static_cast<std::size_t>(i)].name;
+    rows.push_back({{"name", name}, {"mean_z", mean[i]}, {"std_z", std_z[i]}, {"honest", honest}});
+    table += fmt::format("| {} | {:+.3f} | {:.3f} | {} |\n", name, mean[i], std_z[i],
+                         honest ? "ok" : "NOT HONEST");
+  }
+  const bool ks_ok = ks_p > 0.01;
+  if (args.json) {
+    fmt::print("{}\n", nlohmann::json{{"model", args.model},
+                                      {"class", args.sensor_class},
+                                      {"protocol", args.protocol},
+                                      {"plan", args.plan},
+                                      {"warmup", args.warmup},
+                                      {"random_walk", args.random_walk},
+                                      {"runs", args.runs},
+                                      {"solved", ok},
+                                      {"poses_mean", poses / ok},
+                                      {"gate_pass", gate_pass},
+                                      {"chi2_ks_d", ks_d},
+                                      {"chi2_ks_p", ks_p},
+                                      {"params", rows}}
+                           .dump());
+  } else {
+    fmt::print(
+        "Monte Carlo through the pipeline: {} runs of {} ({} class, {}, plan {}{}{}; {:.0f} "
+        "poses and {:.0f} s of session on average), seed {}; {} solved; {:.1f} s wall, {} "
+        "jobs\n\n{}",
+        args.runs, args.model, args.sensor_class, args.protocol, args.plan,
+        args.warmup > 0 ? fmt::format(", warm-up {} x bias instability", args.warmup) : "",
+        args.random_walk > 0 ? fmt::format(", random walk {}", args.random_walk) : "", poses / ok,
+        session_s / ok, args.seed, ok, wall_s, args.jobs, table);
+    fmt::print(
+        "\nchi^2 p-values against uniform: Kolmogorov-Smirnov D = {:.3f}, p = {:.3g} ({})\n"
+        "gate passed in {} of {} runs\n"
+        "Criteria: std z in [0.9, 1.1] and |mean z| <= 0.15 for every parameter, KS p > 0.01; "
+        "{} of {} parameters fail{}.\n",
+        ks_d, ks_p, ks_ok ? "ok" : "NOT UNIFORM", gate_pass, ok, bad, N,
+        ok < args.runs
+            ? fmt::format("; {} runs without an estimate (first: {})", args.runs - ok, first_error)
+            : "");
+  }
+  return bad == 0 && ks_ok && ok == args.runs ? 0 : 1;
+}
+
+}  // namespace turncal::tools
