@@ -7,6 +7,7 @@
 #include <Eigen/SVD>
 #include <boost/math/special_functions/gamma.hpp>
 #include <cmath>
+#include <numeric>
 
 #include "core/gls_whitening.h"
 #include "core/linear_start.h"
@@ -229,10 +230,10 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   w.sqrt_information = eig.eigenvectors() * lambda.cwiseInverse().cwiseSqrt().asDiagonal() *
                        eig.eigenvectors().transpose();
   pose.cost = model_->MakeResidual(p, w.measured, w.sqrt_information);
+  pose.window = window;
   if (options_.drift.enabled()) {
     pose.white = eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
     pose.raw = model_->MakeResidual(p, w.measured, Eigen::Matrix3d::Identity());
-    pose.window = window;
   }
   poses_.push_back(std::move(pose));
   return true;
@@ -367,6 +368,13 @@ Estimate Calibrator::solve() {
     est.warnings.push_back(
         fmt::format("the solver stopped after {} iterations without converging", est.iterations));
   }
+  // The heading beta is an angle: its estimate is reported in (-pi, pi] (a solve may end a turn
+  // away, which is the same calibration).
+  for (int j = 0; j < N; ++j) {
+    if (est.parameters[static_cast<std::size_t>(j)].name == "beta") {
+      theta[j] = std::remainder(theta[j], 2 * M_PI);
+    }
+  }
   if (gauge) {
     ApplyMag22Gauge(*model_, &theta);
     est.gauge = ToString(options_.mag22_gauge);
@@ -450,6 +458,25 @@ Estimate Calibrator::solve() {
   }
   est.dof = 3 * n - est.rank;
   est.p_value = est.dof > 0 ? boost::math::gamma_q(est.dof / 2.0, est.chi2 / 2.0) : 1.0;
+  {
+    // The two-sided check on the innovations in time order (with drift, order_ is that order).
+    std::vector<int> order = order_;
+    if (order.empty()) {
+      order.resize(static_cast<std::size_t>(n));
+      std::iota(order.begin(), order.end(), 0);
+      std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+        return poses_[static_cast<std::size_t>(a)].window.t0_s <
+               poses_[static_cast<std::size_t>(b)].window.t0_s;
+      });
+    }
+    std::vector<Eigen::Vector3d> innovations;
+    for (int i : order) innovations.push_back(est.residuals[static_cast<std::size_t>(i)].whitened);
+    est.fit = CheckFit(innovations, order, est.chi2, est.dof, options_.chi2_inflation_p_value,
+                       options_.outlier_threshold);
+    if (est.fit.verdict != FitVerdict::kOk) {
+      est.warnings.push_back(est.fit.Message(ToString(model_->sensor())));
+    }
+  }
   const int outliers = static_cast<int>(std::count_if(
       est.residuals.begin(), est.residuals.end(), [](const PoseResidual& r) { return r.outlier; }));
   if (outliers > 0) {

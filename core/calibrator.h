@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/bias_drift.h"
+#include "core/fit_check.h"
 #include "core/measurement_model.h"
 #include "core/pose_record.h"
 
@@ -68,7 +69,10 @@ struct CalibratorOptions {
   double parameter_tolerance = 1e-12;
 
   // When chi^2 exceeds its degrees of freedom with p-value below this, the covariance is
-  // inflated by chi^2/dof and the estimate says so (a model that does not fit, or drift).
+  // inflated by chi^2/dof and the estimate says so (a model that does not fit, or drift). The
+  // same level is the two-sided fit check's per tail (Estimate::fit): chi^2 far below its
+  // degrees of freedom is reported too, with its likely cause, but does not shrink the
+  // covariance (docs/ACCURACY.md "The fit check").
   bool inflate_covariance_by_chi2 = true;
   double chi2_inflation_p_value = 0.01;
 
@@ -111,6 +115,7 @@ struct Estimate {
   int dof = 0;
   double p_value = 1.0;
   double covariance_scale = 1.0;  // > 1 when inflated by chi^2/dof
+  FitCheck fit;                   // the two-sided chi^2 check with its likely cause
   std::string gauge;              // mag22: the gauge applied; empty otherwise
   // With a drift model: the time window the bias parameters hold for (the latest pose's) and
   // the drift model, so a user of the estimate can grow the bias sigma with time since.

@@ -170,9 +170,15 @@ GateResult EvaluateGate(const MeasurementModel& model, const Estimate& estimate,
   } else if (estimate.p_value < options.min_p_value) {
     reasons.push_back(fmt::format(
         "chi^2 = {:.1f} on {} dof (p = {:.2g} < {:.2g}): the noise model does not explain the "
-        "data (bias drift between poses, a pose that is not what was commanded, or the wrong "
-        "model)",
-        estimate.chi2, estimate.dof, estimate.p_value, options.min_p_value));
+        "data ({})",
+        estimate.chi2, estimate.dof, estimate.p_value, options.min_p_value,
+        estimate.fit.cause.empty() ? "bias drift between poses, a pose that is not what was "
+                                     "commanded, or the wrong model"
+                                   : estimate.fit.cause));
+  } else if (estimate.fit.verdict != FitVerdict::kOk) {
+    // The other tail, or an upper tail between the fit check's level and the gate's: a note,
+    // since the sigma are then too large (the gate errs towards waiting), not too small.
+    result.notes.push_back("fit check: " + estimate.fit.Message(ToString(model.sensor())));
   }
 
   // 4. No extreme pose.

@@ -1,5 +1,6 @@
 #include "core/session_sim.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace turncal {
@@ -122,6 +123,10 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   const auto n = static_cast<std::size_t>(std::floor(out.duration_s * o.rate_hz));
   out.samples.reserve(n);
   std::vector<int> dwell_counts(out.events.size(), 0);
+  out.acc_drift_sum.assign(1, Eigen::Vector3d::Zero());
+  out.mag_drift_sum.assign(1, Eigen::Vector3d::Zero());
+  out.acc_drift_sum.reserve(n + 1);
+  out.mag_drift_sum.reserve(n + 1);
   std::size_t seg = 0;
   for (std::size_t k = 0; k < n; ++k) {
     const double tk = static_cast<double>(k) * dt;
@@ -156,6 +161,8 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     const double settle = std::exp(-tk / o.warmup_tau_s);
     const Eigen::Vector3d drift_acc = wander_acc + walk_acc + settle * warm_acc;
     const Eigen::Vector3d drift_mag = wander_mag + walk_mag + settle * warm_mag;
+    out.acc_drift_sum.push_back(out.acc_drift_sum.back() + drift_acc);
+    out.mag_drift_sum.push_back(out.mag_drift_sum.back() + drift_mag);
     for (std::size_t e = 0; e < out.events.size(); ++e) {
       if (tk >= out.events[e].t_s && tk < out.events[e].dwell_end_s) {
         out.events[e].acc_wander_mean += drift_acc;
@@ -194,6 +201,33 @@ Eigen::Vector3d SimulatedSession::EffectiveAccBiasOffset() const {
   Eigen::Vector3d m = Eigen::Vector3d::Zero();
   for (const auto& e : events) m += e.acc_wander_mean;
   return events.empty() ? m : Eigen::Vector3d(m / static_cast<double>(events.size()));
+}
+
+namespace {
+
+Eigen::Vector3d WindowMean(const std::vector<Sample>& samples,
+                           const std::vector<Eigen::Vector3d>& sums, double t0_s, double t1_s) {
+  if (sums.size() != samples.size() + 1) return Eigen::Vector3d::Zero();
+  const auto at = [&](double t) {
+    return static_cast<std::size_t>(
+        std::lower_bound(
+            samples.begin(), samples.end(), t,
+            [](const Sample& s, double v) { return static_cast<double>(s.t_host_ns) * 1e-9 < v; }) -
+        samples.begin());
+  };
+  const std::size_t a = at(t0_s), b = std::max(a, at(t1_s));
+  if (b == a) return Eigen::Vector3d::Zero();
+  return (sums[b] - sums[a]) / static_cast<double>(b - a);
+}
+
+}  // namespace
+
+Eigen::Vector3d SimulatedSession::AccDriftMean(double t0_s, double t1_s) const {
+  return WindowMean(samples, acc_drift_sum, t0_s, t1_s);
+}
+
+Eigen::Vector3d SimulatedSession::MagDriftMean(double t0_s, double t1_s) const {
+  return WindowMean(samples, mag_drift_sum, t0_s, t1_s);
 }
 
 Eigen::Vector3d SimulatedSession::LastPoseAccBiasOffset() const {

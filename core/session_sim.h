@@ -76,6 +76,14 @@ struct SimulatedSession {
   // are the bias there (truth "bias_truth": "at_last_pose").
   Eigen::Vector3d LastPoseAccBiasOffset() const;
   Eigen::Vector3d LastPoseMagBiasOffset() const;
+  // The bias's departure from the turn-on bias averaged over the samples in [t0_s, t1_s]
+  // (session time): the truth of a bias estimated over that window, e.g. a calibration's
+  // bias_window (zero when no sample falls inside).
+  Eigen::Vector3d AccDriftMean(double t0_s, double t1_s) const;
+  Eigen::Vector3d MagDriftMean(double t0_s, double t1_s) const;
+
+  // Prefix sums of the bias departure per sample (size samples + 1), for the window means.
+  std::vector<Eigen::Vector3d> acc_drift_sum, mag_drift_sum;
 };
 
 // The session for `poses` with the truths drawn from the class (DrawTruth) from the seed.

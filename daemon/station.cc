@@ -595,6 +595,7 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
           {"chi2", e.chi2},
           {"dof", e.dof},
           {"p_value", e.p_value},
+          {"fit_check", protocol::ToJson(e.fit, m.model->sensor())},
           {"gate", ToJson(m.gate)},
           {"tolerances", protocol::TolerancesJson(*m.model, d.gate)},
           {"context", protocol::ToJson(options_.context)},
@@ -799,17 +800,20 @@ nlohmann::json Station::Result() const {
     nlohmann::json models = nlohmann::json::object();
     for (const ModelState& m : d->models) {
       const Estimate& e = m.estimate;
-      models[m.model->name()] = {{"ok", e.ok},
-                                 {"poses", e.poses},
-                                 {"params", ParamsJson(e)},
-                                 {"rank", m.rank},
-                                 {"chi2", e.chi2},
-                                 {"dof", e.dof},
-                                 {"p_value", e.p_value},
-                                 {"gauge", e.gauge},
-                                 {"warnings", e.warnings},
-                                 {"gate", ToJson(m.gate)},
-                                 {"active_version", m.active_version}};
+      models[m.model->name()] = {
+          {"ok", e.ok},
+          {"poses", e.poses},
+          {"params", ParamsJson(e)},
+          {"rank", m.rank},
+          {"chi2", e.chi2},
+          {"dof", e.dof},
+          {"p_value", e.p_value},
+          {"fit_check", protocol::ToJson(e.fit, m.model->sensor())},
+          {"bias_window", e.bias_window ? protocol::ToJson(*e.bias_window) : nlohmann::json()},
+          {"gauge", e.gauge},
+          {"warnings", e.warnings},
+          {"gate", ToJson(m.gate)},
+          {"active_version", m.active_version}};
     }
     devices[d->name] = {{"poses", d->poses},
                         {"samples",

@@ -134,6 +134,17 @@ nlohmann::json CalibratorJson(const CalibratorOptions& o, const std::string& sen
   return j;
 }
 
+nlohmann::json ToJson(const FitCheck& f, SensorKind sensor) {
+  return {{"verdict", ToString(f.verdict)},
+          {"chi2_per_dof", f.dof > 0 ? f.chi2 / f.dof : 0.0},
+          {"p_upper", f.p_upper},
+          {"p_lower", f.p_lower},
+          {"axis_ratio", JsonVec3(f.axis_ratio)},
+          {"lag1_correlation", f.lag1_correlation},
+          {"cause", f.cause},
+          {"message", f.Message(ToString(sensor))}};
+}
+
 nlohmann::json ToJson(const BiasDrift& d) {
   return {{"gauss_markov_sigma", JsonVec3(d.gm_sigma)},
           {"gauss_markov_tau_s", d.gm_tau_s},
@@ -265,6 +276,11 @@ bool ParseCalibrationDocument(const nlohmann::json& j, CalibrationDocument* out,
   d.dof = j.value("dof", 0);
   d.chi2 = j.value("chi2", 0.0);
   d.p_value = j.value("p_value", 1.0);
+  if (j.contains("fit_check") && j["fit_check"].is_object()) {
+    const auto& f = j["fit_check"];
+    if (f.contains("verdict") && f["verdict"].is_string()) d.fit_verdict = f["verdict"];
+    if (f.contains("message") && f["message"].is_string()) d.fit_message = f["message"];
+  }
   if (!j.contains("gate") || !ReadGate(j["gate"], &d.gate)) {
     return bad("'gate' is missing or malformed");
   }

@@ -33,6 +33,10 @@ bool ParseModelContext(const nlohmann::json& j, ModelContext* out, std::string* 
 // The calibrator's noise model and loss, with the sensor class it came from.
 nlohmann::json CalibratorJson(const CalibratorOptions& options, const std::string& sensor_class);
 
+// The two-sided fit check: {"verdict":"ok|chi2_too_large|chi2_too_small","chi2_per_dof",
+// "p_upper","p_lower","axis_ratio":[3],"lag1_correlation","cause","message"}.
+nlohmann::json ToJson(const FitCheck& fit, SensorKind sensor);
+
 // The calibrator's drift model, and the time window of a calibration's bias.
 nlohmann::json ToJson(const BiasDrift& drift);
 bool ParseBiasDrift(const nlohmann::json& j, BiasDrift* out);
@@ -60,6 +64,8 @@ struct CalibrationDocument {
   double chi2 = 0.0;
   int dof = 0;
   double p_value = 1.0;
+  std::string fit_verdict;  // FitCheck's, "" when the document predates it
+  std::string fit_message;
   GateResult gate;
   nlohmann::json override_who;  // null unless published by operator override
   nlohmann::json identity;      // provenance.device_identity (null in replays)

@@ -26,7 +26,7 @@ table { border-collapse: collapse; margin: 6px 0; } th, td { padding: 2px 8px; b
 td.num { text-align: right; font-variant-numeric: tabular-nums; } .small { font-size: 12px; color: #555; }
 tr.exceeds td { background: #fde8e8; } tr.within td:nth-child(6) { color: #176317; }
 .verdict { font-size: 16px; } .verdict.pass strong { color: #176317; } .verdict.fail strong { color: #b00; }
-.missing { color: #a00; } table.matrix td { font-family: ui-monospace, monospace; border: none; }
+.missing, .fit-warn { color: #a00; } table.matrix td { font-family: ui-monospace, monospace; border: none; }
 table.matrix caption { text-align: left; font-weight: bold; } .sigma { color: #666; }
 svg.plot { display: block; margin: 8px 0; background: #fff; }
 svg.plot text { font: 11px system-ui, sans-serif; fill: #222; }
@@ -88,6 +88,12 @@ std::string ModelSection(const CalibrationDocument& d) {
       Escape(d.software.empty() ? "?" : d.software), d.poses.size(), with_triad,
       ToString(model.sensor()), d.chi2, d.dof, d.p_value);
   if (!d.sensor_class.empty()) o += " Sensor class: " + Escape(d.sensor_class) + ".";
+  o += "</p>";
+  if (!d.fit_message.empty()) {
+    o += fmt::format("<p class=\"fit-{}\"><strong>Fit check:</strong> {}.</p>",
+                     d.fit_verdict == "ok" ? "ok" : "warn", Escape(d.fit_message));
+  }
+  o += "<p class=\"meta\">";
   if (!d.context_recorded) {
     o += " The calibration does not record its reference vectors: the defaults (MODELS.md) are "
          "used.";

@@ -19,6 +19,7 @@
 #include "core/synthetic.h"
 #include "daemon/replay_once.h"
 #include "drivers/capture/tcap.h"
+#include "protocol/calibration_json.h"
 #include "tools/sim_capture.h"
 
 namespace turncal::tools {
@@ -77,6 +78,7 @@ struct RunOutcome {
   bool gate_pass = false;
   int poses = 0;
   double session_s = 0.0;
+  std::uint64_t seed = 0;
 };
 
 }  // namespace
@@ -115,6 +117,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
     for (int run = next++; run < args.runs; run = next++) {
       RunOutcome& out = outcomes[static_cast<std::size_t>(run)];
       const std::uint64_t seed = args.seed * 1000003 + static_cast<std::uint64_t>(run);
+      out.seed = seed;
       SimCaptureOptions o;
       o.protocol = *protocol;
       (accel ? o.accel_model : o.mag_model) = args.model;
@@ -153,8 +156,8 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       station.sensor_class = args.sensor_class;
       daemon::ReplayOnceOutcome replay;
       const bool replayed = daemon::ReplayOnce(path, station, "", {}, &replay, &e);
-      std::filesystem::remove(path);
       if (!replayed) {
+        std::filesystem::remove(path);
         out.error = e;
         continue;
       }
@@ -162,11 +165,22 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       const nlohmann::json& m = replay.result["devices"][device]["models"][args.model];
       if (!m.value("ok", false)) {
         out.error = "no estimate";
+        std::filesystem::remove(path);
         continue;
       }
+      // The bias truth: the turn-on bias plus the drift averaged over the calibration's own bias
+      // window (the sequencer's window at the latest pose; host time = capture time).
       Eigen::VectorXd truth = accel ? capture.session.accel_truth : capture.session.mag_truth;
+      TimeWindow window;
+      if (!protocol::ParseTimeWindow(m["bias_window"], &window)) {
+        out.error = "the result has no bias window";
+        std::filesystem::remove(path);
+        continue;
+      }
+      const double offset_s = static_cast<double>(capture.offset_ns) * 1e-9;
       truth.tail<3>() +=
-          accel ? capture.session.LastPoseAccBiasOffset() : capture.session.LastPoseMagBiasOffset();
+          accel ? capture.session.AccDriftMean(window.t0_s - offset_s, window.t1_s - offset_s)
+                : capture.session.MagDriftMean(window.t0_s - offset_s, window.t1_s - offset_s);
       out.z.resize(N);
       for (int i = 0; i < N; ++i) {
         const auto& p = m["params"][model->parameters()[static_cast<std::size_t>(i)].name];
@@ -174,6 +188,19 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
         out.z[i] = (p["value"].get<double>() - truth[i]) / sigma;
       }
       out.ok = out.z.allFinite();
+      if (std::getenv("TURNCAL_MC_DEBUG") && !(out.z.cwiseAbs().maxCoeff() <= 4.0)) {
+        const auto& ev = capture.session.events;
+        fmt::print(stderr, "seed {} window {} {} offset {} last dwell {} {} prev {} {}\n", seed,
+                   window.t0_s - offset_s, window.t1_s - offset_s, offset_s, ev.back().t_s,
+                   ev.back().dwell_end_s, ev[ev.size() - 2].t_s, ev[ev.size() - 2].dwell_end_s);
+      }
+      std::error_code ec;
+      if (!args.keep_dir.empty() && !(out.z.cwiseAbs().maxCoeff() <= 4.0)) {
+        std::filesystem::create_directories(args.keep_dir, ec);
+        std::filesystem::copy_file(path, fmt::format("{}/run-{}.tcap", args.keep_dir, seed),
+                                   std::filesystem::copy_options::overwrite_existing, ec);
+      }
+      std::filesystem::remove(path, ec);
       out.p_value = m.value("p_value", 1.0);
       out.gate_pass = m["gate"].value("pass", false);
       out.poses = m.value("poses", 0);
@@ -191,6 +218,29 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
+  if (!args.runs_out.empty()) {
+    std::FILE* f = std::fopen(args.runs_out.c_str(), "w");
+    if (f == nullptr) {
+      fmt::print(stderr, "turncal montecarlo: cannot write '{}'\n", args.runs_out);
+      return 2;
+    }
+    for (const auto& r : outcomes) {
+      nlohmann::json z = nlohmann::json::object();
+      for (int i = 0; r.ok && i < N; ++i) {
+        z[model->parameters()[static_cast<std::size_t>(i)].name] = r.z[i];
+      }
+      fmt::print(f, "{}\n",
+                 nlohmann::json{{"seed", r.seed},
+                                {"ok", r.ok},
+                                {"error", r.error},
+                                {"z", z},
+                                {"p_value", r.p_value},
+                                {"gate_pass", r.gate_pass},
+                                {"poses", r.poses}}
+                     .dump());
+    }
+    std::fclose(f);
+  }
   Eigen::VectorXd s1 = Eigen::VectorXd::Zero(N), s2 = Eigen::VectorXd::Zero(N);
   std::vector<double> p_values;
   int ok = 0, gate_pass = 0;

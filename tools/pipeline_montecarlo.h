@@ -32,6 +32,9 @@ struct PipelineMonteCarloArgs {
   double warmup_tau_s = 60.0;
   double random_walk = 0.0;
   bool json = false;
+  std::string runs_out;
+  std::string keep_dir;  // when set: the captures of runs with a parameter beyond 4 sigma go here
+                         // // when set: one JSON line per run (seed, z, p-value, gate) to this file
 };
 
 // Exit status: 0 when every criterion holds, 1 when one does not, 2 on bad arguments.

@@ -340,6 +340,12 @@ void AddSimFitCommands(CLI::App* app) {
                  "instability per sqrt(100 s) (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  mc->add_option("--runs-out", pipe->runs_out,
+                 "with --pipeline: one JSON line per run (seed, z per parameter, chi^2 p-value, "
+                 "gate) to this file");
+  mc->add_option("--keep", pipe->keep_dir,
+                 "with --pipeline: keep the captures of runs with a parameter beyond 4 sigma in "
+                 "this folder (run-SEED.tcap), for turncald --replay");
   mc->callback([mc_args, pipe, pipeline] {
     if (*pipeline) {
       pipe->model = mc_args->model;
