@@ -37,6 +37,11 @@ bool BiasDrift::IsValid(std::string* error) const {
     if (error) *error = "bias drift sigmas must be finite and >= 0";
     return false;
   }
+  if (!(warmup_sigma.allFinite() && warmup_sigma.minCoeff() >= 0) ||
+      (warmup_sigma.maxCoeff() > 0 && !(warmup_tau_s > 0 && std::isfinite(warmup_tau_s)))) {
+    if (error) *error = "the warm-up sigma must be >= 0 and its time constant > 0";
+    return false;
+  }
   if (gm_sigma.maxCoeff() > 0 && !(gm_tau_s > 0 && std::isfinite(gm_tau_s))) {
     if (error) *error = "the Gauss-Markov correlation time must be > 0";
     return false;
@@ -61,7 +66,20 @@ double BiasDrift::WindowCovariance(int axis, const TimeWindow& a, const TimeWind
     const double mean_sum = (wa.mid_s() - origin_s) + (wb.mid_s() - origin_s);
     c += q * q * (0.5 * mean_sum - 0.5 * DoubleIntegral(wa, wb, AbsG) / (ta * tb));
   }
+  const double w = warmup_sigma[axis];
+  if (w > 0) {
+    // A e^{-(t - o) / T_w} with A ~ N(0, w^2): the product of the windows' mean decays.
+    const double o = std::isfinite(warmup_origin_s) ? warmup_origin_s : origin_s;
+    c += w * w * WarmupMean(wa, o) * WarmupMean(wb, o);
+  }
   return c;
+}
+
+double BiasDrift::WarmupMean(const TimeWindow& window, double origin_s) const {
+  const double T = std::max(window.duration_s(), 1e-6);
+  const double tw = warmup_tau_s;
+  return tw / T *
+         (std::exp(-(window.t0_s - origin_s) / tw) - std::exp(-(window.t0_s + T - origin_s) / tw));
 }
 
 double BiasDrift::VarianceSince(int axis, const TimeWindow& ref, double t_s) const {
@@ -89,6 +107,13 @@ double BiasDrift::VarianceSince(int axis, const TimeWindow& ref, double t_s) con
     const auto A = [](double x) { return 0.5 * x * std::abs(x); };
     const double cov = q * q * (0.5 * (t + mid) - 0.5 * (A(b) - A(a)) / T);
     v += q * q * t - 2 * cov;
+  }
+  const double w = warmup_sigma[axis];
+  if (w > 0 && std::isfinite(warmup_origin_s)) {
+    // The warm-up's own variance at t, less twice its covariance with the window, is added with
+    // the window's variance below.
+    const double at = std::exp(-(t_s - warmup_origin_s) / warmup_tau_s);
+    v += w * w * (at * at - 2 * at * WarmupMean(ref, warmup_origin_s));
   }
   v += WindowCovariance(axis, ref, ref, std::min(ref.t0_s, t_s));
   return std::max(v, 0.0);

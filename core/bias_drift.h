@@ -11,6 +11,7 @@
 // estimate of b exactly the bias over the reference window (docs/ACCURACY.md "Drift").
 
 #include <Eigen/Core>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -31,12 +32,22 @@ struct BiasDrift {
   double gm_tau_s = 100.0;
   // Random walk: the bias variance grows by rw_density^2 per second (triad unit / sqrt(s)).
   Eigen::Vector3d rw_density = Eigen::Vector3d::Zero();
+  // Warm-up after power-on: an offset of 1 sigma warmup_sigma per axis at warmup_origin_s that
+  // settles as exp(-(t - origin) / warmup_tau_s). The origin is the earliest window's start when
+  // not set (NaN): the first pose, which a sensor powered on earlier has already partly settled
+  // by, so the model errs towards more warm-up, not less.
+  Eigen::Vector3d warmup_sigma = Eigen::Vector3d::Zero();
+  double warmup_tau_s = 60.0;
+  double warmup_origin_s = std::numeric_limits<double>::quiet_NaN();
 
-  bool enabled() const { return gm_sigma.maxCoeff() > 0 || rw_density.maxCoeff() > 0; }
+  bool enabled() const {
+    return gm_sigma.maxCoeff() > 0 || rw_density.maxCoeff() > 0 || warmup_sigma.maxCoeff() > 0;
+  }
   bool IsValid(std::string* error) const;
 
   // Covariance on one axis of the wander averaged over window a and over window b (the random
-  // walk's part counted from time origin_s, which cancels in increments).
+  // walk's part counted from time origin_s, which cancels in increments; the warm-up's from
+  // warmup_origin_s, or origin_s when that is not set).
   double WindowCovariance(int axis, const TimeWindow& a, const TimeWindow& b,
                           double origin_s) const;
   // Variance on one axis of the bias at time t_s minus its average over `ref`: how far the bias
@@ -44,6 +55,8 @@ struct BiasDrift {
   double VarianceSince(int axis, const TimeWindow& ref, double t_s) const;
   // The 1-sigma wander per axis over `seconds` after the reference window's end.
   Eigen::Vector3d SigmaAfter(const TimeWindow& ref, double seconds) const;
+  // The window's mean of exp(-(t - origin_s) / warmup_tau_s).
+  double WarmupMean(const TimeWindow& window, double origin_s) const;
 };
 
 // D(i, j) = Cov(ubar_i - ubar_ref, ubar_j - ubar_ref) on one axis for the windows given (row

@@ -450,6 +450,9 @@ Estimate Calibrator::solve() {
     const TimeWindow& ref = poses_[static_cast<std::size_t>(order_.back())].window;
     est.bias_window = ref;
     est.drift = options_.drift;
+    if (!std::isfinite(est.drift.warmup_origin_s)) {
+      est.drift.warmup_origin_s = poses_[static_cast<std::size_t>(order_.front())].window.t0_s;
+    }
   }
   for (auto& r : est.residuals) {
     r.normalized = std::sqrt(r.whitened.squaredNorm() / 3.0);

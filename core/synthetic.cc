@@ -102,6 +102,8 @@ CalibratorOptions DriftOptionsForClass(const MeasurementModel& model, const Sens
   CalibratorOptions o = OptionsForClass(model, sensor);
   o.drift.gm_sigma = Eigen::Vector3d::Constant(o.pose_offset_sigma);
   o.drift.gm_tau_s = sensor.bias_tau_s;
+  o.drift.warmup_sigma = o.drift.gm_sigma * sensor.warmup_in_instabilities;
+  o.drift.warmup_tau_s = sensor.warmup_tau_s;
   o.pose_offset_sigma = 0.0;
   return o;
 }

@@ -32,6 +32,11 @@ struct SensorClass {
   // Correlation time of the bias instability (first-order Gauss-Markov, both triads): minutes
   // for MEMS (SENSORS.md); the session simulator's default.
   double bias_tau_s = 100.0;
+  // The warm-up the calibrator allows for after power-on (BiasDrift::warmup_sigma), in units of
+  // the bias instability, and its time constant: none by default (an allowance the data do not
+  // show makes chi^2 too small, docs/ACCURACY.md); the simulator draws none unless asked.
+  double warmup_in_instabilities = 0.0;
+  double warmup_tau_s = 60.0;
   // Gyroscope (for the byte-level simulator; not calibrated here), rad/s.
   double gyr_noise_density = 0.0;  // per sqrt(Hz)
   double gyr_turn_on_bias = 0.0;   // 1 sigma

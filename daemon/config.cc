@@ -198,8 +198,23 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   }
   StationOptions& st = c.station;
   if (const toml::table* t = root["station"].as_table()) {
-    if (!OnlyKeys(*t, {"models", "sensor_class"}, "[station]", source, error)) return false;
+    if (!OnlyKeys(*t, {"models", "sensor_class", "bias_tau_s", "warmup", "warmup_tau_s"},
+                  "[station]", source, error)) {
+      return false;
+    }
     if (!GetString(*t, "sensor_class", &st.sensor_class, source, error)) return false;
+    if (!GetNumber(*t, "bias_tau_s", &st.bias_tau_s, source, error) ||
+        !GetNumber(*t, "warmup", &st.warmup_in_instabilities, source, error) ||
+        !GetNumber(*t, "warmup_tau_s", &st.warmup_tau_s, source, error)) {
+      return false;
+    }
+    if ((t->contains("bias_tau_s") && !(st.bias_tau_s > 0)) ||
+        (t->contains("warmup") && !(st.warmup_in_instabilities >= 0)) ||
+        (t->contains("warmup_tau_s") && !(st.warmup_tau_s > 0))) {
+      *error =
+          fmt::format("{}: [station] bias_tau_s and warmup_tau_s must be > 0, warmup >= 0", source);
+      return false;
+    }
     if (!GetModels(*t, &st.models, source, error)) return false;
   }
   if (const toml::table* t = root["sequencer"].as_table()) {

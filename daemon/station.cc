@@ -135,6 +135,11 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
                  EventSink sink)
     : options_(options), sink_(std::move(sink)) {
   SensorClassByName(options_.sensor_class, &sensor_);
+  if (options_.bias_tau_s > 0) sensor_.bias_tau_s = options_.bias_tau_s;
+  if (options_.warmup_in_instabilities >= 0) {
+    sensor_.warmup_in_instabilities = options_.warmup_in_instabilities;
+  }
+  if (options_.warmup_tau_s > 0) sensor_.warmup_tau_s = options_.warmup_tau_s;
   if (!options_.gate_tolerances_set) {
     GateTolerancesForClass(options_.sensor_class, &options_.gate.tolerances);
   }

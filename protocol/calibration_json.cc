@@ -146,9 +146,13 @@ nlohmann::json ToJson(const FitCheck& f, SensorKind sensor) {
 }
 
 nlohmann::json ToJson(const BiasDrift& d) {
-  return {{"gauss_markov_sigma", JsonVec3(d.gm_sigma)},
-          {"gauss_markov_tau_s", d.gm_tau_s},
-          {"random_walk", JsonVec3(d.rw_density)}};
+  nlohmann::json j = {{"gauss_markov_sigma", JsonVec3(d.gm_sigma)},
+                      {"gauss_markov_tau_s", d.gm_tau_s},
+                      {"random_walk", JsonVec3(d.rw_density)},
+                      {"warmup_sigma", JsonVec3(d.warmup_sigma)},
+                      {"warmup_tau_s", d.warmup_tau_s}};
+  if (std::isfinite(d.warmup_origin_s)) j["warmup_origin_s"] = d.warmup_origin_s;
+  return j;
 }
 
 bool ParseBiasDrift(const nlohmann::json& j, BiasDrift* out) {
@@ -158,9 +162,16 @@ bool ParseBiasDrift(const nlohmann::json& j, BiasDrift* out) {
     return false;
   }
   if (j.contains("random_walk") && !ReadJsonVec3(j["random_walk"], &d.rw_density)) return false;
-  if (j.contains("gauss_markov_tau_s")) {
-    if (!j["gauss_markov_tau_s"].is_number()) return false;
-    d.gm_tau_s = j["gauss_markov_tau_s"].get<double>();
+  if (j.contains("warmup_sigma") && !ReadJsonVec3(j["warmup_sigma"], &d.warmup_sigma)) {
+    return false;
+  }
+  for (const auto& [key, target] :
+       {std::pair<const char*, double*>{"gauss_markov_tau_s", &d.gm_tau_s},
+        {"warmup_tau_s", &d.warmup_tau_s},
+        {"warmup_origin_s", &d.warmup_origin_s}}) {
+    if (!j.contains(key)) continue;
+    if (!j[key].is_number()) return false;
+    *target = j[key].get<double>();
   }
   if (!d.IsValid(nullptr)) return false;
   *out = d;

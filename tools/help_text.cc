@@ -123,8 +123,26 @@ const std::map<std::string, Manual>& Manuals() {
        {"Repeats simulated sessions and checks that the reported sigma matches the scatter of the "
         "errors (the honesty of the uncertainty).",
         "turncal montecarlo --model accel13 --runs 1000\n"
-        "turncal montecarlo --model mag13 --noise session --runs 200",
-        "0; 2 a command-line mistake", "docs/ACCURACY.md"}},
+        "turncal montecarlo --model mag13 --noise session --runs 200\n"
+        "turncal montecarlo --pipeline --model accel13 --class consumer --protocol xbus --plan "
+        "shuffled --runs 200   # sessions as bytes through the station, as turncald --replay "
+        "--once runs them",
+        "0 every criterion holds; 1 one does not (a parameter's std z outside [0.9, 1.1] or "
+        "|mean z| > 0.15, chi^2 p-values not uniform, a run without an estimate); 2 a "
+        "command-line mistake",
+        "docs/ACCURACY.md"}},
+      {"noise",
+       {"The overlapping Allan deviation of a static recording, per triad and axis, and the noise "
+        "model fitted to it: white-noise density N, a Gauss-Markov bias instability (sigma, tau), "
+        "a random walk, and the IEEE flat-bottom figure. Record the sensor at rest for several "
+        "times the longest correlation time you care about; use --from/--to to keep only the "
+        "rest. The fitted values are what [station] drift and noise settings expect.",
+        "turncal noise rest.tcap --svg rest-allan.svg\n"
+        "turncal noise imu.bin --protocol mip --to 600 --json\n"
+        "turncal noise xsens_acc.mat --triad acc --to 45   # imu_tk's text columns (raw counts)",
+        "0 done; 1 no triad with enough samples, or the plot cannot be written; 2 the input "
+        "cannot be read or a command-line mistake",
+        "docs/ACCURACY.md (the noise model), SENSORS.md"}},
       {"sim",
        {"Simulates a whole turntable session: a .tcap capture of a MIP, GX2 or Xbus device and a "
         "truth file. With --live it streams into ptys in real time (or --live-speed times "

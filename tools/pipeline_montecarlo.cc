@@ -154,6 +154,8 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       daemon::StationOptions station;
       station.models = {args.model};
       station.sensor_class = args.sensor_class;
+      station.warmup_in_instabilities = args.station_warmup;
+      station.warmup_tau_s = args.warmup_tau_s;
       daemon::ReplayOnceOutcome replay;
       const bool replayed = daemon::ReplayOnce(path, station, "", {}, &replay, &e);
       if (!replayed) {
@@ -286,6 +288,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                       {"plan", args.plan},
                                       {"warmup", args.warmup},
                                       {"random_walk", args.random_walk},
+                                      {"station_warmup", args.station_warmup},
                                       {"runs", args.runs},
                                       {"solved", ok},
                                       {"poses_mean", poses / ok},
@@ -301,8 +304,11 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
         "jobs\n\n{}",
         args.runs, args.model, args.sensor_class, args.protocol, args.plan,
         args.warmup > 0 ? fmt::format(", warm-up {} x bias instability", args.warmup) : "",
-        args.random_walk > 0 ? fmt::format(", random walk {}", args.random_walk) : "", poses / ok,
-        session_s / ok, args.seed, ok, wall_s, args.jobs, table);
+        (args.random_walk > 0 ? fmt::format(", random walk {}", args.random_walk) : "") +
+            (args.station_warmup >= 0
+                 ? fmt::format(", station warm-up allowance {}", args.station_warmup)
+                 : std::string()),
+        poses / ok, session_s / ok, args.seed, ok, wall_s, args.jobs, table);
     fmt::print(
         "\nchi^2 p-values against uniform: Kolmogorov-Smirnov D = {:.3f}, p = {:.3g} ({})\n"
         "gate passed in {} of {} runs\n"

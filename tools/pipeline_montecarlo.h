@@ -31,6 +31,8 @@ struct PipelineMonteCarloArgs {
   double warmup = 0.0;
   double warmup_tau_s = 60.0;
   double random_walk = 0.0;
+  // The station's warm-up allowance ([station] warmup, in bias instabilities; negative: none).
+  double station_warmup = -1.0;
   bool json = false;
   std::string runs_out;
   std::string keep_dir;  // when set: the captures of runs with a parameter beyond 4 sigma go here

@@ -340,6 +340,9 @@ void AddSimFitCommands(CLI::App* app) {
                  "instability per sqrt(100 s) (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  mc->add_option("--station-warmup", pipe->station_warmup,
+                 "with --pipeline: the station's warm-up allowance ([station] warmup, in bias "
+                 "instabilities, with --warmup-tau); default none");
   mc->add_option("--runs-out", pipe->runs_out,
                  "with --pipeline: one JSON line per run (seed, z per parameter, chi^2 p-value, "
                  "gate) to this file");

@@ -7,6 +7,7 @@
 #include "tools/decode_command.h"
 #include "tools/help_text.h"
 #include "tools/models_command.h"
+#include "tools/noise_command.h"
 #include "tools/observability_command.h"
 #include "tools/plan_compare_command.h"
 #include "tools/sequence_command.h"
@@ -23,6 +24,7 @@ int main(int argc, char** argv) {
   turncal::tools::AddDecodeCommand(&app);
   turncal::tools::AddModelsCommand(&app);
   turncal::tools::AddSimFitCommands(&app);
+  turncal::tools::AddNoiseCommand(&app);
   turncal::tools::AddSimCommand(&app);
   turncal::tools::AddObservabilityCommands(&app);
   turncal::tools::AddPlanCompareCommand(&app);
