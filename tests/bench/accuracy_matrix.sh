@@ -23,8 +23,11 @@ for model in accel13 mag13; do
     done
   done
 done
+# Warm-up of 3 bias instabilities (tau 60 s) that the station is not told about, then the same
+# with the station's warm-up allowance ([station] warmup = 3).
 for model in accel13 mag13; do
   for class in industrial consumer; do
     row --model "$model" --class "$class" --protocol mip --plan default --warmup 3
+    row --model "$model" --class "$class" --protocol mip --plan default --warmup 3 --station-warmup 3
   done
 done
