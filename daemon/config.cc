@@ -198,11 +198,20 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   }
   StationOptions& st = c.station;
   if (const toml::table* t = root["station"].as_table()) {
-    if (!OnlyKeys(*t, {"models", "sensor_class", "bias_tau_s", "warmup", "warmup_tau_s"},
+    if (!OnlyKeys(*t,
+                  {"models", "sensor_class", "drift_model", "bias_tau_s", "warmup", "warmup_tau_s"},
                   "[station]", source, error)) {
       return false;
     }
     if (!GetString(*t, "sensor_class", &st.sensor_class, source, error)) return false;
+    std::string drift_model = "gauss-markov";
+    if (!GetString(*t, "drift_model", &drift_model, source, error)) return false;
+    if (drift_model != "gauss-markov" && drift_model != "independent") {
+      *error = fmt::format("{}: [station] drift_model must be \"gauss-markov\" or \"independent\"",
+                           source);
+      return false;
+    }
+    st.drift_model = drift_model == "gauss-markov";
     if (!GetNumber(*t, "bias_tau_s", &st.bias_tau_s, source, error) ||
         !GetNumber(*t, "warmup", &st.warmup_in_instabilities, source, error) ||
         !GetNumber(*t, "warmup_tau_s", &st.warmup_tau_s, source, error)) {

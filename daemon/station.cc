@@ -166,7 +166,9 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
       ModelState m;
       std::string error;
       m.model = MakeModel(name, options_.context, &error);
-      m.calibrator = std::make_unique<Calibrator>(DriftOptionsForClass(*m.model, sensor_));
+      m.calibrator = std::make_unique<Calibrator>(options_.drift_model
+                                                      ? DriftOptionsForClass(*m.model, sensor_)
+                                                      : OptionsForClass(*m.model, sensor_));
       d->models.push_back(std::move(m));
     }
     devices_.push_back(std::move(d));

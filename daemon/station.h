@@ -43,6 +43,9 @@ struct StationOptions {
   // Gauss-Markov process of this correlation time, and a warm-up allowance after power-on of
   // this many bias instabilities (1 sigma at the first pose) settling with warmup_tau_s.
   // Negative: the class's (100 s; no warm-up; 60 s).
+  // false: the model before issue 19, an independent offset of the bias instability per pose
+  // (kept for comparisons; its sigma are not honest in ordered plans).
+  bool drift_model = true;
   double bias_tau_s = -1.0;
   double warmup_in_instabilities = -1.0;
   double warmup_tau_s = -1.0;

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -79,6 +80,8 @@ struct RunOutcome {
   int poses = 0;
   double session_s = 0.0;
   std::uint64_t seed = 0;
+  int gate_poses = -1;  // poses at the first activation (-1: never)
+  double gate_s = NAN;  // session seconds at the first activation
 };
 
 }  // namespace
@@ -156,15 +159,47 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       station.sensor_class = args.sensor_class;
       station.warmup_in_instabilities = args.station_warmup;
       station.warmup_tau_s = args.warmup_tau_s;
+      station.drift_model = !args.independent;
+      const std::string state_dir = (dir / fmt::format("state-{}", run)).string();
+      if (args.at == "first-gate") station.state_dir = state_dir;
       daemon::ReplayOnceOutcome replay;
-      const bool replayed = daemon::ReplayOnce(path, station, "", {}, &replay, &e);
+      const double offset_s = static_cast<double>(capture.offset_ns) * 1e-9;
+      // The first activation: poses and session seconds to a passing gate.
+      const auto on_event = [&](const nlohmann::json& j) {
+        if (out.gate_poses < 0 && j.value("class", "") == "CALIBRATION_ACTIVE") {
+          out.gate_poses = j.value("poses", -1);
+          out.gate_s = j.value("t", NAN) - offset_s;
+        }
+      };
+      const bool replayed = daemon::ReplayOnce(path, station, "", on_event, &replay, &e);
       if (!replayed) {
         std::filesystem::remove(path);
         out.error = e;
         continue;
       }
       const std::string& device = capture.header.devices.at(0).name;
-      const nlohmann::json& m = replay.result["devices"][device]["models"][args.model];
+      nlohmann::json first;
+      if (args.at == "first-gate") {
+        // Version 1: in history/ when later versions replaced it, else the active file.
+        for (const auto& f :
+             {fmt::format("{}/history/{}.{}.v1.json", state_dir, device, args.model),
+              fmt::format("{}/calibrations/{}.{}.json", state_dir, device, args.model)}) {
+          std::ifstream in(f);
+          if (in) {
+            first = nlohmann::json::parse(in, nullptr, false);
+            break;
+          }
+        }
+        std::filesystem::remove_all(state_dir);
+        if (!first.is_object() || first.value("version", 0) != 1) {
+          out.error = "the gate never passed";
+          std::filesystem::remove(path);
+          continue;
+        }
+        first["ok"] = true;
+      }
+      const nlohmann::json& m =
+          args.at == "first-gate" ? first : replay.result["devices"][device]["models"][args.model];
       if (!m.value("ok", false)) {
         out.error = "no estimate";
         std::filesystem::remove(path);
@@ -179,7 +214,6 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
         std::filesystem::remove(path);
         continue;
       }
-      const double offset_s = static_cast<double>(capture.offset_ns) * 1e-9;
       truth.tail<3>() +=
           accel ? capture.session.AccDriftMean(window.t0_s - offset_s, window.t1_s - offset_s)
                 : capture.session.MagDriftMean(window.t0_s - offset_s, window.t1_s - offset_s);
@@ -245,8 +279,8 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
   }
   Eigen::VectorXd s1 = Eigen::VectorXd::Zero(N), s2 = Eigen::VectorXd::Zero(N);
   std::vector<double> p_values;
-  int ok = 0, gate_pass = 0;
-  double poses = 0, session_s = 0;
+  int ok = 0, gate_pass = 0, activated = 0;
+  double poses = 0, session_s = 0, gate_poses = 0, gate_s = 0;
   std::string first_error;
   for (const auto& r : outcomes) {
     if (!r.ok) {
@@ -258,6 +292,11 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
     s2 += r.z.cwiseAbs2();
     p_values.push_back(r.p_value);
     gate_pass += r.gate_pass;
+    if (r.gate_poses > 0) {
+      ++activated;
+      gate_poses += r.gate_poses;
+      gate_s += r.gate_s;
+    }
     poses += r.poses;
     session_s += r.session_s;
   }
@@ -293,6 +332,10 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                       {"solved", ok},
                                       {"poses_mean", poses / ok},
                                       {"gate_pass", gate_pass},
+                                      {"independent", args.independent},
+                                      {"activated", activated},
+                                      {"poses_to_gate", activated ? gate_poses / activated : NAN},
+                                      {"seconds_to_gate", activated ? gate_s / activated : NAN},
                                       {"chi2_ks_d", ks_d},
                                       {"chi2_ks_p", ks_p},
                                       {"params", rows}}
@@ -311,10 +354,13 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
         poses / ok, session_s / ok, args.seed, ok, wall_s, args.jobs, table);
     fmt::print(
         "\nchi^2 p-values against uniform: Kolmogorov-Smirnov D = {:.3f}, p = {:.3g} ({})\n"
-        "gate passed in {} of {} runs\n"
+        "gate passed in {} of {} runs; first passed after {:.2f} poses and {:.1f} s of session "
+        "on average ({} runs)\n"
         "Criteria: std z in [0.9, 1.1] and |mean z| <= 0.15 for every parameter, KS p > 0.01; "
         "{} of {} parameters fail{}.\n",
-        ks_d, ks_p, ks_ok ? "ok" : "NOT UNIFORM", gate_pass, ok, bad, N,
+        ks_d, ks_p, ks_ok ? "ok" : "NOT UNIFORM", gate_pass, ok,
+        activated ? gate_poses / activated : NAN, activated ? gate_s / activated : NAN, activated,
+        bad, N,
         ok < args.runs
             ? fmt::format("; {} runs without an estimate (first: {})", args.runs - ok, first_error)
             : "");

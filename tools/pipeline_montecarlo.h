@@ -33,6 +33,10 @@ struct PipelineMonteCarloArgs {
   double random_walk = 0.0;
   // The station's warm-up allowance ([station] warmup, in bias instabilities; negative: none).
   double station_warmup = -1.0;
+  bool independent = false;
+  // Which estimate is judged: "end" (after every pose of the plan) or "first-gate" (the
+  // calibration the gate first activated, from the state directory's history).
+  std::string at = "end";  // the station's model before issue 19 ([station] drift_model)
   bool json = false;
   std::string runs_out;
   std::string keep_dir;  // when set: the captures of runs with a parameter beyond 4 sigma go here

@@ -343,6 +343,14 @@ void AddSimFitCommands(CLI::App* app) {
   mc->add_option("--station-warmup", pipe->station_warmup,
                  "with --pipeline: the station's warm-up allowance ([station] warmup, in bias "
                  "instabilities, with --warmup-tau); default none");
+  mc->add_flag("--independent", pipe->independent,
+               "with --pipeline: the station's model before issue 19 (an independent offset per "
+               "pose; [station] drift_model = \"independent\"), for comparisons");
+  mc->add_option("--at", pipe->at,
+                 "with --pipeline: judge the estimate at the end of the plan (end) or the "
+                 "calibration the gate first activated (first-gate)")
+      ->check(CLI::IsMember({"end", "first-gate"}))
+      ->capture_default_str();
   mc->add_option("--runs-out", pipe->runs_out,
                  "with --pipeline: one JSON line per run (seed, z per parameter, chi^2 p-value, "
                  "gate) to this file");
