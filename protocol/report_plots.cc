@@ -65,13 +65,33 @@ std::string ResidualsSvg(const CalibrationDocument& doc, const ModelAnalysis& a)
   const PoseResiduals& r = a.residuals;
   const ResidualUnit unit = ResidualUnitFor(model);
   const auto n = static_cast<double>(r.after.size());
+  // The x axis is time since the first pose when the records carry their windows (a trend with
+  // time is drift the noise model does not carry, issue 19), else the pose number.
+  std::vector<double> xs;
+  bool timed = true;
+  for (std::size_t i = 0; i < r.after.size() && timed; ++i) {
+    const auto k = static_cast<std::size_t>(r.pose_index[i]);
+    timed = k < doc.records.size() && doc.records[k].t_end_s > doc.records[k].t_start_s;
+    if (timed) xs.push_back(0.5 * (doc.records[k].t_start_s + doc.records[k].t_end_s));
+  }
+  if (!timed || xs.empty()) {
+    xs.clear();
+    for (std::size_t i = 0; i < r.after.size(); ++i) xs.push_back(static_cast<double>(i) + 1);
+  } else {
+    const double t0 = *std::min_element(xs.begin(), xs.end());
+    for (double& x : xs) x -= t0;
+  }
+  const double x_max = xs.empty() ? 1.0 : *std::max_element(xs.begin(), xs.end());
+  const double x_pad = timed ? std::max(1.0, 0.03 * x_max) : 0.5;
+  const double x_lo = timed ? -x_pad : 0.5, x_hi = timed ? x_max + x_pad : n + 0.5;
   const double width = 900, height = 505, left = 70, panel_w = 230, gap_x = 60, panel_h = 150;
   std::string o = svg::Open(
       id, width, height, title,
       fmt::format("Measured mean minus the model's prediction at each of {} poses, per sensor "
-                  "axis, in {}: top row at the nominal parameters, bottom row at the estimate "
-                  "with each pose mean's 1 sigma.",
-                  r.after.size(), unit.name));
+                  "axis, in {}, against {}: top row at the nominal parameters, bottom row at the "
+                  "estimate with each pose mean's 1 sigma.",
+                  r.after.size(), unit.name,
+                  timed ? "the time since the first pose" : "the pose number"));
   o += fmt::format(R"(<text class="plot-title" x="{}" y="20">{}</text>)", Num(left), Escape(title));
   for (int row = 0; row < 2; ++row) {
     const bool after = row == 1;
@@ -89,19 +109,20 @@ std::string ResidualsSvg(const CalibrationDocument& doc, const ModelAnalysis& a)
       svg::PadRange(&lo, &hi, /*with_zero=*/true);
       const double x = left + axis * (panel_w + gap_x);
       const double y = 60 + row * (panel_h + 70);
-      const svg::Panel p = svg::MakePanel(x, y, panel_w, panel_h, 0.5, n + 0.5, lo, hi, false);
+      const svg::Panel p = svg::MakePanel(x, y, panel_w, panel_h, x_lo, x_hi, lo, hi, false);
       svg::DrawAxes(
           p,
           fmt::format("{} {}: RMS {:.3g} {}", kAxisNames[axis], after ? "after" : "before",
                       rms[axis] * unit.per_triad_unit, unit.name),
-          "pose", axis == 0 ? fmt::format("residual, {}", unit.name) : "", &o);
+          timed ? "time since the first pose, s" : "pose",
+          axis == 0 ? fmt::format("residual, {}", unit.name) : "", &o);
       o += fmt::format(R"(<line class="zero" x1="{}" y1="{}" x2="{}" y2="{}"/>)", Num(p.x),
                        Num(p.sy(0)), Num(p.x + p.w), Num(p.sy(0)));
       o += fmt::format(R"(<g class="{}" fill="{}" stroke="{}">)",
                        after ? "residual-after" : "residual-before", kAxisColors[axis],
                        kAxisColors[axis]);
       for (std::size_t i = 0; i < values.size(); ++i) {
-        const double px = p.sx(static_cast<double>(i) + 1);
+        const double px = p.sx(xs[i]);
         const double v = values[i][axis] * unit.per_triad_unit;
         if (after && i < r.sigma_mean.size()) {
           const double s = r.sigma_mean[i][axis] * unit.per_triad_unit;

@@ -28,31 +28,24 @@ TEST(Config, TheShippedExampleParsesToTheDefaults) {
   GateTolerances industrial;
   GateTolerancesForClass("industrial", &industrial);
   EXPECT_EQ(c.station.gate.tolerances.scale_factor, industrial.scale_factor);
+  EXPECT_TRUE(c.station.drift_model);
+  EXPECT_EQ(c.station.bias_tau_s, 100.0);
+  EXPECT_EQ(c.station.warmup_in_instabilities, 0.0);
 }
 
-TEST(Config, ValuesAndPerParameterTolerances) {
+TEST(Config, TheDriftModelsSettings) {
   Config c;
   std::string error;
-  ASSERT_TRUE(ParseConfig(R"(
-[station]
-models = ["accel12"]
-sensor_class = "consumer"
-[sequencer]
-dwell_s = 5
-[gate]
-angle_deg = 0.05
-[gate.parameters]
-Sx = 2e-4
-)",
+  ASSERT_TRUE(ParseConfig("[station]\nbias_tau_s = 300\nwarmup = 2.5\nwarmup_tau_s = 90\n",
                           "t.toml", &c, &error))
       << error;
-  EXPECT_EQ(c.station.models, std::vector<std::string>{"accel12"});
-  EXPECT_EQ(c.station.sequencer.dwell_s, 5.0);
-  EXPECT_NEAR(c.station.gate.tolerances.angle_rad, 0.05 * M_PI / 180, 1e-15);
-  EXPECT_EQ(c.station.gate.parameter_tolerance.at("Sx"), 2e-4);
-  GateTolerances consumer;
-  GateTolerancesForClass("consumer", &consumer);
-  EXPECT_EQ(c.station.gate.tolerances.scale_factor, consumer.scale_factor);
+  EXPECT_TRUE(c.station.drift_model);
+  EXPECT_EQ(c.station.bias_tau_s, 300.0);
+  EXPECT_EQ(c.station.warmup_in_instabilities, 2.5);
+  EXPECT_EQ(c.station.warmup_tau_s, 90.0);
+  ASSERT_TRUE(ParseConfig("[station]\ndrift_model = \"independent\"\n", "t.toml", &c, &error))
+      << error;
+  EXPECT_FALSE(c.station.drift_model);
 }
 
 TEST(Config, DevicesHaveTheirOwnModelsGatesRatesAndTheLabsReference) {
@@ -120,6 +113,9 @@ INSTANTIATE_TEST_SUITE_P(
         Bad{"[sequencer]\ndwell_s = -1\n", "dwell must be in (0, 3600] s"},
         Bad{"[station]\nmodels = [\"accel14\"]\n", "accel14"},
         Bad{"[station]\nsensor_class = \"military\"\n", "unknown sensor class 'military'"},
+        Bad{"[station]\nbias_tau_s = 0\n", "bias_tau_s and warmup_tau_s must be > 0"},
+        Bad{"[station]\nwarmup = -1\n", "warmup >= 0"},
+        Bad{"[station]\ndrift_model = \"ar1\"\n", "drift_model must be"},
         Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\n[[device]]\nname = "
             "\"a\"\nprotocol = \"xbus\"\nport = \"/dev/y\"\n",
             "device name 'a' is given twice"},
