@@ -22,7 +22,8 @@ struct Calibrator::Pose {
   // With a drift model: the unwhitened residual, the pose's own (white) covariance and its window.
   std::unique_ptr<ceres::CostFunction> raw;
   Eigen::Matrix3d white = Eigen::Matrix3d::Identity();
-  TimeWindow window;
+  TimeWindow window;       // on the sensor's clock: drift and ordering
+  TimeWindow host_window;  // on the host's: when the bias holds, for corrected output
 };
 
 const char* ToString(RobustLoss loss) {
@@ -198,7 +199,7 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
     return fail("the record holds a non-finite mean or covariance");
   }
   if (triad->count < 1) return fail("the record has no samples");
-  const TimeWindow window{record.t_start_s, record.t_end_s};
+  const TimeWindow window{record.sensor_start_s(), record.sensor_end_s()};
   if (options_.drift.enabled() &&
       !(std::isfinite(window.t0_s) && std::isfinite(window.t1_s) && window.t1_s > window.t0_s)) {
     return fail("the drift model needs the record's time window (t_start_s < t_end_s)");
@@ -209,9 +210,12 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
           ? *triad->mean_covariance
           : Eigen::Matrix3d(triad->covariance / static_cast<double>(triad->count));
   sigma = 0.5 * (sigma + sigma.transpose());
+  // Averaging and drift are timed on the sensor's clock when the record has it (a simulator or
+  // a replay may run the host's clock at another pace).
+  const double duration_s = record.sensor_end_s() - record.sensor_start_s();
   double floor_var = 0.0;
-  if (options_.noise_density > 0 && record.duration_s() > 0) {
-    floor_var = options_.noise_density * options_.noise_density / (2.0 * record.duration_s());
+  if (options_.noise_density > 0 && duration_s > 0) {
+    floor_var = options_.noise_density * options_.noise_density / (2.0 * duration_s);
   }
   // Floor the eigenvalues (the mean is never known better than the white noise allows), then add
   // the pose-to-pose offset variance.
@@ -231,6 +235,7 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
                        eig.eigenvectors().transpose();
   pose.cost = model_->MakeResidual(p, w.measured, w.sqrt_information);
   pose.window = window;
+  pose.host_window = TimeWindow{record.t_start_s, record.t_end_s};
   if (options_.drift.enabled()) {
     pose.white = eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
     pose.raw = model_->MakeResidual(p, w.measured, Eigen::Matrix3d::Identity());
@@ -447,11 +452,12 @@ Estimate Calibrator::solve() {
     for (int k = 0; k < n; ++k) {
       est.residuals[static_cast<std::size_t>(order_[k])].whitened = innovations.segment<3>(3 * k);
     }
-    const TimeWindow& ref = poses_[static_cast<std::size_t>(order_.back())].window;
+    const TimeWindow& ref = poses_[static_cast<std::size_t>(order_.back())].host_window;
     est.bias_window = ref;
     est.drift = options_.drift;
     if (!std::isfinite(est.drift.warmup_origin_s)) {
-      est.drift.warmup_origin_s = poses_[static_cast<std::size_t>(order_.front())].window.t0_s;
+      // On the host's clock, as the bias window (corrected output's sigma uses both).
+      est.drift.warmup_origin_s = poses_[static_cast<std::size_t>(order_.front())].host_window.t0_s;
     }
   }
   for (auto& r : est.residuals) {

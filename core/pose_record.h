@@ -3,7 +3,9 @@
 // angles and the statistics of each triad over one stationary window.
 
 #include <Eigen/Core>
+#include <cmath>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 
@@ -28,9 +30,20 @@ struct PoseRecord {
   std::optional<TriadStats> mag;  // device unit
   double t_start_s = 0.0;         // window start and end, seconds on the host's clock
   double t_end_s = 0.0;
+  // The same window on the sensor's own clock (the sequencer's: the device clock kept continuous
+  // across resets), which bias drift evolves in; NaN when not known (then the host's is used).
+  double sensor_t_start_s = std::numeric_limits<double>::quiet_NaN();
+  double sensor_t_end_s = std::numeric_limits<double>::quiet_NaN();
   std::optional<double> temp_c;
 
   double duration_s() const { return t_end_s - t_start_s; }
+  bool has_sensor_window() const {
+    return std::isfinite(sensor_t_start_s) && std::isfinite(sensor_t_end_s) &&
+           sensor_t_end_s > sensor_t_start_s;
+  }
+  // The window drift and averaging are timed in: the sensor's when known, else the host's.
+  double sensor_start_s() const { return has_sensor_window() ? sensor_t_start_s : t_start_s; }
+  double sensor_end_s() const { return has_sensor_window() ? sensor_t_end_s : t_end_s; }
 };
 
 // One pose as the estimator weighs it: the measured mean of the model's triad and

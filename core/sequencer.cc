@@ -226,11 +226,40 @@ void Sequencer::Push(StillSample s) {
   Accept(s);
 }
 
+double Sequencer::SensorTime(const StillSample& s) {
+  const double host = s.t_s();
+  double t;
+  if (s.t_device_s && std::isfinite(*s.t_device_s)) {
+    const double device = *s.t_device_s;
+    if (sensor_last_device_s_) {
+      const double d_device = device - *sensor_last_device_s_;
+      const double d_host = std::max(host - sensor_last_host_s_, 0.0);
+      // Backwards, or far ahead of what the host saw pass (a reset or a corrupt time stamp that
+      // was real enough to be accepted): continue from the last sensor time by the host's gap.
+      if (!(d_device >= 0) || d_device > 2 * d_host + 10.0) {
+        sensor_offset_s_ = *sensor_last_s_ + d_host - device;
+      }
+    } else if (sensor_last_s_) {
+      // The first device time after samples without one.
+      sensor_offset_s_ = *sensor_last_s_ + std::max(host - sensor_last_host_s_, 0.0) - device;
+    }
+    t = device + sensor_offset_s_;
+    sensor_last_device_s_ = device;
+  } else {
+    t = sensor_last_s_ ? *sensor_last_s_ + std::max(host - sensor_last_host_s_, 0.0) : host;
+    sensor_last_device_s_.reset();
+  }
+  sensor_last_s_ = t;
+  sensor_last_host_s_ = host;
+  return t;
+}
+
 void Sequencer::Accept(StillSample s) {
   last_read_ns_ = s.t_host_ns;
   // From here on a sample's time is when its device sent it, on the host clock (HostClock): a
   // backlog read at once after an announcement belongs before it.
   s.t_host_ns = clock_.Map(s.t_host_ns, s.t_device_s);
+  s.t_sensor_s = SensorTime(s);
   CheckTimeout(s.t_host_ns);
   const double t_s = s.t_s();
   const std::uint32_t lost = CountLost(s);
@@ -411,6 +440,7 @@ void Sequencer::StartCollecting(const StillSample& first) {
       2, static_cast<std::int64_t>(std::ceil(dwell_s_ * detector_->profile().rate_hz - 1e-9)));
   next_progress_ = static_cast<std::int64_t>(std::ceil(options_.progress_step * needed_));
   t_first_ns_ = first.t_host_ns;
+  t_first_sensor_s_ = first.t_sensor_s;
   state_ = State::kCollecting;
   Emit(SequencerEventKind::kCollecting, first.t_s(),
        fmt::format("still; collecting {} samples", needed_));
@@ -438,6 +468,7 @@ void Sequencer::Commit(const StillSample& s) {
     ++temp_n_;
   }
   t_last_ns_ = s.t_host_ns;
+  t_last_sensor_s_ = s.t_sensor_s;
   if (counts_.used + counts_.bad() >= next_progress_ && counts_.used + counts_.bad() < needed_) {
     Emit(SequencerEventKind::kProgress, s.t_s());
     while (next_progress_ <= counts_.used + counts_.bad()) {
@@ -503,6 +534,13 @@ void Sequencer::Complete(double t_s) {
   record.t_start_s = static_cast<double>(t_first_ns_) * 1e-9;
   // The window covers `used` sample periods.
   record.t_end_s = static_cast<double>(t_last_ns_) * 1e-9 + 1.0 / detector_->profile().rate_hz;
+  if (std::isfinite(t_first_sensor_s_) && std::isfinite(t_last_sensor_s_) &&
+      t_last_sensor_s_ >= t_first_sensor_s_) {
+    const auto& prof = detector_->profile();
+    record.sensor_t_start_s = t_first_sensor_s_;
+    record.sensor_t_end_s =
+        t_last_sensor_s_ + (prof.device_period_s ? *prof.device_period_s : 1.0 / prof.rate_hz);
+  }
   if (temp_n_ > 0) record.temp_c = temp_sum_ / static_cast<double>(temp_n_);
 
   if (predictor_) {

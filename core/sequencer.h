@@ -188,6 +188,7 @@ class Sequencer {
   double temp_sum_ = 0.0;
   std::int64_t temp_n_ = 0;
   std::int64_t t_first_ns_ = 0, t_last_ns_ = 0;
+  double t_first_sensor_s_ = 0.0, t_last_sensor_s_ = 0.0;
 
   // Stream state.
   std::optional<StillSample> held_;  // a possible outlier waiting for its successor
@@ -198,7 +199,14 @@ class Sequencer {
   std::optional<double> last_device_s_;
   std::optional<std::int64_t> last_host_ns_;  // the last sample's sending time (HostClock)
   std::optional<std::int64_t> last_read_ns_;  // and when it was read
-  HostClock clock_;                           // device time -> host time of sending
+  // The sensor clock (SensorTime): the device clock plus an offset that changes only where the
+  // device clock resets or jumps, so that drift is timed as the sensor lived it whatever the
+  // host's pace (a replay, a simulator running faster than real time).
+  double SensorTime(const StillSample& s);
+  std::optional<double> sensor_last_s_, sensor_last_device_s_;
+  double sensor_last_host_s_ = 0.0;
+  double sensor_offset_s_ = 0.0;
+  HostClock clock_;  // device time -> host time of sending
   StillFinding last_motion_;
   double last_motion_t_s_ = -1.0;
   std::string last_noise_failure_;

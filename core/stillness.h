@@ -49,6 +49,9 @@ struct StillSample {
   // Samples that did not make it into the stream just before this one (the sequencer attaches
   // them here so they are counted against the pose whose window this sample ends up in).
   std::uint32_t lost_before = 0, flagged_before = 0, outliers_before = 0;
+  // The sequencer's sensor clock (Sequencer: the device clock, kept continuous across resets;
+  // the host clock for devices without one): what bias drift evolves in.
+  double t_sensor_s = std::numeric_limits<double>::quiet_NaN();
 
   bool has(int triad) const { return (present >> triad) & 1u; }
   double t_s() const { return static_cast<double>(t_host_ns) * 1e-9; }

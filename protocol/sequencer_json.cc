@@ -70,6 +70,10 @@ nlohmann::json ToJson(const PoseRecord& r) {
   if (r.gyr) j["gyr"] = Triad(*r.gyr);
   if (r.mag) j["mag"] = Triad(*r.mag);
   if (r.temp_c) j["temp"] = *r.temp_c;
+  if (r.has_sensor_window()) {
+    j["t_sensor_start"] = r.sensor_t_start_s;
+    j["t_sensor_end"] = r.sensor_t_end_s;
+  }
   return j;
 }
 
@@ -116,6 +120,11 @@ bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* erro
   }
   r.t_start_s = j["t_start"].get<double>();
   r.t_end_s = j["t_end"].get<double>();
+  if (j.contains("t_sensor_start") && j.contains("t_sensor_end") &&
+      j["t_sensor_start"].is_number() && j["t_sensor_end"].is_number()) {
+    r.sensor_t_start_s = j["t_sensor_start"].get<double>();
+    r.sensor_t_end_s = j["t_sensor_end"].get<double>();
+  }
   const char* const triads[] = {"acc", "gyr", "mag"};
   std::optional<TriadStats>* slots[] = {&r.acc, &r.gyr, &r.mag};
   for (int i = 0; i < 3; ++i) {

@@ -344,6 +344,34 @@ TEST(Sequencer, AnnouncedSessionGivesOneAccurateRecordPerPose) {
   EXPECT_NEAR(chi2, 78, 4 * std::sqrt(156.0));
 }
 
+// Issue 19: each record also carries its window on the sensor's clock (what bias drift is timed
+// in): the device clock, kept continuous where it resets. Here the device clock runs 20 ppm fast
+// and resets to zero halfway; the sensor windows still advance with the session, pose by pose.
+TEST(Sequencer, RecordsCarryTheirWindowOnTheSensorClockAcrossAClockReset) {
+  const Session s = Simulate();
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  const double reset_at = s.sim.events[13].dwell_end_s + 1.0;  // during the move to pose 14
+  Replay(s, &seq, [&](Sample* x) {
+    if (x->t_device_s && static_cast<double>(x->t_host_ns) * 1e-9 >= reset_at) {
+      *x->t_device_s -= *s.sim.samples.front().t_device_s + reset_at;
+    }
+    return true;
+  });
+  ASSERT_EQ(c.captured.size(), 26u);
+  for (std::size_t i = 0; i < c.captured.size(); ++i) {
+    const PoseRecord& r = *c.captured[i].record;
+    ASSERT_TRUE(r.has_sensor_window()) << "pose " << i;
+    // 3 s of samples on either clock (the device's 20 ppm is 60 us here).
+    EXPECT_NEAR(r.sensor_t_end_s - r.sensor_t_start_s, r.t_end_s - r.t_start_s, 1e-3);
+    if (i == 0) continue;
+    const PoseRecord& prev = *c.captured[i - 1].record;
+    // Across the reset too, the sensor clock moved on by what the host saw (to 10 ms).
+    EXPECT_NEAR(r.sensor_t_start_s - prev.sensor_t_start_s, r.t_start_s - prev.t_start_s, 0.01)
+        << "pose " << i;
+  }
+}
+
 TEST(Sequencer, EarlyAnnouncementWaitsUntilTheTableIsStill) {
   const Session s = Simulate();
   Collected c;
