@@ -325,10 +325,16 @@ nlohmann::json Station::Status(int device) const {
   const DeviceState& d = *devices_[static_cast<std::size_t>(device)];
   nlohmann::json models = nlohmann::json::object();
   for (const ModelState& m : d.models) {
-    models[m.model->name()] = {{"poses", m.estimate.poses},
-                               {"gate", ToJson(m.gate)},
-                               {"active_version", m.active_version},
-                               {"applied_version", m.applied_version}};
+    const CalibratorOptions& co = m.calibrator->options();
+    models[m.model->name()] = {
+        {"poses", m.estimate.poses},
+        {"gate", ToJson(m.gate)},
+        {"fit_check", ToString(m.estimate.fit.verdict)},
+        {"noise_model",
+         co.drift.enabled() ? protocol::ToJson(co.drift)
+                            : nlohmann::json{{"pose_offset_sigma", co.pose_offset_sigma}}},
+        {"active_version", m.active_version},
+        {"applied_version", m.applied_version}};
   }
   const SampleCounts& t = d.sequencer->totals();
   return {{"poses", d.poses},

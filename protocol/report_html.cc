@@ -89,6 +89,39 @@ std::string ModelSection(const CalibrationDocument& d) {
       ToString(model.sensor()), d.chi2, d.dof, d.p_value);
   if (!d.sensor_class.empty()) o += " Sensor class: " + Escape(d.sensor_class) + ".";
   o += "</p>";
+  {
+    // The noise model the calibration was made with (docs/ACCURACY.md "Drift").
+    const BiasDrift& drift = d.calibrator.drift;
+    const bool accel = model.sensor() == SensorKind::kAccelerometer;
+    const double unit = accel ? 1e3 / 9.80665 : 1e3;  // mg or mGauss (devices reporting Gauss)
+    const char* unit_name = accel ? "mg" : "mG";
+    std::string text;
+    if (drift.enabled()) {
+      text = fmt::format(
+          "bias drift in time: Gauss&#8211;Markov &#963; {:.3g} {} with &#964; = {:.0f} s",
+          drift.gm_sigma.maxCoeff() * unit, unit_name, drift.gm_tau_s);
+      if (drift.rw_density.maxCoeff() > 0) {
+        text += fmt::format(", random walk {:.3g} {}/&#8730;s", drift.rw_density.maxCoeff() * unit,
+                            unit_name);
+      }
+      if (drift.warmup_sigma.maxCoeff() > 0) {
+        text += fmt::format(", warm-up {:.3g} {} settling with &#964; = {:.0f} s",
+                            drift.warmup_sigma.maxCoeff() * unit, unit_name, drift.warmup_tau_s);
+      }
+      text += "; the biases hold over the latest pose's window, and corrected output's &#963; grows "
+              "with the time since";
+    } else {
+      text = fmt::format(
+          "an independent offset of {:.3g} {} per pose (the model before drift in time: its "
+          "&#963; are not honest in an ordered plan)",
+          d.calibrator.pose_offset_sigma * unit, unit_name);
+    }
+    if (accel && d.calibrator.noise_density > 0) {
+      text += fmt::format("; white-noise floor {:.3g} &#181;g/&#8730;Hz",
+                          d.calibrator.noise_density * 1e6 / 9.80665);
+    }
+    o += "<p class=\"meta\"><strong>Noise model:</strong> " + text + ".</p>";
+  }
   if (!d.fit_message.empty()) {
     o += fmt::format("<p class=\"fit-{}\"><strong>Fit check:</strong> {}.</p>",
                      d.fit_verdict == "ok" ? "ok" : "warn", Escape(d.fit_message));
