@@ -25,4 +25,16 @@ std::unique_ptr<Decoder> MakeDecoder(Protocol protocol, const DecoderOptions& op
   return nullptr;
 }
 
+void DecodeStream(std::istream& in, Decoder* decoder, std::size_t chunk) {
+  std::vector<char> buffer(std::max<std::size_t>(chunk, 1));
+  while (in) {
+    in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+    const auto n = static_cast<std::size_t>(in.gcount());
+    if (n == 0) break;
+    decoder->Push(
+        std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(buffer.data()), n), 0);
+  }
+  decoder->Finish();
+}
+
 }  // namespace turncal::drivers

@@ -268,15 +268,12 @@ int RunCapture(const DecodeArgs& args, const drivers::DecoderOptions& base) {
 int RunDecode(const DecodeArgs& args) {
   drivers::DecoderOptions options;
   if (!MakeOptions(args, &options)) return 2;
-  std::ifstream in(args.file, std::ios::binary);
-  if (!in) {
+  const std::optional<bool> is_capture = drivers::FileLooksLikeCapture(args.file);
+  if (!is_capture) {
     fmt::print(stderr, "turncal decode: cannot open '{}'\n", args.file);
     return 2;
   }
-  char magic[6] = {};
-  in.read(magic, 6);
-  const bool capture = in.gcount() == 6 && drivers::LooksLikeCapture(std::span<const std::uint8_t>(
-                                               reinterpret_cast<const std::uint8_t*>(magic), 6));
+  const bool capture = *is_capture;
   if (!args.protocol.empty() && !drivers::ParseProtocol(args.protocol)) {
     fmt::print(stderr, "turncal decode: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)\n",
                args.protocol);
@@ -287,8 +284,7 @@ int RunDecode(const DecodeArgs& args) {
     fmt::print(stderr, "turncal decode: '{}' is a raw stream: name its --protocol\n", args.file);
     return 2;
   }
-  in.clear();
-  in.seekg(0);
+  std::ifstream in(args.file, std::ios::binary);
   const drivers::Protocol protocol = *drivers::ParseProtocol(args.protocol);
   PrintingSink sink(protocol, args.json);
   std::string error;
@@ -297,15 +293,7 @@ int RunDecode(const DecodeArgs& args) {
     fmt::print(stderr, "turncal decode: {}\n", error);
     return 2;
   }
-  std::vector<char> buffer(args.chunk);
-  while (in) {
-    in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
-    const auto n = static_cast<std::size_t>(in.gcount());
-    if (n == 0) break;
-    decoder->Push(
-        std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(buffer.data()), n), 0);
-  }
-  decoder->Finish();
+  drivers::DecodeStream(in, decoder.get(), args.chunk);
   PrintSummary(*decoder, "", args.json);
   return 0;
 }

@@ -182,16 +182,12 @@ std::string Svg(const std::vector<AxisResult>& results) {
 
 int Run(const NoiseArgs& args) {
   std::string error;
-  std::ifstream probe(args.file, std::ios::binary);
-  if (!probe) {
+  const std::optional<bool> is_capture = drivers::FileLooksLikeCapture(args.file);
+  if (!is_capture) {
     fmt::print(stderr, "turncal noise: cannot open '{}'\n", args.file);
     return 2;
   }
-  char magic[6] = {};
-  probe.read(magic, 6);
-  const bool capture =
-      probe.gcount() == 6 && drivers::LooksLikeCapture(std::span<const std::uint8_t>(
-                                 reinterpret_cast<const std::uint8_t*>(magic), 6));
+  const bool capture = *is_capture;
   Series series;
   int skipped = 0;
   std::string source;
@@ -233,18 +229,8 @@ int Run(const NoiseArgs& args) {
       fmt::print(stderr, "turncal noise: {}\n", error);
       return 2;
     }
-    probe.clear();
-    probe.seekg(0);
-    std::vector<char> buffer(1 << 16);
-    while (probe) {
-      probe.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
-      const auto n = static_cast<std::size_t>(probe.gcount());
-      if (n == 0) break;
-      decoder->Push(
-          std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(buffer.data()), n),
-          0);
-    }
-    decoder->Finish();
+    std::ifstream in(args.file, std::ios::binary);
+    drivers::DecodeStream(in, decoder.get());
     series = std::move(collector.series);
   } else {
     if (!ReadText(args, &series, &skipped, &error)) {

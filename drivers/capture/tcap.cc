@@ -117,6 +117,14 @@ bool CaptureWriter::Close(std::string* error) {
   return ok;
 }
 
+std::optional<bool> FileLooksLikeCapture(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return std::nullopt;
+  std::uint8_t magic[6] = {};
+  in.read(reinterpret_cast<char*>(magic), sizeof magic);
+  return in.gcount() == static_cast<std::streamsize>(sizeof magic) && LooksLikeCapture(magic);
+}
+
 bool LooksLikeCapture(std::span<const std::uint8_t> b) {
   return b.size() >= 6 && std::memcmp(b.data(), "TCAP1 ", 6) == 0;
 }

@@ -106,5 +106,7 @@ class CaptureReader {
 
 // True when the file starts with "TCAP1 " (otherwise it is taken as a raw .bin stream).
 bool LooksLikeCapture(std::span<const std::uint8_t> first_bytes);
+// Whether the file at `path` starts like a capture; nullopt when it cannot be opened.
+std::optional<bool> FileLooksLikeCapture(const std::string& path);
 
 }  // namespace turncal::drivers
