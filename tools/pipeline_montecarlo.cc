@@ -209,14 +209,20 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       // window (the sequencer's window at the latest pose; host time = capture time).
       Eigen::VectorXd truth = accel ? capture.session.accel_truth : capture.session.mag_truth;
       TimeWindow window;
-      if (!protocol::ParseTimeWindow(m["bias_window"], &window)) {
+      if (protocol::ParseTimeWindow(m["bias_window"], &window)) {
+        truth.tail<3>() +=
+            accel ? capture.session.AccDriftMean(window.t0_s - offset_s, window.t1_s - offset_s)
+                  : capture.session.MagDriftMean(window.t0_s - offset_s, window.t1_s - offset_s);
+      } else if (args.independent) {
+        // The model before issue 19 has no bias window: its bias is, near enough, the drift's
+        // mean over the dwells.
+        truth.tail<3>() += accel ? capture.session.EffectiveAccBiasOffset()
+                                 : capture.session.EffectiveMagBiasOffset();
+      } else {
         out.error = "the result has no bias window";
         std::filesystem::remove(path);
         continue;
       }
-      truth.tail<3>() +=
-          accel ? capture.session.AccDriftMean(window.t0_s - offset_s, window.t1_s - offset_s)
-                : capture.session.MagDriftMean(window.t0_s - offset_s, window.t1_s - offset_s);
       out.z.resize(N);
       for (int i = 0; i < N; ++i) {
         const auto& p = m["params"][model->parameters()[static_cast<std::size_t>(i)].name];
