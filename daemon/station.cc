@@ -330,8 +330,8 @@ nlohmann::json Station::Status(int device) const {
         {"poses", m.estimate.poses},
         {"gate", ToJson(m.gate)},
         {"fit_check", ToString(m.estimate.fit.verdict)},
-        {"noise_model",
-         co.drift.enabled() ? protocol::ToJson(co.drift)
+        {"noise_model", co.drift.enabled()
+                            ? protocol::ToJson(co.drift)
                             : nlohmann::json{{"pose_offset_sigma", co.pose_offset_sigma}}},
         {"active_version", m.active_version},
         {"applied_version", m.applied_version}};
