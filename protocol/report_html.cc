@@ -108,8 +108,9 @@ std::string ModelSection(const CalibrationDocument& d) {
         text += fmt::format(", warm-up {:.3g} {} settling with &#964; = {:.0f} s",
                             drift.warmup_sigma.maxCoeff() * unit, unit_name, drift.warmup_tau_s);
       }
-      text += "; the biases hold over the latest pose's window, and corrected output's &#963; grows "
-              "with the time since";
+      text +=
+          "; the biases hold over the latest pose's window, and corrected output's &#963; grows "
+          "with the time since";
     } else {
       text = fmt::format(
           "an independent offset of {:.3g} {} per pose (the model before drift in time: its "
