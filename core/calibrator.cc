@@ -275,12 +275,15 @@ bool Calibrator::BuildBlocks(std::string* error) {
   order_ = gls.order;
   gls_w_ = gls.W;
   const int n = num_poses();
+  std::vector<const ceres::CostFunction*> raw;
+  for (const auto& p : poses_) raw.push_back(p.raw.get());
+  auto cache = std::make_shared<RawResidualCache>(std::move(raw), model_->num_parameters());
   for (int k = 0; k < n; ++k) {
-    auto cost = std::make_unique<InnovationCost>(model_->num_parameters());
+    auto cost = std::make_unique<InnovationCost>(cache, model_->num_parameters());
     for (int j = 0; j <= k; ++j) {
       const Eigen::Matrix3d weight = gls.W.block<3, 3>(3 * k, 3 * j);
       if (weight.isZero(0.0)) continue;
-      cost->Add(poses_[static_cast<std::size_t>(gls.order[j])].raw.get(), weight);
+      cost->Add(gls.order[j], weight);
     }
     blocks_.push_back(cost.get());
     gls_blocks_.push_back(std::move(cost));

@@ -44,38 +44,56 @@ bool BuildGlsWhitening(const std::vector<TimeWindow>& windows,
   return true;
 }
 
-InnovationCost::InnovationCost(int num_parameters) {
+RawResidualCache::RawResidualCache(std::vector<const ceres::CostFunction*> raw, int num_parameters)
+    : raw_(std::move(raw)),
+      n_params_(num_parameters),
+      r_(raw_.size()),
+      J_(raw_.size(), RowJacobian::Zero(3, num_parameters)) {}
+
+bool RawResidualCache::Evaluate(const double* theta, bool with_jacobians) {
+  const auto N = static_cast<std::size_t>(n_params_);
+  if (valid_ && (jacobians_ || !with_jacobians) && theta_.size() == N &&
+      std::equal(theta_.begin(), theta_.end(), theta)) {
+    return true;
+  }
+  valid_ = false;
+  theta_.assign(theta, theta + N);
+  const double* parameters[1] = {theta_.data()};
+  for (std::size_t i = 0; i < raw_.size(); ++i) {
+    double* jacobians[1] = {J_[i].data()};
+    if (!raw_[i]->Evaluate(parameters, r_[i].data(), with_jacobians ? jacobians : nullptr)) {
+      return false;
+    }
+  }
+  valid_ = true;
+  jacobians_ = with_jacobians;
+  return true;
+}
+
+InnovationCost::InnovationCost(std::shared_ptr<RawResidualCache> cache, int num_parameters)
+    : cache_(std::move(cache)) {
   set_num_residuals(3);
   mutable_parameter_block_sizes()->push_back(num_parameters);
 }
 
-void InnovationCost::Add(const ceres::CostFunction* raw, const Eigen::Matrix3d& weight) {
-  terms_.push_back({raw, weight});
+void InnovationCost::Add(int pose, const Eigen::Matrix3d& weight) {
+  terms_.push_back({pose, weight});
 }
 
 bool InnovationCost::Evaluate(double const* const* parameters, double* residuals,
                               double** jacobians) const {
-  using RowJacobian = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>;
+  using RowJacobian = RawResidualCache::RowJacobian;
   const int N = parameter_block_sizes()[0];
   const bool want_jacobian = jacobians != nullptr && jacobians[0] != nullptr;
+  if (!cache_->Evaluate(parameters[0], want_jacobian)) return false;
   Eigen::Map<Eigen::Vector3d> out(residuals);
   out.setZero();
-  RowJacobian J_sum, J;
-  double* raw_jacobians[1] = {nullptr};
+  for (const Term& t : terms_) out.noalias() += t.weight * cache_->residual(t.pose);
   if (want_jacobian) {
-    J_sum = RowJacobian::Zero(3, N);
-    J.resize(3, N);
-    raw_jacobians[0] = J.data();
+    Eigen::Map<RowJacobian> J(jacobians[0], 3, N);
+    J.setZero();
+    for (const Term& t : terms_) J.noalias() += t.weight * cache_->jacobian(t.pose);
   }
-  Eigen::Vector3d r;
-  for (const Term& t : terms_) {
-    if (!t.raw->Evaluate(parameters, r.data(), want_jacobian ? raw_jacobians : nullptr)) {
-      return false;
-    }
-    out += t.weight * r;
-    if (want_jacobian) J_sum += t.weight * J;
-  }
-  if (want_jacobian) Eigen::Map<RowJacobian>(jacobians[0], 3, N) = J_sum;
   return true;
 }
 

@@ -29,20 +29,42 @@ bool BuildGlsWhitening(const std::vector<TimeWindow>& windows,
                        const std::vector<Eigen::Matrix3d>& white, const BiasDrift& drift,
                        GlsWhitening* out, std::string* error);
 
-// Residual: sum_j weight_j * raw_j(theta) over the poses added (raw_j: a pose's unwhitened
-// residual block, one parameter block of `num_parameters`). Does not own the raw blocks.
+// Every pose's unwhitened residual (and Jacobian) at one parameter point, evaluated once per
+// point and shared by the innovation blocks: the solver evaluates the blocks one after another at
+// the same point, so the n^2 / 2 terms cost n autodiff evaluations and small products. Not
+// thread-safe (the calibrator solves with one thread). Does not own the raw blocks.
+class RawResidualCache {
+ public:
+  using RowJacobian = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>;
+  RawResidualCache(std::vector<const ceres::CostFunction*> raw, int num_parameters);
+  // False when a raw block fails to evaluate.
+  bool Evaluate(const double* theta, bool with_jacobians);
+  const Eigen::Vector3d& residual(int pose) const { return r_[static_cast<std::size_t>(pose)]; }
+  const RowJacobian& jacobian(int pose) const { return J_[static_cast<std::size_t>(pose)]; }
+
+ private:
+  std::vector<const ceres::CostFunction*> raw_;
+  int n_params_;
+  std::vector<double> theta_;
+  bool valid_ = false, jacobians_ = false;
+  std::vector<Eigen::Vector3d> r_;
+  std::vector<RowJacobian> J_;
+};
+
+// Residual: sum_j weight_j * raw_j(theta) over the poses added, raw_j from the shared cache.
 class InnovationCost final : public ceres::CostFunction {
  public:
-  explicit InnovationCost(int num_parameters);
-  void Add(const ceres::CostFunction* raw, const Eigen::Matrix3d& weight);
+  InnovationCost(std::shared_ptr<RawResidualCache> cache, int num_parameters);
+  void Add(int pose, const Eigen::Matrix3d& weight);
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override;
 
  private:
   struct Term {
-    const ceres::CostFunction* raw;
+    int pose;
     Eigen::Matrix3d weight;
   };
+  std::shared_ptr<RawResidualCache> cache_;
   std::vector<Term> terms_;
 };
 

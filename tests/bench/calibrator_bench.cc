@@ -16,7 +16,9 @@ struct Session {
   CalibratorOptions options;
 };
 
-Session MakeSession(const std::string& name, int poses, std::uint64_t seed) {
+// `drift`: the station's calibrator (bias drift in time, generalised least squares over all
+// poses), the records 9 s apart with 5 s windows.
+Session MakeSession(const std::string& name, int poses, std::uint64_t seed, bool drift = false) {
   Session s;
   std::string error;
   s.model = MakeModel(name, ModelContext{}, &error);
@@ -26,13 +28,17 @@ Session MakeSession(const std::string& name, int poses, std::uint64_t seed) {
   for (const auto& pose : RandomPoses(poses, &rng)) {
     s.records.push_back(SimulateRecord(*s.model, truth, pose, sensor, 5.0, &rng));
   }
-  s.options = OptionsForClass(*s.model, sensor);
+  s.options = drift ? DriftOptionsForClass(*s.model, sensor) : OptionsForClass(*s.model, sensor);
+  for (std::size_t i = 0; drift && i < s.records.size(); ++i) {
+    s.records[i].t_start_s = 9.0 * static_cast<double>(i);
+    s.records[i].t_end_s = s.records[i].t_start_s + 5.0;
+  }
   return s;
 }
 
 // Cold solve: add every pose, linear start, Levenberg-Marquardt, covariance, residuals.
-void FullSolve(benchmark::State& state, const std::string& model) {
-  const Session s = MakeSession(model, static_cast<int>(state.range(0)), 1);
+void FullSolve(benchmark::State& state, const std::string& model, bool drift = false) {
+  const Session s = MakeSession(model, static_cast<int>(state.range(0)), 1, drift);
   std::string error;
   for (auto _ : state) {
     Calibrator calibrator(s.options);
@@ -47,12 +53,13 @@ void FullSolve(benchmark::State& state, const std::string& model) {
 void BM_Accel13FullSolve(benchmark::State& state) { FullSolve(state, "accel13"); }
 void BM_Mag13FullSolve(benchmark::State& state) { FullSolve(state, "mag13"); }
 void BM_Mag22FullSolve(benchmark::State& state) { FullSolve(state, "mag22"); }
+void BM_Accel13DriftFullSolve(benchmark::State& state) { FullSolve(state, "accel13", true); }
 
 // The update after one more pose: a calibrator holding n poses and their estimate gets pose n+1
 // and re-solves, warm-started.
-void BM_Accel13IncrementalAddPose(benchmark::State& state) {
+void IncrementalAddPose(benchmark::State& state, bool drift) {
   const int n = static_cast<int>(state.range(0));
-  const Session s = MakeSession("accel13", n + 1, 2);
+  const Session s = MakeSession("accel13", n + 1, 2, drift);
   std::string error;
   for (auto _ : state) {
     state.PauseTiming();
@@ -69,6 +76,9 @@ void BM_Accel13IncrementalAddPose(benchmark::State& state) {
   }
 }
 
+void BM_Accel13IncrementalAddPose(benchmark::State& state) { IncrementalAddPose(state, false); }
+void BM_Accel13DriftIncrementalAddPose(benchmark::State& state) { IncrementalAddPose(state, true); }
+
 BENCHMARK(BM_Accel13FullSolve)
     ->Arg(10)
     ->Arg(26)
@@ -80,6 +90,14 @@ BENCHMARK(BM_Accel13FullSolve)
     ->Unit(benchmark::kMillisecond)
     ->Complexity();
 BENCHMARK(BM_Accel13IncrementalAddPose)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Accel13DriftFullSolve)
+    ->Arg(26)
+    ->Arg(50)
+    ->Arg(100)
+    ->Arg(200)
+    ->Unit(benchmark::kMillisecond)
+    ->Complexity();
+BENCHMARK(BM_Accel13DriftIncrementalAddPose)->Arg(36)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Mag13FullSolve)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Mag22FullSolve)
     ->Arg(10)
