@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 namespace turncal {
 
@@ -125,6 +126,15 @@ Eigen::Vector3d BiasDrift::SigmaAfter(const TimeWindow& ref, double seconds) con
     out[axis] = std::sqrt(VarianceSince(axis, ref, ref.t1_s + std::max(seconds, 0.0)));
   }
   return out;
+}
+
+std::vector<int> TimeOrder(const std::vector<TimeWindow>& windows) {
+  std::vector<int> order(windows.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return windows[static_cast<std::size_t>(a)].t0_s < windows[static_cast<std::size_t>(b)].t0_s;
+  });
+  return order;
 }
 
 Eigen::MatrixXd DriftIncrementCovariance(const BiasDrift& drift, int axis,

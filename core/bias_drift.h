@@ -59,6 +59,10 @@ struct BiasDrift {
   double WarmupMean(const TimeWindow& window, double origin_s) const;
 };
 
+// The windows' indices in time order (by start; ties keep their order): the last is the
+// reference window of the generalised least squares.
+std::vector<int> TimeOrder(const std::vector<TimeWindow>& windows);
+
 // D(i, j) = Cov(ubar_i - ubar_ref, ubar_j - ubar_ref) on one axis for the windows given (row
 // and column `ref` are zero).
 Eigen::MatrixXd DriftIncrementCovariance(const BiasDrift& drift, int axis,

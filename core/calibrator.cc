@@ -7,7 +7,6 @@
 #include <Eigen/SVD>
 #include <boost/math/special_functions/gamma.hpp>
 #include <cmath>
-#include <numeric>
 
 #include "core/gls_whitening.h"
 #include "core/linear_start.h"
@@ -128,6 +127,11 @@ const TriadStats* TriadFor(SensorKind sensor, const PoseRecord& record) {
   return triad ? &*triad : nullptr;
 }
 
+// Sigma^{-1/2} of the covariance V diag(variances) V^T.
+Eigen::Matrix3d SqrtInformation(const Eigen::Matrix3d& V, const Eigen::Vector3d& variances) {
+  return V * variances.cwiseInverse().cwiseSqrt().asDiagonal() * V.transpose();
+}
+
 // Dense Jacobian of all residuals (with the robust loss's reweighting, as the solver sees it).
 Eigen::MatrixXd DenseJacobian(ceres::Problem* problem) {
   ceres::CRSMatrix crs;
@@ -161,10 +165,7 @@ std::vector<WeightedPose> Calibrator::weighted_poses() const {
   // the observability analysis and the planner use.
   std::vector<TimeWindow> windows;
   for (const auto& p : poses_) windows.push_back(p.window);
-  int ref = 0;
-  for (int i = 1; i < num_poses(); ++i)
-    if (windows[static_cast<std::size_t>(i)].t0_s >= windows[static_cast<std::size_t>(ref)].t0_s)
-      ref = i;
+  const int ref = TimeOrder(windows).back();
   Eigen::Matrix<double, Eigen::Dynamic, 3> marginal(num_poses(), 3);
   for (int axis = 0; axis < 3; ++axis) {
     marginal.col(axis) = DriftIncrementCovariance(options_.drift, axis, windows, ref).diagonal();
@@ -173,9 +174,7 @@ std::vector<WeightedPose> Calibrator::weighted_poses() const {
     Eigen::Matrix3d cov = poses_[i].white;
     cov.diagonal() += marginal.row(static_cast<Eigen::Index>(i)).transpose();
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
-    out[i].sqrt_information = eig.eigenvectors() *
-                              eig.eigenvalues().cwiseInverse().cwiseSqrt().asDiagonal() *
-                              eig.eigenvectors().transpose();
+    out[i].sqrt_information = SqrtInformation(eig.eigenvectors(), eig.eigenvalues());
   }
   return out;
 }
@@ -231,8 +230,7 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   WeightedPose& w = pose.weighted;
   w.pose = p;
   w.measured = triad->mean;
-  w.sqrt_information = eig.eigenvectors() * lambda.cwiseInverse().cwiseSqrt().asDiagonal() *
-                       eig.eigenvectors().transpose();
+  w.sqrt_information = SqrtInformation(eig.eigenvectors(), lambda);
   pose.cost = model_->MakeResidual(p, w.measured, w.sqrt_information);
   pose.window = window;
   pose.host_window = TimeWindow{record.t_start_s, record.t_end_s};
@@ -474,12 +472,9 @@ Estimate Calibrator::solve() {
     // The two-sided check on the innovations in time order (with drift, order_ is that order).
     std::vector<int> order = order_;
     if (order.empty()) {
-      order.resize(static_cast<std::size_t>(n));
-      std::iota(order.begin(), order.end(), 0);
-      std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
-        return poses_[static_cast<std::size_t>(a)].window.t0_s <
-               poses_[static_cast<std::size_t>(b)].window.t0_s;
-      });
+      std::vector<TimeWindow> windows;
+      for (const auto& p : poses_) windows.push_back(p.window);
+      order = TimeOrder(windows);
     }
     std::vector<Eigen::Vector3d> innovations;
     for (int i : order) innovations.push_back(est.residuals[static_cast<std::size_t>(i)].whitened);

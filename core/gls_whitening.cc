@@ -4,7 +4,6 @@
 
 #include <Eigen/Cholesky>
 #include <algorithm>
-#include <numeric>
 
 namespace turncal {
 
@@ -12,11 +11,7 @@ bool BuildGlsWhitening(const std::vector<TimeWindow>& windows,
                        const std::vector<Eigen::Matrix3d>& white, const BiasDrift& drift,
                        GlsWhitening* out, std::string* error) {
   const int n = static_cast<int>(windows.size());
-  out->order.resize(static_cast<std::size_t>(n));
-  std::iota(out->order.begin(), out->order.end(), 0);
-  std::stable_sort(out->order.begin(), out->order.end(), [&](int a, int b) {
-    return windows[static_cast<std::size_t>(a)].t0_s < windows[static_cast<std::size_t>(b)].t0_s;
-  });
+  out->order = TimeOrder(windows);
   std::vector<TimeWindow> sorted;
   for (int i : out->order) sorted.push_back(windows[static_cast<std::size_t>(i)]);
   Eigen::MatrixXd& C = out->C;

@@ -122,7 +122,6 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   }
   const auto n = static_cast<std::size_t>(std::floor(out.duration_s * o.rate_hz));
   out.samples.reserve(n);
-  std::vector<int> dwell_counts(out.events.size(), 0);
   out.acc_drift_sum.assign(1, Eigen::Vector3d::Zero());
   out.mag_drift_sum.assign(1, Eigen::Vector3d::Zero());
   out.acc_drift_sum.reserve(n + 1);
@@ -163,13 +162,6 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     const Eigen::Vector3d drift_mag = wander_mag + walk_mag + settle * warm_mag;
     out.acc_drift_sum.push_back(out.acc_drift_sum.back() + drift_acc);
     out.mag_drift_sum.push_back(out.mag_drift_sum.back() + drift_mag);
-    for (std::size_t e = 0; e < out.events.size(); ++e) {
-      if (tk >= out.events[e].t_s && tk < out.events[e].dwell_end_s) {
-        out.events[e].acc_wander_mean += drift_acc;
-        out.events[e].mag_wander_mean += drift_mag;
-        ++dwell_counts[e];
-      }
-    }
     Sample smp;
     smp.t_host_ns = static_cast<std::int64_t>(std::llround(tk * 1e9));
     smp.t_device_s = o.clock_offset_s + tk * (1.0 + o.clock_drift_ppm * 1e-6);
@@ -188,11 +180,25 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     smp.temp_c = 25.0 + 0.5 * tk / std::max(out.duration_s, 1.0);
     out.samples.push_back(smp);
   }
-  for (std::size_t e = 0; e < out.events.size(); ++e) {
-    if (dwell_counts[e] > 0) {
-      out.events[e].acc_wander_mean /= dwell_counts[e];
-      out.events[e].mag_wander_mean /= dwell_counts[e];
+  // Each dwell's mean drift, from the prefix sums: the samples with t_s <= k dt < dwell_end_s.
+  const auto first_at_or_after = [&](double at_s) {
+    std::size_t lo = 0, hi = out.samples.size();
+    while (lo < hi) {
+      const std::size_t mid = (lo + hi) / 2;
+      if (static_cast<double>(mid) * dt < at_s) {
+        lo = mid + 1;
+      } else {
+        hi = mid;
+      }
     }
+    return lo;
+  };
+  for (auto& e : out.events) {
+    const std::size_t a = first_at_or_after(e.t_s), b = first_at_or_after(e.dwell_end_s);
+    if (b <= a) continue;
+    const double count = static_cast<double>(b - a);
+    e.acc_wander_mean = (out.acc_drift_sum[b] - out.acc_drift_sum[a]) / count;
+    e.mag_wander_mean = (out.mag_drift_sum[b] - out.mag_drift_sum[a]) / count;
   }
   return out;
 }

@@ -39,13 +39,13 @@ struct StationOptions {
   // Noise and tolerance class (SENSORS.md): the calibrator's noise floor and pose-to-pose offset,
   // and the gate's default tolerances.
   std::string sensor_class = "industrial";
+  // false: the model before issue 19, an independent offset of the bias instability per pose
+  // (kept for comparisons; its sigma are not honest in ordered plans).
+  bool drift_model = true;
   // The calibrator's drift model (docs/ACCURACY.md "Drift"): the class's bias instability as a
   // Gauss-Markov process of this correlation time, and a warm-up allowance after power-on of
   // this many bias instabilities (1 sigma at the first pose) settling with warmup_tau_s.
   // Negative: the class's (100 s; no warm-up; 60 s).
-  // false: the model before issue 19, an independent offset of the bias instability per pose
-  // (kept for comparisons; its sigma are not honest in ordered plans).
-  bool drift_model = true;
   double bias_tau_s = -1.0;
   double warmup_in_instabilities = -1.0;
   double warmup_tau_s = -1.0;

@@ -5,7 +5,8 @@
 //
 //   "context":    {"g_ned":[3], "B_ned":[3], "mounting":[[3]x3], "accel_output_frame":"case"}
 //   "calibrator": {"sensor_class", "noise_density", "pose_offset_sigma", "loss", "loss_scale",
-//                  "drift": {"gauss_markov_sigma":[3], "gauss_markov_tau_s", "random_walk":[3]}}
+//                  "drift": {"gauss_markov_sigma":[3], "gauss_markov_tau_s", "random_walk":[3],
+//                            "warmup_sigma":[3], "warmup_tau_s"[, "warmup_origin_s"]}}
 //   "bias_window": {"t0_s", "t1_s"}: when the bias parameters hold (the latest pose's window, on
 //                  the station's host clock), with a drift model
 //   "tolerances": {NAME: 1-sigma tolerance} for every gated parameter, in the parameter's units

@@ -18,8 +18,8 @@
 #include "core/pose_planner.h"
 #include "core/session_sim.h"
 #include "core/synthetic.h"
+#include "daemon/persistence.h"
 #include "daemon/replay_once.h"
-#include "drivers/capture/tcap.h"
 #include "protocol/calibration_json.h"
 #include "tools/sim_capture.h"
 
@@ -70,6 +70,18 @@ std::pair<double, double> KsUniform(std::vector<double> p) {
   }
   return {d, std::clamp(q, 0.0, 1.0)};
 }
+
+// A file or folder of one run, removed when the run ends.
+struct RemovedOnExit {
+  explicit RemovedOnExit(std::string p) : path(std::move(p)) {}
+  ~RemovedOnExit() {
+    std::error_code ec;
+    std::filesystem::remove_all(path, ec);
+  }
+  RemovedOnExit(const RemovedOnExit&) = delete;
+  RemovedOnExit& operator=(const RemovedOnExit&) = delete;
+  std::string path;
+};
 
 struct RunOutcome {
   bool ok = false;
@@ -143,14 +155,10 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
         out.error = e;
         continue;
       }
-      const std::string path = (dir / fmt::format("run-{}.tcap", run)).string();
-      auto writer = drivers::CaptureWriter::Create(path, capture.header, &e);
-      bool written = writer != nullptr;
-      for (std::size_t i = 0; written && i < capture.records.size(); ++i) {
-        const auto& r = capture.records[i];
-        written = writer->Append(r.type, r.device, r.t_ns, r.payload, &e);
-      }
-      if (!written || !writer->Close(&e)) {
+      // The capture and the state directory are removed whichever way the run ends.
+      const RemovedOnExit path((dir / fmt::format("run-{}.tcap", run)).string());
+      const RemovedOnExit state_dir((dir / fmt::format("state-{}", run)).string());
+      if (!WriteSimCapture(capture, path.path, &e)) {
         out.error = e;
         continue;
       }
@@ -160,8 +168,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       station.warmup_in_instabilities = args.station_warmup;
       station.warmup_tau_s = args.warmup_tau_s;
       station.drift_model = !args.independent;
-      const std::string state_dir = (dir / fmt::format("state-{}", run)).string();
-      if (args.at == "first-gate") station.state_dir = state_dir;
+      if (args.at == "first-gate") station.state_dir = state_dir.path;
       daemon::ReplayOnceOutcome replay;
       const double offset_s = static_cast<double>(capture.offset_ns) * 1e-9;
       // The first activation: poses and session seconds to a passing gate.
@@ -171,29 +178,24 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
           out.gate_s = j.value("t", NAN) - offset_s;
         }
       };
-      const bool replayed = daemon::ReplayOnce(path, station, "", on_event, &replay, &e);
-      if (!replayed) {
-        std::filesystem::remove(path);
+      if (!daemon::ReplayOnce(path.path, station, "", on_event, &replay, &e)) {
         out.error = e;
         continue;
       }
       const std::string& device = capture.header.devices.at(0).name;
       nlohmann::json first;
       if (args.at == "first-gate") {
-        // Version 1: in history/ when later versions replaced it, else the active file.
-        for (const auto& f :
-             {fmt::format("{}/history/{}.{}.v1.json", state_dir, device, args.model),
-              fmt::format("{}/calibrations/{}.{}.json", state_dir, device, args.model)}) {
-          std::ifstream in(f);
-          if (in) {
-            first = nlohmann::json::parse(in, nullptr, false);
-            break;
-          }
+        // Version 1: in history/ when later versions replaced it (daemon/persistence.h), else the
+        // active calibration.
+        std::ifstream history(
+            fmt::format("{}/history/{}.{}.v1.json", state_dir.path, device, args.model));
+        if (history) {
+          first = nlohmann::json::parse(history, nullptr, false);
+        } else {
+          daemon::ReadActiveCalibration(state_dir.path, device, args.model, &first);
         }
-        std::filesystem::remove_all(state_dir);
         if (!first.is_object() || first.value("version", 0) != 1) {
           out.error = "the gate never passed";
-          std::filesystem::remove(path);
           continue;
         }
         first["ok"] = true;
@@ -202,7 +204,6 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
           args.at == "first-gate" ? first : replay.result["devices"][device]["models"][args.model];
       if (!m.value("ok", false)) {
         out.error = "no estimate";
-        std::filesystem::remove(path);
         continue;
       }
       // The bias truth: the turn-on bias plus the drift averaged over the calibration's own bias
@@ -220,7 +221,6 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                  : capture.session.EffectiveMagBiasOffset();
       } else {
         out.error = "the result has no bias window";
-        std::filesystem::remove(path);
         continue;
       }
       out.z.resize(N);
@@ -230,19 +230,12 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
         out.z[i] = (p["value"].get<double>() - truth[i]) / sigma;
       }
       out.ok = out.z.allFinite();
-      if (std::getenv("TURNCAL_MC_DEBUG") && !(out.z.cwiseAbs().maxCoeff() <= 4.0)) {
-        const auto& ev = capture.session.events;
-        fmt::print(stderr, "seed {} window {} {} offset {} last dwell {} {} prev {} {}\n", seed,
-                   window.t0_s - offset_s, window.t1_s - offset_s, offset_s, ev.back().t_s,
-                   ev.back().dwell_end_s, ev[ev.size() - 2].t_s, ev[ev.size() - 2].dwell_end_s);
-      }
-      std::error_code ec;
       if (!args.keep_dir.empty() && !(out.z.cwiseAbs().maxCoeff() <= 4.0)) {
+        std::error_code ec;
         std::filesystem::create_directories(args.keep_dir, ec);
-        std::filesystem::copy_file(path, fmt::format("{}/run-{}.tcap", args.keep_dir, seed),
+        std::filesystem::copy_file(path.path, fmt::format("{}/run-{}.tcap", args.keep_dir, seed),
                                    std::filesystem::copy_options::overwrite_existing, ec);
       }
-      std::filesystem::remove(path, ec);
       out.p_value = m.value("p_value", 1.0);
       out.gate_pass = m["gate"].value("pass", false);
       out.poses = m.value("poses", 0);

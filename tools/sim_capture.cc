@@ -304,4 +304,13 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
   return true;
 }
 
+bool WriteSimCapture(const SimCapture& capture, const std::string& path, std::string* error) {
+  auto writer = drivers::CaptureWriter::Create(path, capture.header, error);
+  if (writer == nullptr) return false;
+  for (const auto& r : capture.records) {
+    if (!writer->Append(r.type, r.device, r.t_ns, r.payload, error)) return false;
+  }
+  return writer->Close(error);
+}
+
 }  // namespace turncal::tools

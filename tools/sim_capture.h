@@ -76,4 +76,8 @@ std::vector<std::uint8_t> EncodeSimSample(drivers::Protocol protocol, const Samp
 // cannot carry.
 bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::string* error);
 
+// Writes the capture's records to a .tcap file at `path` (what `turncal sim -o` writes). False
+// with a message when the file cannot be written.
+bool WriteSimCapture(const SimCapture& capture, const std::string& path, std::string* error);
+
 }  // namespace turncal::tools

@@ -345,17 +345,9 @@ int RunSim(const SimCommandArgs& args) {
   const SimulatedSession& session = capture.session;
   const std::vector<drivers::CaptureRecord>& records = capture.records;
 
-  if (!args.output.empty()) {
-    auto writer = drivers::CaptureWriter::Create(args.output, capture.header, &error);
-    bool ok = writer != nullptr;
-    for (std::size_t i = 0; ok && i < records.size(); ++i) {
-      const auto& r = records[i];
-      ok = writer->Append(r.type, r.device, r.t_ns, r.payload, &error);
-    }
-    if (!ok || !writer->Close(&error)) {
-      fmt::print(stderr, "turncal sim: {}\n", error);
-      return 1;
-    }
+  if (!args.output.empty() && !WriteSimCapture(capture, args.output, &error)) {
+    fmt::print(stderr, "turncal sim: {}\n", error);
+    return 1;
   }
   if (!args.live.empty() && !StreamLive(args.live, records, args.live_speed, &error)) {
     fmt::print(stderr, "turncal sim: {}\n", error);
