@@ -179,6 +179,19 @@ std::vector<WeightedPose> Calibrator::weighted_poses() const {
   return out;
 }
 
+void Calibrator::planning_poses(std::vector<WeightedPose>* white,
+                                std::vector<TimeWindow>* windows) const {
+  white->clear();
+  windows->clear();
+  for (const auto& p : poses_) {
+    white->push_back(p.weighted);
+    if (!options_.drift.enabled()) continue;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p.white);
+    white->back().sqrt_information = SqrtInformation(eig.eigenvectors(), eig.eigenvalues());
+    windows->push_back(p.window);
+  }
+}
+
 bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   auto fail = [&](const std::string& message) {
     if (error) *error = message;

@@ -153,6 +153,9 @@ class Calibrator {
   // The poses added so far with the weights the estimator gives them (for the observability
   // analysis and the pose planner).
   std::vector<WeightedPose> weighted_poses() const;
+  // The poses weighed by their own white noise only, and their windows on the sensor's clock
+  // (empty without a drift model): what the pose planner needs to place a new pose in time.
+  void planning_poses(std::vector<WeightedPose>* white, std::vector<TimeWindow>* windows) const;
   const MeasurementModel* model() const { return model_.get(); }
   const CalibratorOptions& options() const { return options_; }
 

@@ -19,6 +19,7 @@ bool SessionSimOptions::IsValid(std::string* error) const {
     return fail("random walk and warm-up must be >= 0");
   }
   if (!(warmup_tau_s > 0)) return fail("the warm-up time constant must be > 0");
+  if (table && !table->IsValid(error)) return false;
   return true;
 }
 
@@ -83,18 +84,25 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   Eigen::Vector3d at = Eigen::Vector3d::Zero();
   segments.push_back({t, t + o.start_s, at, at, false});
   t += o.start_s;
+  const double settle_s = o.table ? o.table->settle_s : o.settle_s;
   for (std::size_t i = 0; i < poses.size(); ++i) {
-    const Eigen::Vector3d target = Vec(poses[i]);
-    segments.push_back({t, t + o.move_s, at, target, true});
-    t += o.move_s;
-    segments.push_back({t, t + o.settle_s + o.dwell_s, target, target, false});
+    Eigen::Vector3d target = Vec(poses[i]);
+    double move_s = o.move_s;
+    if (o.table) {
+      const TablePose from{at[0], at[1], at[2]};
+      target = at + o.table->Travel(from, poses[i]);
+      move_s = std::max(o.table->MoveSeconds(from, poses[i]), 0.1);
+    }
+    segments.push_back({t, t + move_s, at, target, true});
+    t += move_s;
+    segments.push_back({t, t + settle_s + o.dwell_s, target, target, false});
     SessionPoseEvent e;
-    e.t_s = t + o.settle_s;
+    e.t_s = t + settle_s;
     e.index = static_cast<int>(i);
     e.pose = poses[i];
-    e.dwell_end_s = t + o.settle_s + o.dwell_s;
+    e.dwell_end_s = t + settle_s + o.dwell_s;
     out.events.push_back(e);
-    t += o.settle_s + o.dwell_s;
+    t += settle_s + o.dwell_s;
     at = target;
   }
   out.duration_s = t;
@@ -140,14 +148,14 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
       a.value = s.to;
       // A decaying oscillation after a move (the table's servo settling).
       const double since = tk - s.t0;
-      if (seg > 0 && since < o.settle_s + o.dwell_s) {
+      if (seg > 0 && since < settle_s + o.dwell_s) {
         const double env =
-            o.settle_amplitude_rad * std::exp(-since / (0.2 * std::max(o.settle_s, 0.05)));
+            o.settle_amplitude_rad * std::exp(-since / (0.2 * std::max(settle_s, 0.05)));
         const double w = 2 * M_PI * 4.0;  // 4 Hz
         a.value += Eigen::Vector3d::Constant(env * std::sin(w * since));
         a.rate += Eigen::Vector3d::Constant(
             env *
-            (w * std::cos(w * since) - std::sin(w * since) / (0.2 * std::max(o.settle_s, 0.05))));
+            (w * std::cos(w * since) - std::sin(w * since) / (0.2 * std::max(settle_s, 0.05))));
       }
     }
     const TablePose pose{a.value[0], a.value[1], a.value[2]};

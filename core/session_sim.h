@@ -3,7 +3,8 @@
 // `turncal sim`; the byte level lives in tools/). Pure computation with an explicit seed.
 //
 // Time line: the table rests at the home pose (0, 0, 0) for `start_s`; then for every pose it
-// moves there along a smooth S-curve in each angle (`move_s`), settles with a small decaying
+// moves there along a smooth S-curve in each angle (`move_s`, or as long as the table's rates
+// take), settles with a small decaying
 // oscillation (`settle_s`), and dwells (`dwell_s`). The controller's pose event is at the start of
 // the dwell. The sensor is at the table's centre of rotation: its specific force and field are
 // the measurement models' stationary predictions at the current table angles (no lever-arm
@@ -15,6 +16,7 @@
 // that settles exponentially after power-on, which is time 0), quantisation for classes with a
 // 16-bit ADC. The device clock runs `clock_drift_ppm` fast and starts at `clock_offset_s`.
 
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -22,6 +24,7 @@
 #include "core/pose_record.h"
 #include "core/sample.h"
 #include "core/synthetic.h"
+#include "core/table_motion.h"
 
 namespace turncal {
 
@@ -31,6 +34,10 @@ struct SessionSimOptions {
   double start_s = 1.0;
   double move_s = 3.0;
   double settle_s = 1.0;
+  // Moves at the table's rates (core/table_motion.h: each move as long as the coordinated
+  // trapezoidal move takes, at least 0.1 s, the shorter way round on continuous axes, then the
+  // table's settle time) instead of move_s and settle_s for every move.
+  std::optional<TableMotion> table;
   double dwell_s = 5.0;
   // Bias random walk, triad unit per sqrt(s) (0: none).
   double acc_random_walk = 0.0;  // m/s^2/sqrt(s)

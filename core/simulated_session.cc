@@ -38,23 +38,18 @@ PoseChooser FixedSequence(std::vector<TablePose> design) {
   };
 }
 
-PoseChooser PlannedSequence(const MeasurementModel& model, const CalibratorOptions& options,
-                            const GateOptions& gate, double dwell_s, PlannerOptions planner) {
+PoseChooser PlannedSequence(const MeasurementModel& model, const GateOptions& gate, double dwell_s,
+                            PlannerOptions planner) {
   planner.horizon = 1;  // only the recommendation is needed
-  return
-      [&model, options, gate, dwell_s, planner](
-          int, const Calibrator& calibrator, const Estimate* estimate) -> std::optional<TablePose> {
-        PlanningTarget target;
-        target.model = &model;
-        target.theta = estimate ? estimate->theta : model.nominal();
-        target.sqrt_information =
-            ExpectedSqrtInformation(options.noise_density, options.pose_offset_sigma, dwell_s);
-        target.captured = calibrator.weighted_poses();
-        target.gate = gate;
-        const NextPoseAdvice advice = PlanNextPose({target}, planner);
-        if (!advice.ok) return std::nullopt;
-        return advice.pose;
-      };
+  planner.dwell_s = dwell_s;
+  return [&model, gate, dwell_s, planner](int, const Calibrator& calibrator,
+                                          const Estimate* estimate) -> std::optional<TablePose> {
+    const PlanningTarget target = TargetFromCalibrator(
+        calibrator, estimate ? estimate->theta : model.nominal(), dwell_s, gate);
+    const NextPoseAdvice advice = PlanNextPose({target}, planner);
+    if (!advice.ok) return std::nullopt;
+    return advice.pose;
+  };
 }
 
 }  // namespace turncal

@@ -37,7 +37,7 @@ SessionOutcome RunSimulatedSession(const MeasurementModel& model, const Eigen::V
 PoseChooser FixedSequence(std::vector<TablePose> design);
 
 // Next-pose planning from the current estimate (nominal values until the first solve succeeds).
-PoseChooser PlannedSequence(const MeasurementModel& model, const CalibratorOptions& options,
-                            const GateOptions& gate, double dwell_s, PlannerOptions planner);
+PoseChooser PlannedSequence(const MeasurementModel& model, const GateOptions& gate, double dwell_s,
+                            PlannerOptions planner);
 
 }  // namespace turncal

@@ -108,6 +108,17 @@ CalibratorOptions DriftOptionsForClass(const MeasurementModel& model, const Sens
   return o;
 }
 
+Eigen::Matrix3d ExpectedPoseSqrtInformation(const MeasurementModel& model,
+                                            const SensorClass& sensor,
+                                            const CalibratorOptions& options, double dwell_s,
+                                            double rate_hz) {
+  const bool accel = model.sensor() == SensorKind::kAccelerometer;
+  const double white = accel ? sensor.acc_noise_density * sensor.acc_noise_density / (2 * dwell_s)
+                             : sensor.mag_noise_rms * sensor.mag_noise_rms / (rate_hz * dwell_s);
+  const double var = white + options.pose_offset_sigma * options.pose_offset_sigma;
+  return Eigen::Matrix3d::Identity() / std::sqrt(var);
+}
+
 std::vector<TablePose> RandomPoses(int n, std::mt19937_64* rng) {
   std::uniform_real_distribution<double> uniform(-1.0, 1.0);
   std::vector<TablePose> poses;

@@ -74,6 +74,14 @@ CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorCla
 // uses, for records that carry their time windows.
 CalibratorOptions DriftOptionsForClass(const MeasurementModel& model, const SensorClass& sensor);
 
+// The 1/sigma a planned pose's mean will have from white noise (and options' independent
+// pose_offset_sigma), for the pose planner: the accelerometer's density over the dwell, the
+// magnetometer's per-sample noise over the dwell's samples at `rate_hz`.
+Eigen::Matrix3d ExpectedPoseSqrtInformation(const MeasurementModel& model,
+                                            const SensorClass& sensor,
+                                            const CalibratorOptions& options, double dwell_s,
+                                            double rate_hz);
+
 // The record a stationary window of `dwell_s` at `pose` would give: the true measurement plus
 // white noise averaged over the window and a bias-instability offset, with the sample covariance
 // of the white noise (what the window's samples show). The offset is invisible inside one

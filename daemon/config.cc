@@ -77,6 +77,41 @@ bool GetVector(const toml::table& t, const char* key, Eigen::Vector3d* out,
   return ok;
 }
 
+// One number for all three table axes, or [inner, middle, outer].
+bool GetAxes(const toml::table& t, const char* key, Eigen::Vector3d* out, const std::string& source,
+             std::string* error) {
+  const toml::node* n = t.get(key);
+  if (!n) return true;
+  if (n->as_array()) return GetVector(t, key, out, source, error);
+  double v = 0;
+  if (!GetNumber(t, key, &v, source, error)) return false;
+  out->setConstant(v);
+  return true;
+}
+
+bool ParseTable(const toml::table& t, const std::string& source, StationOptions* st,
+                std::string* error) {
+  if (!OnlyKeys(t, {"rate_dps", "accel_dps2", "settle_s", "plan_for"}, "[table]", source, error) ||
+      !GetAxes(t, "rate_dps", &st->table.rate_dps, source, error) ||
+      !GetAxes(t, "accel_dps2", &st->table.accel_dps2, source, error) ||
+      !GetNumber(t, "settle_s", &st->table.settle_s, source, error)) {
+    return false;
+  }
+  std::string why;
+  if (!st->table.IsValid(&why)) {
+    *error = fmt::format("{}: [table] {}", source, why);
+    return false;
+  }
+  std::string plan_for = ToString(st->plan_objective);
+  if (!GetString(t, "plan_for", &plan_for, source, error)) return false;
+  if (plan_for != "time" && plan_for != "poses") {
+    *error = fmt::format("{}: [table] plan_for must be \"time\" or \"poses\"", source);
+    return false;
+  }
+  st->plan_objective = plan_for == "time" ? PlanObjective::kTime : PlanObjective::kPoses;
+  return true;
+}
+
 bool GetModels(const toml::table& t, std::vector<std::string>* models, const std::string& source,
                std::string* error) {
   const toml::node* n = t.get("models");
@@ -152,7 +187,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   Config c;
   if (!OnlyKeys(root,
                 {"socket", "socket_group", "control_users", "state_dir", "station", "sequencer",
-                 "gate", "reference", "device"},
+                 "table", "gate", "reference", "device"},
                 "the file", source, error)) {
     return false;
   }
@@ -248,6 +283,9 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
         !GetNumber(*t, "pose_check_false_alarm", &q.pose_check_false_alarm, source, error)) {
       return false;
     }
+  }
+  if (const toml::table* t = root["table"].as_table()) {
+    if (!ParseTable(*t, source, &st, error)) return false;
   }
   GateTolerancesForClass(st.sensor_class, &st.gate.tolerances);
   if (const toml::table* t = root["gate"].as_table()) {

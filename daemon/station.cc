@@ -105,7 +105,7 @@ nlohmann::json ParamsJson(const Estimate& e) {
 }  // namespace
 
 bool StationOptions::IsValid(std::string* error) const {
-  if (!sequencer.IsValid(error) || !gate.IsValid(error)) return false;
+  if (!sequencer.IsValid(error) || !gate.IsValid(error) || !table.IsValid(error)) return false;
   SensorClass c;
   if (!SensorClassByName(sensor_class, &c)) {
     if (error) *error = "unknown sensor class '" + sensor_class + "' (industrial, consumer)";
@@ -785,24 +785,23 @@ nlohmann::json Station::NextPose(const std::string& device) const {
   const DeviceState& d = *devices_[static_cast<std::size_t>(i)];
   std::vector<PlanningTarget> targets;
   for (const ModelState& m : d.models) {
-    PlanningTarget t;
-    t.model = m.model.get();
-    t.theta = m.estimate.ok ? m.estimate.theta : m.model->nominal();
-    const auto& opt = m.calibrator->options();
-    // A new pose weighs as the white noise over the dwell plus, for the drift between poses, an
-    // independent offset of the drift's stationary sigma (the planner's model before issue 19;
-    // docs/ACCURACY.md "Drift").
-    const double offset = std::hypot(opt.pose_offset_sigma, opt.drift.gm_sigma.maxCoeff());
-    t.sqrt_information =
-        ExpectedSqrtInformation(opt.noise_density, offset, options_.sequencer.dwell_s);
-    {
-      std::lock_guard lock(*m.calibrator_mutex);  // a solve in progress finishes first
-      t.captured = m.calibrator->weighted_poses();
-    }
-    t.gate = d.gate;
-    targets.push_back(std::move(t));
+    // The drift model and the poses' times: a new pose is weighed by what it adds given every
+    // earlier one at the time the table would reach it (core/pose_planner.h).
+    // A new pose's white noise from the device's own noise profile when it has one.
+    const NoiseProfile* noise = d.sequencer->noise();
+    const int triad = m.model->sensor() == SensorKind::kAccelerometer ? kTriadAcc : kTriadMag;
+    std::lock_guard lock(*m.calibrator_mutex);  // a solve in progress finishes first
+    targets.push_back(
+        TargetFromCalibrator(*m.calibrator, m.estimate.ok ? m.estimate.theta : m.model->nominal(),
+                             options_.sequencer.dwell_s, d.gate,
+                             noise ? noise->sigma[static_cast<std::size_t>(triad)] : std::nullopt,
+                             noise ? noise->rate_hz : 0.0));
   }
-  nlohmann::json j = ToJson(PlanNextPose(targets, PlannerOptions{}));
+  PlannerOptions planner;
+  planner.motion = options_.table;
+  planner.objective = options_.plan_objective;
+  planner.dwell_s = options_.sequencer.dwell_s;
+  nlohmann::json j = ToJson(PlanNextPose(targets, planner));
   j["device"] = device;
   return j;
 }

@@ -18,6 +18,7 @@
 
 #include "core/calibrator.h"
 #include "core/observability.h"
+#include "core/pose_planner.h"
 #include "core/publish_gate.h"
 #include "core/sequencer.h"
 #include "core/synthetic.h"
@@ -49,6 +50,9 @@ struct StationOptions {
   double bias_tau_s = -1.0;
   double warmup_in_instabilities = -1.0;
   double warmup_tau_s = -1.0;
+  // The table's motion and what the next-pose planner minimises (core/pose_planner.h).
+  TableMotion table;
+  PlanObjective plan_objective = PlanObjective::kTime;
   ModelContext context;
   GateOptions gate;  // tolerances replaced by the class's unless gate_tolerances_set
   bool gate_tolerances_set = false;

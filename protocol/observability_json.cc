@@ -1,5 +1,7 @@
 #include "protocol/observability_json.h"
 
+#include <fmt/format.h>
+
 #include <cmath>
 
 #include "core/units.h"
@@ -108,13 +110,23 @@ nlohmann::json ToJson(const NextPoseAdvice& a) {
     j["error"] = a.error;
     return j;
   }
-  j["criterion"] = "D-optimal: largest increase of sum over models of log det(Fisher information)";
+  j["criterion"] = fmt::format(
+      "D-optimal: largest increase of sum over models of log det(Fisher information){}{}",
+      a.objective == PlanObjective::kTime ? " per second of table time" : " per pose",
+      a.drift_aware ? ", each pose's information given the earlier ones under the drift model"
+                    : "");
+  j["objective"] = ToString(a.objective);
   j["candidates"] = a.candidates;
   j["pose"] = ToJson(a.pose);
   j["gain"] = a.gain;
+  j["seconds"] = a.seconds;
   nlohmann::json top = nlohmann::json::array();
   for (const auto& c : a.top) {
-    top.push_back({{"pose", ToJson(c.pose)}, {"gain", c.gain}, {"model_gains", c.model_gains}});
+    top.push_back({{"pose", ToJson(c.pose)},
+                   {"gain", c.gain},
+                   {"seconds", c.seconds},
+                   {"score", c.score},
+                   {"model_gains", c.model_gains}});
   }
   j["top"] = top;
   nlohmann::json models = nlohmann::json::array();
@@ -128,9 +140,11 @@ nlohmann::json ToJson(const NextPoseAdvice& a) {
   }
   j["models"] = models;
   j["poses_to_gate"] = a.poses_to_gate;
+  j["seconds_to_gate"] = a.seconds_to_gate;
   nlohmann::json plan = nlohmann::json::array();
   for (const auto& p : a.continuation) plan.push_back(ToJson(p));
   j["plan"] = plan;
+  j["plan_seconds"] = a.continuation_seconds;
   return j;
 }
 

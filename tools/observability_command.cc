@@ -33,6 +33,12 @@ struct ObservabilityArgs {
   int horizon = 60;
   int top = 5;
   bool accept_gauge = false;
+  double table_rate_dps = TableMotion{}.rate_dps[0];
+  double table_accel_dps2 = TableMotion{}.accel_dps2[0];
+  double settle_s = TableMotion{}.settle_s;
+  std::string objective = "time";
+  std::string drift_model = "gauss-markov";
+  double rate_hz = 100.0;  // samples per second (the magnetometer's noise per pose mean)
 };
 
 void AddCommonOptions(CLI::App* cmd, ObservabilityArgs* args) {
@@ -189,6 +195,11 @@ int RunPlan(const ObservabilityArgs& args) {
   PlannerOptions options;
   options.horizon = args.horizon;
   options.top = args.top;
+  options.dwell_s = args.dwell_s;
+  options.motion.rate_dps.setConstant(args.table_rate_dps);
+  options.motion.accel_dps2.setConstant(args.table_accel_dps2);
+  options.motion.settle_s = args.settle_s;
+  options.objective = args.objective == "poses" ? PlanObjective::kPoses : PlanObjective::kTime;
   if (!ParseRange(args.phi, &options.grid.phi) || !ParseRange(args.gamma, &options.grid.gamma) ||
       !ParseRange(args.psi, &options.grid.psi)) {
     fmt::print(stderr, "turncal plan: a range is MIN:MAX:STEP in degrees, or one angle\n");
@@ -212,9 +223,21 @@ int RunPlan(const ObservabilityArgs& args) {
     PlanningTarget t;
     t.model = model.get();
     t.theta = Point(*model, args, sensor, false);
-    t.sqrt_information = ExpectedWeight(*model, sensor, args.dwell_s);
-    for (const auto& p : captured)
+    const CalibratorOptions o = args.drift_model == "independent"
+                                    ? OptionsForClass(*model, sensor)
+                                    : DriftOptionsForClass(*model, sensor);
+    t.sqrt_information = ExpectedPoseSqrtInformation(*model, sensor, o, args.dwell_s, args.rate_hz);
+    t.drift = o.drift;
+    // The captured poses as if taken in the file's order from home at the table's rates.
+    TablePose at;
+    double t_s = 0;
+    for (const auto& p : captured) {
       t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information});
+      t_s += options.motion.MoveSeconds(at, p) + options.motion.settle_s;
+      if (t.drift.enabled()) t.captured_windows.push_back({t_s, t_s + args.dwell_s});
+      t_s += args.dwell_s;
+      at = p;
+    }
     GateTolerancesForClass(args.sensor_class, &t.gate.tolerances);
     t.gate.accept_gauge_dependent_correction = args.accept_gauge;
     targets.push_back(t);
@@ -237,8 +260,18 @@ int RunPlan(const ObservabilityArgs& args) {
   for (const auto& m : args.models) names += (names.empty() ? "" : "+") + m;
   fmt::print("{}: {} poses captured, {} candidates, {} class tolerances\n", names, captured.size(),
              a.candidates, args.sensor_class);
-  fmt::print("next pose: {}   (log det F gains {:.3f})\n", show(a.pose), a.gain);
-  for (const auto& c : a.top) fmt::print("  candidate {}   gain {:.3f}\n", show(c.pose), c.gain);
+  fmt::print(
+      "planning for {} ({}), {} drift model; table {:g} deg/s, {:g} deg/s^2, settle {:g} s, "
+      "dwell {:g} s\n",
+      args.objective == "poses" ? "the fewest poses" : "the least table time",
+      args.objective == "poses" ? "log det F gain per pose" : "log det F gain per second",
+      a.drift_aware ? "with the" : "without a", args.table_rate_dps, args.table_accel_dps2,
+      args.settle_s, args.dwell_s);
+  fmt::print("next pose: {}   (log det F gains {:.3f} in {:.1f} s)\n", show(a.pose), a.gain,
+             a.seconds);
+  for (const auto& c : a.top) {
+    fmt::print("  candidate {}   gain {:.3f} in {:5.1f} s\n", show(c.pose), c.gain, c.seconds);
+  }
   for (const auto& m : a.models) {
     if (m.gauge_blocks) {
       fmt::print(
@@ -259,12 +292,14 @@ int RunPlan(const ObservabilityArgs& args) {
   } else if (a.poses_to_gate == 0) {
     fmt::print("the captured poses already meet the predicted gate\n");
   } else if (a.poses_to_gate > 0) {
-    fmt::print("predicted poses to the gate: {} (greedy plan below)\n", a.poses_to_gate);
+    fmt::print("predicted to the gate: {} poses, {:.0f} s of table time (greedy plan below)\n",
+               a.poses_to_gate, a.seconds_to_gate);
   } else {
     fmt::print("the gate is not predicted within {} more poses\n", options.horizon);
   }
   for (std::size_t i = 0; i < a.continuation.size(); ++i) {
-    fmt::print("  {:>3}: {}\n", captured.size() + i + 1, show(a.continuation[i]));
+    fmt::print("  {:>3}: {}   {:5.1f} s\n", captured.size() + i + 1, show(a.continuation[i]),
+               a.continuation_seconds[i]);
   }
   return 0;
 }
@@ -358,6 +393,27 @@ void AddObservabilityCommands(CLI::App* app) {
       ->capture_default_str();
   plan->add_flag("--accept-gauge", plan_args->accept_gauge,
                  "let mag22's gauge-dependent correction pass the gate");
+  plan->add_option("--objective", plan_args->objective,
+                   "minimise table time (information per second) or poses (per pose)")
+      ->check(CLI::IsMember({"time", "poses"}))
+      ->capture_default_str();
+  plan->add_option("--table-rate", plan_args->table_rate_dps, "the table's move rate, deg/s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  plan->add_option("--table-accel", plan_args->table_accel_dps2,
+                   "the table's angular acceleration, deg/s^2")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  plan->add_option("--settle", plan_args->settle_s, "seconds the table settles after a move")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  plan->add_option("--rate", plan_args->rate_hz, "the device's sample rate, Hz")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  plan->add_option("--drift-model", plan_args->drift_model,
+                   "the class's bias drift as a process in time, or independent per pose")
+      ->check(CLI::IsMember({"gauss-markov", "independent"}))
+      ->capture_default_str();
   AddCommonOptions(plan, plan_args.get());
   plan->callback([plan_args] { throw CLI::RuntimeError(RunPlan(*plan_args)); });
 }

@@ -29,9 +29,11 @@ namespace {
 
 // The D-optimal planner's plan to the gate from nominal values, for the accelerometer and
 // magnetometer models a station calibrates together (what `turncal plan --model accel13 --model
-// mag13` prints): the recommended pose and its continuation.
-std::vector<TablePose> PlannerSequence(const SensorClass& sensor, const std::string& class_name,
-                                       double dwell_s, std::string* error) {
+// mag13` prints): the recommended pose and its continuation, for the simulated table.
+std::vector<TablePose> PlannerSequence(const SensorClass& sensor,
+                                       const PipelineMonteCarloArgs& args,
+                                       const std::optional<TableMotion>& table, double rate_hz,
+                                       std::string* error) {
   std::vector<std::unique_ptr<MeasurementModel>> models;
   std::vector<PlanningTarget> targets;
   for (const char* name : {"accel13", "mag13"}) {
@@ -40,13 +42,31 @@ std::vector<TablePose> PlannerSequence(const SensorClass& sensor, const std::str
     PlanningTarget t;
     t.model = model.get();
     t.theta = model->nominal();
-    const CalibratorOptions o = OptionsForClass(*model, sensor);
-    t.sqrt_information = ExpectedSqrtInformation(o.noise_density, o.pose_offset_sigma, dwell_s);
-    GateTolerancesForClass(class_name, &t.gate.tolerances);
+    const CalibratorOptions o = args.planner_drift == "independent"
+                                    ? OptionsForClass(*model, sensor)
+                                    : DriftOptionsForClass(*model, sensor);
+    t.sqrt_information = ExpectedPoseSqrtInformation(*model, sensor, o, args.dwell_s, rate_hz);
+    t.drift = o.drift;
+    GateTolerancesForClass(args.sensor_class, &t.gate.tolerances);
     targets.push_back(t);
     models.push_back(std::move(model));
   }
-  const NextPoseAdvice a = PlanNextPose(targets, PlannerOptions{});
+  PlannerOptions options;
+  options.dwell_s = args.dwell_s;
+  options.objective =
+      args.planner_objective == "poses" ? PlanObjective::kPoses : PlanObjective::kTime;
+  if (table) {
+    options.motion = *table;
+  } else {
+    // The simulator's fixed moves: every pose costs the same time, only the drift's timing counts.
+    options.motion.rate_dps.setConstant(1e6);
+    options.motion.accel_dps2.setConstant(1e12);
+    options.motion.settle_s = SessionSimOptions{}.move_s + SessionSimOptions{}.settle_s;
+  }
+  // A whole session's plan, as long as the default one, so that the gate's first pass is the
+  // station's and the estimate at the end is judged after as many poses as the other plans.
+  options.min_continuation = static_cast<int>(DefaultSessionPoses().size());
+  const NextPoseAdvice a = PlanNextPose(targets, options);
   if (!a.ok) {
     *error = "the planner: " + a.error;
     return {};
@@ -111,9 +131,16 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
     return 2;
   }
   const bool accel = model->sensor() == SensorKind::kAccelerometer;
+  std::optional<TableMotion> table;
+  if (args.table_rate_dps > 0) {
+    table.emplace();
+    table->rate_dps.setConstant(args.table_rate_dps);
+    table->accel_dps2.setConstant(args.table_accel_dps2);
+    table->settle_s = SessionSimOptions{}.settle_s;
+  }
   std::vector<TablePose> plan = DefaultSessionPoses();
   if (args.plan == "planner") {
-    plan = PlannerSequence(sensor, args.sensor_class, args.dwell_s, &error);
+    plan = PlannerSequence(sensor, args, table, SimDefaultRateHz(*protocol), &error);
     if (plan.empty()) {
       fmt::print(stderr, "turncal montecarlo: {}\n", error);
       return 1;
@@ -143,6 +170,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       }
       o.session.sensor = sensor;
       o.session.dwell_s = args.dwell_s;
+      o.session.table = table;
       o.session.seed = seed;
       o.session.acc_warmup = args.warmup * sensor.acc_bias_instability;
       o.session.mag_warmup = args.warmup * sensor.mag_bias_instability;
@@ -309,14 +337,14 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
   const auto [ks_d, ks_p] = KsUniform(p_values);
   int bad = 0;
   nlohmann::json rows = nlohmann::json::array();
-  std::string table = "| param | mean z | std z | verdict |\n|---|---|---|---|\n";
+  std::string z_table = "| param | mean z | std z | verdict |\n|---|---|---|---|\n";
   for (int i = 0; i < N; ++i) {
     const bool honest = std_z[i] >= 0.9 && std_z[i] <= 1.1 && std::abs(mean[i]) <= 0.15;
     bad += !honest;
     const std::string& name = model->parameters()[static_cast<std::size_t>(i)].name;
     rows.push_back({{"name", name}, {"mean_z", mean[i]}, {"std_z", std_z[i]}, {"honest", honest}});
-    table += fmt::format("| {} | {:+.3f} | {:.3f} | {} |\n", name, mean[i], std_z[i],
-                         honest ? "ok" : "NOT HONEST");
+    z_table += fmt::format("| {} | {:+.3f} | {:.3f} | {} |\n", name, mean[i], std_z[i],
+                           honest ? "ok" : "NOT HONEST");
   }
   const bool ks_ok = ks_p > 0.01;
   if (args.json) {
@@ -324,6 +352,9 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                       {"class", args.sensor_class},
                                       {"protocol", args.protocol},
                                       {"plan", args.plan},
+                                      {"planner_objective", args.planner_objective},
+                                      {"planner_drift", args.planner_drift},
+                                      {"table_rate_dps", args.table_rate_dps},
                                       {"warmup", args.warmup},
                                       {"random_walk", args.random_walk},
                                       {"station_warmup", args.station_warmup},
@@ -344,13 +375,19 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
         "Monte Carlo through the pipeline: {} runs of {} ({} class, {}, plan {}{}{}; {:.0f} "
         "poses and {:.0f} s of session on average), seed {}; {} solved; {:.1f} s wall, {} "
         "jobs\n\n{}",
-        args.runs, args.model, args.sensor_class, args.protocol, args.plan,
+        args.runs, args.model, args.sensor_class, args.protocol,
+        args.plan +
+            (args.plan == "planner"
+                 ? fmt::format(" for {}, {} drift", args.planner_objective, args.planner_drift)
+                 : std::string()) +
+            (args.table_rate_dps > 0 ? fmt::format(", table {:g} deg/s", args.table_rate_dps)
+                                     : std::string()),
         args.warmup > 0 ? fmt::format(", warm-up {} x bias instability", args.warmup) : "",
         (args.random_walk > 0 ? fmt::format(", random walk {}", args.random_walk) : "") +
             (args.station_warmup >= 0
                  ? fmt::format(", station warm-up allowance {}", args.station_warmup)
                  : std::string()),
-        poses / ok, session_s / ok, args.seed, ok, wall_s, args.jobs, table);
+        poses / ok, session_s / ok, args.seed, ok, wall_s, args.jobs, z_table);
     fmt::print(
         "\nchi^2 p-values against uniform: Kolmogorov-Smirnov D = {:.3f}, p = {:.3g} ({})\n"
         "gate passed in {} of {} runs; first passed after {:.2f} poses and {:.1f} s of session "

@@ -33,14 +33,21 @@ struct PipelineMonteCarloArgs {
   double random_walk = 0.0;
   // The station's warm-up allowance ([station] warmup, in bias instabilities; negative: none).
   double station_warmup = -1.0;
-  bool independent = false;
+  bool independent = false;  // the station's model before issue 19 ([station] drift_model)
   // Which estimate is judged: "end" (after every pose of the plan) or "first-gate" (the
   // calibration the gate first activated, from the state directory's history).
-  std::string at = "end";  // the station's model before issue 19 ([station] drift_model)
+  std::string at = "end";
+  // The simulated table: moves at this rate (deg/s) and acceleration; 0: every move takes 3 s.
+  // The planner plans for the same table.
+  double table_rate_dps = 0.0;
+  double table_accel_dps2 = 20.0;
+  // The planner's objective ("time" or "poses") and whether it plans with the class's drift
+  // model ("gauss-markov") or independent poses ("independent": the planner before issue 19).
+  std::string planner_objective = "time";
+  std::string planner_drift = "gauss-markov";
   bool json = false;
-  std::string runs_out;
+  std::string runs_out;  // when set: one JSON line per run (seed, z, p-value, gate) to this file
   std::string keep_dir;  // when set: the captures of runs with a parameter beyond 4 sigma go here
-                         // // when set: one JSON line per run (seed, z, p-value, gate) to this file
 };
 
 // Exit status: 0 when every criterion holds, 1 when one does not, 2 on bad arguments.

@@ -19,10 +19,33 @@ struct PlanCompareArgs {
   double dwell_s = 5.0;
   std::uint64_t seed = 1;
   bool json = false;
+  double table_rate_dps = TableMotion{}.rate_dps[0];
+  double table_accel_dps2 = TableMotion{}.accel_dps2[0];
+  std::string objective = "time";
 };
+
+// Table seconds of the first `count` poses from home: moves, settling and dwells.
+double SessionSeconds(const std::vector<TablePose>& poses, int count, const TableMotion& table,
+                      double dwell_s) {
+  TablePose at;
+  double t = 0;
+  for (int i = 0; i < count && i < static_cast<int>(poses.size()); ++i) {
+    t += table.MoveSeconds(at, poses[static_cast<std::size_t>(i)]) + table.settle_s + dwell_s;
+    at = poses[static_cast<std::size_t>(i)];
+  }
+  return t;
+}
 
 struct Tally {
   std::vector<int> counts;  // -1: the gate never passed
+  std::vector<double> seconds;
+  double mean_seconds() const {
+    double sum = 0;
+    int n = 0;
+    for (std::size_t i = 0; i < counts.size(); ++i)
+      if (counts[i] > 0) sum += seconds[i], ++n;
+    return n ? sum / n : 0.0;
+  }
   int failures() const { return static_cast<int>(std::count(counts.begin(), counts.end(), -1)); }
   double mean() const {
     double sum = 0;
@@ -45,8 +68,13 @@ int RunPlanCompare(const PlanCompareArgs& args) {
   const CalibratorOptions options = OptionsForClass(*model, sensor);
   GateOptions gate;
   GateTolerancesForClass(args.sensor_class, &gate.tolerances);
+  PlannerOptions planner;
+  planner.dwell_s = args.dwell_s;
+  planner.motion.rate_dps.setConstant(args.table_rate_dps);
+  planner.motion.accel_dps2.setConstant(args.table_accel_dps2);
+  planner.objective = args.objective == "poses" ? PlanObjective::kPoses : PlanObjective::kTime;
   Tally cube, planned;
-  int planned_fewer = 0, equal = 0;
+  int planned_fewer = 0, equal = 0, planned_quicker = 0;
   nlohmann::json runs = nlohmann::json::array();
   for (int run = 0; run < args.runs; ++run) {
     std::mt19937_64 truth_rng(args.seed + static_cast<std::uint64_t>(run));
@@ -58,18 +86,28 @@ int RunPlanCompare(const PlanCompareArgs& args) {
     const SessionOutcome a =
         RunSimulatedSession(*model, truth, sensor, options, gate, args.dwell_s,
                             std::min<int>(args.max_poses, 26), FixedSequence(design), &rng_a);
-    const SessionOutcome b = RunSimulatedSession(
-        *model, truth, sensor, options, gate, args.dwell_s, args.max_poses,
-        PlannedSequence(*model, options, gate, args.dwell_s, PlannerOptions{}), &rng_b);
+    const SessionOutcome b =
+        RunSimulatedSession(*model, truth, sensor, options, gate, args.dwell_s, args.max_poses,
+                            PlannedSequence(*model, gate, args.dwell_s, planner), &rng_b);
     cube.counts.push_back(a.poses_to_gate);
     planned.counts.push_back(b.poses_to_gate);
+    const double sa = SessionSeconds(a.poses, a.poses_to_gate, planner.motion, args.dwell_s);
+    const double sb = SessionSeconds(b.poses, b.poses_to_gate, planner.motion, args.dwell_s);
+    cube.seconds.push_back(sa);
+    planned.seconds.push_back(sb);
+    planned_quicker += b.poses_to_gate > 0 && (a.poses_to_gate < 0 || sb < sa);
     const int ca = a.poses_to_gate < 0 ? 1000 : a.poses_to_gate;
     const int cb = b.poses_to_gate < 0 ? 1000 : b.poses_to_gate;
     planned_fewer += cb < ca;
     equal += cb == ca;
-    runs.push_back({{"run", run}, {"cube", a.poses_to_gate}, {"planned", b.poses_to_gate}});
+    runs.push_back({{"run", run},
+                    {"cube", a.poses_to_gate},
+                    {"planned", b.poses_to_gate},
+                    {"cube_s", sa},
+                    {"planned_s", sb}});
     if (!args.json) {
-      fmt::print("run {:>3}: cube {:>3}   planned {:>3}{}\n", run, a.poses_to_gate, b.poses_to_gate,
+      fmt::print("run {:>3}: cube {:>3} poses {:6.1f} s   planned {:>3} poses {:6.1f} s{}\n", run,
+                 a.poses_to_gate, sa, b.poses_to_gate, sb,
                  b.poses_to_gate < 0 && !b.last_gate.reasons.empty()
                      ? "   (" + b.last_gate.reasons.front() + ")"
                      : "");
@@ -78,23 +116,30 @@ int RunPlanCompare(const PlanCompareArgs& args) {
   if (args.json) {
     fmt::print("{}\n", nlohmann::json{{"model", args.model},
                                       {"class", args.sensor_class},
+                                      {"objective", args.objective},
+                                      {"table_rate_dps", args.table_rate_dps},
                                       {"runs", runs},
                                       {"cube_mean", cube.mean()},
+                                      {"cube_mean_s", cube.mean_seconds()},
                                       {"cube_never", cube.failures()},
                                       {"planned_mean", planned.mean()},
+                                      {"planned_mean_s", planned.mean_seconds()},
                                       {"planned_never", planned.failures()},
                                       {"planned_fewer", planned_fewer},
+                                      {"planned_quicker", planned_quicker},
                                       {"equal", equal}}
                            .dump());
   } else {
     fmt::print(
-        "{} ({} class tolerances), {} runs: poses to pass the gate\n"
-        "  cube sequence: mean {:.2f}, never within 26 poses in {} run(s)\n"
-        "  planned:       mean {:.2f}, never within {} poses in {} run(s)\n"
-        "  planned needed fewer poses in {} run(s), as many in {}, more in {}\n",
-        args.model, args.sensor_class, args.runs, cube.mean(), cube.failures(), planned.mean(),
-        args.max_poses, planned.failures(), planned_fewer, equal,
-        args.runs - planned_fewer - equal);
+        "{} ({} class tolerances), {} runs: poses and table seconds to pass the gate (table {:g} "
+        "deg/s, {:g} deg/s^2, settle {:g} s, dwell {:g} s; planner minimises {})\n"
+        "  cube sequence: mean {:.2f} poses, {:.1f} s; never within 26 poses in {} run(s)\n"
+        "  planned:       mean {:.2f} poses, {:.1f} s; never within {} poses in {} run(s)\n"
+        "  planned needed fewer poses in {} run(s), as many in {}, more in {}; less time in {}\n",
+        args.model, args.sensor_class, args.runs, args.table_rate_dps, args.table_accel_dps2,
+        planner.motion.settle_s, args.dwell_s, args.objective, cube.mean(), cube.mean_seconds(),
+        cube.failures(), planned.mean(), planned.mean_seconds(), args.max_poses, planned.failures(),
+        planned_fewer, equal, args.runs - planned_fewer - equal, planned_quicker);
   }
   return 0;
 }
@@ -121,6 +166,17 @@ void AddPlanCompareCommand(CLI::App* app) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_option("--seed", args->seed, "first seed")->capture_default_str();
+  cmd->add_option("--objective", args->objective,
+                  "the planner minimises table time (information per second) or poses")
+      ->check(CLI::IsMember({"time", "poses"}))
+      ->capture_default_str();
+  cmd->add_option("--table-rate", args->table_rate_dps, "the table's move rate, deg/s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--table-accel", args->table_accel_dps2,
+                  "the table's angular acceleration, deg/s^2")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd->add_flag("--json", args->json, "one JSON object");
   cmd->callback([args] { throw CLI::RuntimeError(RunPlanCompare(*args)); });
 }

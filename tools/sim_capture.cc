@@ -49,6 +49,8 @@ constexpr drivers::XbusLegacyLayout kLegacyLayout = kSimXbusLegacyLayout;
 
 }  // namespace
 
+double SimDefaultRateHz(drivers::Protocol protocol) { return Defaults(protocol).rate_hz; }
+
 std::vector<std::uint8_t> EncodeSimSample(drivers::Protocol p, const Sample& s) {
   switch (p) {
     case drivers::Protocol::kMip: {

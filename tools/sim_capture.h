@@ -25,6 +25,9 @@ namespace turncal::tools {
 // the pose (so settle_s + this before the dwell starts), while the table is still visibly moving.
 inline constexpr double kSimEarlyBeforeMoveEnd_s = 0.5;
 
+// The sample rate the simulator gives a protocol when none is asked for (mip 500 Hz, others 100).
+double SimDefaultRateHz(drivers::Protocol protocol);
+
 struct SimCaptureOptions {
   drivers::Protocol protocol = drivers::Protocol::kMip;
   std::string accel_model = "accel13";  // an accelerometer model (MakeModel)

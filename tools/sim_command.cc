@@ -49,6 +49,8 @@ struct SimCommandArgs {
   double bias_tau_s = -1, acc_random_walk = 0, mag_random_walk = 0, acc_warmup = 0, mag_warmup = 0,
          warmup_tau_s = 60;
   bool no_quantisation = false;
+  double table_rate_dps = 0;  // 0: every move takes 3 s (SessionSimOptions::move_s)
+  double table_accel_dps2 = TableMotion{}.accel_dps2[0];
   std::vector<std::string> lives;  // ptys (or writable ttys/files) to stream to at real time
   std::string live;                // the first of lives
   double live_speed = 1.0;
@@ -163,30 +165,36 @@ nlohmann::json TruthFor(const SimCapture& capture, const std::vector<TablePose>&
   accel_truth.tail<3>() += session.LastPoseAccBiasOffset();
   mag_truth.tail<3>() += session.LastPoseMagBiasOffset();
   const SessionSimOptions& so = capture.session_options;
-  return {{"acc_bias_instability", so.sensor.acc_bias_instability},
-          {"mag_bias_instability", so.sensor.mag_bias_instability},
-          {"bias_tau_s", so.sensor.bias_tau_s},
-          {"acc_random_walk", so.acc_random_walk},
-          {"mag_random_walk", so.mag_random_walk},
-          {"acc_warmup", so.acc_warmup},
-          {"mag_warmup", so.mag_warmup},
-          {"warmup_tau_s", so.warmup_tau_s},
-          {"bias_truth", "at_last_pose"},
-          {"models",
-           {{capture.accel_model, TruthJson(*accel, accel_truth)},
-            {capture.mag_model, TruthJson(*mag, mag_truth)}}},
-          {"turn_on_bias",
-           {{capture.accel_model, triad(session.accel_truth.tail<3>())},
-            {capture.mag_model, triad(session.mag_truth.tail<3>())}}},
-          {"gyro_bias_radps",
-           {session.gyro_bias_radps.x(), session.gyro_bias_radps.y(), session.gyro_bias_radps.z()}},
-          {"class", args.sensor_class},
-          {"protocol", args.protocol},
-          {"seed", args.seed},
-          {"rate_hz", capture.session_options.rate_hz},
-          {"dwell_s", capture.session_options.dwell_s},
-          {"samples", session.samples.size()},
-          {"poses", pose_list}};
+  return {
+      {"acc_bias_instability", so.sensor.acc_bias_instability},
+      {"mag_bias_instability", so.sensor.mag_bias_instability},
+      {"bias_tau_s", so.sensor.bias_tau_s},
+      {"acc_random_walk", so.acc_random_walk},
+      {"mag_random_walk", so.mag_random_walk},
+      {"acc_warmup", so.acc_warmup},
+      {"mag_warmup", so.mag_warmup},
+      {"warmup_tau_s", so.warmup_tau_s},
+      {"bias_truth", "at_last_pose"},
+      {"models",
+       {{capture.accel_model, TruthJson(*accel, accel_truth)},
+        {capture.mag_model, TruthJson(*mag, mag_truth)}}},
+      {"turn_on_bias",
+       {{capture.accel_model, triad(session.accel_truth.tail<3>())},
+        {capture.mag_model, triad(session.mag_truth.tail<3>())}}},
+      {"gyro_bias_radps",
+       {session.gyro_bias_radps.x(), session.gyro_bias_radps.y(), session.gyro_bias_radps.z()}},
+      {"class", args.sensor_class},
+      {"protocol", args.protocol},
+      {"seed", args.seed},
+      {"rate_hz", capture.session_options.rate_hz},
+      {"dwell_s", capture.session_options.dwell_s},
+      {"move_s", capture.session_options.table ? nlohmann::json("at the table's rates")
+                                               : nlohmann::json(capture.session_options.move_s)},
+      {"table_rate_dps",
+       capture.session_options.table ? capture.session_options.table->rate_dps[0] : 0.0},
+      {"duration_s", session.duration_s},
+      {"samples", session.samples.size()},
+      {"poses", pose_list}};
 }
 
 int RunController(const SimCommandArgs& args, SimCaptureOptions options) {
@@ -328,6 +336,13 @@ int RunSim(const SimCommandArgs& args) {
   o.acc_warmup = args.acc_warmup;
   o.mag_warmup = args.mag_warmup;
   o.warmup_tau_s = args.warmup_tau_s;
+  if (args.table_rate_dps > 0) {
+    TableMotion table;
+    table.rate_dps.setConstant(args.table_rate_dps);
+    table.accel_dps2.setConstant(args.table_accel_dps2);
+    table.settle_s = o.settle_s;
+    o.table = table;
+  }
   if (args.no_quantisation) o.sensor.acc_quantum = o.sensor.gyr_quantum = o.sensor.mag_quantum = 0;
   o.rate_hz = args.rate_hz;  // <= 0: the protocol's default
   o.dwell_s = args.dwell_s;
@@ -425,6 +440,14 @@ void AddSimCommand(CLI::App* app) {
                   "correlation time of the Gauss-Markov bias instability, s (default: the class's, "
                   "100)")
       ->check(CLI::PositiveNumber);
+  cmd->add_option("--table-rate", args->table_rate_dps,
+                  "move at this rate, deg/s, on every axis (a trapezoidal profile; the shorter way "
+                  "round on the inner and outer axes); default: every move takes 3 s")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--table-accel", args->table_accel_dps2,
+                  "the table's angular acceleration with --table-rate, deg/s^2")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd->add_option("--acc-random-walk", args->acc_random_walk,
                   "accelerometer bias random walk, m/s^2/sqrt(s) (default 0)")
       ->check(CLI::NonNegativeNumber);

@@ -324,6 +324,23 @@ void AddSimFitCommands(CLI::App* app) {
                  "gate)")
       ->check(CLI::IsMember({"default", "shuffled", "planner"}))
       ->capture_default_str();
+  mc->add_option("--table-rate", pipe->table_rate_dps,
+                 "with --pipeline: the simulated table moves at this rate, deg/s, and the planner "
+                 "plans for it (default: every move takes 3 s)")
+      ->check(CLI::PositiveNumber);
+  mc->add_option("--table-accel", pipe->table_accel_dps2,
+                 "with --pipeline and --table-rate: the table's angular acceleration, deg/s^2")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  mc->add_option("--planner-objective", pipe->planner_objective,
+                 "with --plan planner: minimise table time or poses")
+      ->check(CLI::IsMember({"time", "poses"}))
+      ->capture_default_str();
+  mc->add_option("--planner-drift", pipe->planner_drift,
+                 "with --plan planner: plan with the class's drift model or independent poses "
+                 "(the planner before issue 19)")
+      ->check(CLI::IsMember({"gauss-markov", "independent"}))
+      ->capture_default_str();
   mc->add_option("--jobs", pipe->jobs, "with --pipeline: runs in parallel")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();

@@ -253,7 +253,7 @@ TEST(Planner, PlannedSessionPassesTheGateInFewerPosesThanTheCube) {
                                                     FixedSequence(CubePoses26()), &rng_cube);
     const SessionOutcome planned = RunSimulatedSession(
         *model, truth, sensor, options, gate, 5.0, 26,
-        PlannedSequence(*model, options, gate, 5.0, PlannerOptions{}), &rng_plan);
+        PlannedSequence(*model, gate, 5.0, PlannerOptions{}), &rng_plan);
     ASSERT_GT(cube.poses_to_gate, 0) << sensor.name << Join(cube.last_gate.reasons);
     ASSERT_GT(planned.poses_to_gate, 0) << sensor.name << Join(planned.last_gate.reasons);
     EXPECT_LT(planned.poses_to_gate, cube.poses_to_gate) << sensor.name;
