@@ -34,7 +34,8 @@ BENCHMARK_CAPTURE(BM_AnalyzeData, accel13, "accel13")
 BENCHMARK_CAPTURE(BM_AnalyzeData, mag22, "mag22")->Arg(26)->Arg(100)->Unit(benchmark::kMillisecond);
 
 // accel13 + mag13 together, the default 672-pose grid; args: poses captured, horizon (consumer
-// tolerances, so that the greedy continuation runs for a dozen poses).
+// tolerances, so that the greedy continuation runs for a dozen poses), and whether the drift
+// model is used (1: the class's Gauss-Markov drift, poses 9 s apart; 0: independent poses).
 void BM_PlanNextPose(benchmark::State& state) {
   std::string error;
   auto accel = MakeModel("accel13", ModelContext{}, &error);
@@ -42,20 +43,35 @@ void BM_PlanNextPose(benchmark::State& state) {
   std::mt19937_64 rng(2);
   std::vector<PlanningTarget> targets(2);
   const MeasurementModel* models[2] = {accel.get(), mag.get()};
+  const bool drift = state.range(2) != 0;
   for (int i = 0; i < 2; ++i) {
     targets[i].model = models[i];
     targets[i].theta = DrawTruth(*models[i], IndustrialClass(), &rng);
     targets[i].captured = Poses(*models[i], static_cast<int>(state.range(0)), &rng);
     GateTolerancesForClass("consumer", &targets[i].gate.tolerances);
-    const CalibratorOptions o = OptionsForClass(*models[i], IndustrialClass());
+    const CalibratorOptions o = drift ? DriftOptionsForClass(*models[i], IndustrialClass())
+                                      : OptionsForClass(*models[i], IndustrialClass());
     targets[i].sqrt_information =
-        ExpectedSqrtInformation(o.noise_density, o.pose_offset_sigma, 5.0);
+        ExpectedPoseSqrtInformation(*models[i], IndustrialClass(), o, 5.0, 100.0);
+    if (drift) {
+      targets[i].drift = o.drift;
+      for (std::size_t k = 0; k < targets[i].captured.size(); ++k) {
+        targets[i].captured[k].sqrt_information = targets[i].sqrt_information;
+        targets[i].captured_windows.push_back({9.0 * k + 4, 9.0 * k + 9});
+      }
+    }
   }
   PlannerOptions options;
   options.horizon = static_cast<int>(state.range(1));
   for (auto _ : state) benchmark::DoNotOptimize(PlanNextPose(targets, options));
 }
-BENCHMARK(BM_PlanNextPose)->Args({26, 1})->Args({0, 60})->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_PlanNextPose)
+    ->Args({26, 1, 0})
+    ->Args({0, 60, 0})
+    ->Args({26, 1, 1})
+    ->Args({100, 1, 1})
+    ->Args({0, 60, 1})
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace turncal

@@ -31,6 +31,25 @@ TEST(Config, TheShippedExampleParsesToTheDefaults) {
   EXPECT_TRUE(c.station.drift_model);
   EXPECT_EQ(c.station.bias_tau_s, 100.0);
   EXPECT_EQ(c.station.warmup_in_instabilities, 0.0);
+  const TableMotion table;
+  EXPECT_EQ(c.station.table.rate_dps, table.rate_dps);
+  EXPECT_EQ(c.station.table.accel_dps2, table.accel_dps2);
+  EXPECT_EQ(c.station.table.settle_s, table.settle_s);
+  EXPECT_EQ(c.station.plan_objective, PlanObjective::kTime);
+}
+
+TEST(Config, TheTablesMotionAndWhatThePlannerMinimises) {
+  Config c;
+  std::string error;
+  ASSERT_TRUE(
+      ParseConfig("[table]\nrate_dps = [50, 30, 10]\naccel_dps2 = 100\nsettle_s = 2.5\n"
+                  "plan_for = \"poses\"\n",
+                  "t.toml", &c, &error))
+      << error;
+  EXPECT_EQ(c.station.table.rate_dps, Eigen::Vector3d(50, 30, 10));
+  EXPECT_EQ(c.station.table.accel_dps2, Eigen::Vector3d::Constant(100));
+  EXPECT_EQ(c.station.table.settle_s, 2.5);
+  EXPECT_EQ(c.station.plan_objective, PlanObjective::kPoses);
 }
 
 TEST(Config, TheDriftModelsSettings) {
@@ -116,6 +135,10 @@ INSTANTIATE_TEST_SUITE_P(
         Bad{"[station]\nbias_tau_s = 0\n", "bias_tau_s and warmup_tau_s must be > 0"},
         Bad{"[station]\nwarmup = -1\n", "warmup >= 0"},
         Bad{"[station]\ndrift_model = \"ar1\"\n", "drift_model must be"},
+        Bad{"[table]\nrate_dps = 0\n", "[table] table rates and accelerations must be"},
+        Bad{"[table]\naccel_dps2 = [1, 2]\n", "'accel_dps2' must be [x, y, z]"},
+        Bad{"[table]\nplan_for = \"speed\"\n", "plan_for must be \"time\" or \"poses\""},
+        Bad{"[table]\nrate = 3\n", "unknown key 'rate' in [table]"},
         Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\n[[device]]\nname = "
             "\"a\"\nprotocol = \"xbus\"\nport = \"/dev/y\"\n",
             "device name 'a' is given twice"},

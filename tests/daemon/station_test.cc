@@ -14,6 +14,7 @@
 #include <fstream>
 
 #include "core/synthetic.h"
+#include "core/units.h"
 #include "daemon/persistence.h"
 #include "daemon/replay_once.h"
 #include "tools/sim_capture.h"
@@ -134,6 +135,57 @@ TEST(StationDrift, CorrectedSigmaGrowsWithTheTimeSinceTheCalibration) {
     EXPECT_NEAR(grown, expected, 0.01 * expected) << "axis " << k;
     EXPECT_GT((*later.acc_sigma)[k], 2 * (*now.acc_sigma)[k]);
   }
+}
+
+// NEXT_POSE plans for the table's time under the drift model: the recommendation's seconds are
+// the move from the latest captured pose at the configured rates, settling and the dwell; the
+// plan's seconds add up; plan_for = "poses" switches the objective.
+TEST(StationPlanning, NextPoseCountsTheTablesSecondsFromTheLatestPose) {
+  tools::SimCaptureOptions o;
+  o.protocol = drivers::Protocol::kMip;
+  o.session.seed = 22;
+  o.poses.resize(5);
+  tools::SimCapture c;
+  std::string error;
+  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  const std::string path = WriteCapture(c, "planning");
+  for (const PlanObjective objective : {PlanObjective::kTime, PlanObjective::kPoses}) {
+    daemon::StationOptions options;
+    options.table.rate_dps = Eigen::Vector3d(30, 15, 10);
+    options.table.settle_s = 2.0;
+    options.plan_objective = objective;
+    daemon::Station station({"imu"}, options, {});
+    drivers::CaptureReader reader;
+    ASSERT_TRUE(reader.Open(path, &error)) << error;
+    daemon::ReplayStats stats;
+    ASSERT_TRUE(daemon::ReplayInto(&reader, &station, true, {}, &stats, &error)) << error;
+    const nlohmann::json j = station.NextPose("imu");
+    ASSERT_TRUE(j["ok"].get<bool>()) << j.dump();
+    EXPECT_EQ(j["objective"], ToString(objective));
+    EXPECT_NE(j["criterion"].get<std::string>().find("under the drift model"), std::string::npos);
+    const auto deg = [](const nlohmann::json& p) {
+      return TablePose{p["phi_deg"].get<double>() * kRadPerDeg,
+                       p["gamma_deg"].get<double>() * kRadPerDeg,
+                       p["psi_deg"].get<double>() * kRadPerDeg};
+    };
+    const TablePose from = o.poses.back(), to = deg(j["pose"]);
+    EXPECT_NEAR(j["seconds"].get<double>(),
+                options.table.MoveSeconds(from, to) + 2.0 + options.sequencer.dwell_s, 1e-9);
+    double sum = 0;
+    for (const auto& s : j["plan_seconds"]) sum += s.get<double>();
+    ASSERT_EQ(j["plan_seconds"].size(), j["plan"].size());
+    ASSERT_GT(j["poses_to_gate"].get<int>(), 0) << j.dump();
+    EXPECT_NEAR(sum, j["seconds_to_gate"].get<double>(), 1e-9);
+    // The best score first: gain per second, or gain.
+    const nlohmann::json& top = j["top"];
+    for (std::size_t i = 0; i + 1 < top.size(); ++i) {
+      EXPECT_GE(top[i]["score"].get<double>(), top[i + 1]["score"].get<double>());
+    }
+    const double gain = top[0]["gain"].get<double>(), seconds = top[0]["seconds"].get<double>();
+    EXPECT_NEAR(top[0]["score"].get<double>(),
+                objective == PlanObjective::kTime ? gain / seconds : gain, 1e-12);
+  }
+  std::remove(path.c_str());
 }
 
 INSTANTIATE_TEST_SUITE_P(Protocols, StationReplay,
