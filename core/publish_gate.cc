@@ -25,6 +25,12 @@ bool GateTolerancesForClass(const std::string& sensor_class, GateTolerances* out
   return false;
 }
 
+bool GateDefaultsForClass(const std::string& sensor_class, GateOptions* out) {
+  if (!GateTolerancesForClass(sensor_class, &out->tolerances)) return false;
+  out->min_dof = sensor_class == "consumer" ? 6 : 3;
+  return true;
+}
+
 bool GateOptions::IsValid(std::string* error) const {
   auto fail = [&](const std::string& message) {
     if (error) *error = message;

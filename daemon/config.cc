@@ -77,6 +77,20 @@ bool GetVector(const toml::table& t, const char* key, Eigen::Vector3d* out,
   return ok;
 }
 
+// A whole number in [0, 1000].
+bool GetInt(const toml::table& t, const char* key, int* out, const std::string& source,
+            std::string* error) {
+  const toml::node* n = t.get(key);
+  if (!n) return true;
+  const auto* i = n->as_integer();
+  if (!i || i->get() < 0 || i->get() > 1000) {
+    *error = fmt::format("{}: '{}' must be a whole number from 0 to 1000", Where(*n, source), key);
+    return false;
+  }
+  *out = static_cast<int>(i->get());
+  return true;
+}
+
 // One number for all three table axes, or [inner, middle, outer].
 bool GetAxes(const toml::table& t, const char* key, Eigen::Vector3d* out, const std::string& source,
              std::string* error) {
@@ -139,7 +153,7 @@ bool ParseGate(const toml::table& t, const std::string& context, const std::stri
                GateOptions* gate, std::string* error) {
   if (!OnlyKeys(t,
                 {"scale_factor", "angle_deg", "acceleration_mps2", "gain", "field", "min_p_value",
-                 "max_normalized_residual", "parameters"},
+                 "min_dof", "max_normalized_residual", "parameters"},
                 context, source, error)) {
     return false;
   }
@@ -151,6 +165,7 @@ bool ParseGate(const toml::table& t, const std::string& context, const std::stri
       !GetNumber(t, "gain", &g.gain, source, error) ||
       !GetNumber(t, "field", &g.field, source, error) ||
       !GetNumber(t, "min_p_value", &gate->min_p_value, source, error) ||
+      !GetInt(t, "min_dof", &gate->min_dof, source, error) ||
       !GetNumber(t, "max_normalized_residual", &gate->max_normalized_residual, source, error)) {
     return false;
   }
@@ -287,7 +302,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   if (const toml::table* t = root["table"].as_table()) {
     if (!ParseTable(*t, source, &st, error)) return false;
   }
-  GateTolerancesForClass(st.sensor_class, &st.gate.tolerances);
+  GateDefaultsForClass(st.sensor_class, &st.gate);
   if (const toml::table* t = root["gate"].as_table()) {
     if (!ParseGate(*t, "[gate]", source, &st.gate, error)) return false;
     st.gate_tolerances_set = true;

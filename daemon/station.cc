@@ -141,7 +141,7 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
   }
   if (options_.warmup_tau_s > 0) sensor_.warmup_tau_s = options_.warmup_tau_s;
   if (!options_.gate_tolerances_set) {
-    GateTolerancesForClass(options_.sensor_class, &options_.gate.tolerances);
+    GateDefaultsForClass(options_.sensor_class, &options_.gate);
   }
   for (std::size_t i = 0; i < device_names.size(); ++i) {
     auto d = std::make_unique<DeviceState>();

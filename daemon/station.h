@@ -54,7 +54,7 @@ struct StationOptions {
   TableMotion table;
   PlanObjective plan_objective = PlanObjective::kTime;
   ModelContext context;
-  GateOptions gate;  // tolerances replaced by the class's unless gate_tolerances_set
+  GateOptions gate;  // tolerances and min_dof replaced by the class's unless gate_tolerances_set
   bool gate_tolerances_set = false;
   std::map<std::string, DeviceModelOptions> per_device;  // by device name
   // Where the pose journal and the active calibrations live (daemon/persistence.h); empty:

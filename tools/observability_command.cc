@@ -39,6 +39,7 @@ struct ObservabilityArgs {
   std::string objective = "time";
   std::string drift_model = "gauss-markov";
   double rate_hz = 100.0;  // samples per second (the magnetometer's noise per pose mean)
+  int min_poses = 0;       // plan at least this many poses, past the predicted gate
 };
 
 void AddCommonOptions(CLI::App* cmd, ObservabilityArgs* args) {
@@ -134,7 +135,7 @@ int RunData(const MeasurementModel& model, const ObservabilityArgs& args,
   const DataReport r =
       AnalyzeData(model, Point(model, args, sensor, false), weighted, ObservabilityOptions{});
   GateOptions gate;
-  GateTolerancesForClass(args.sensor_class, &gate.tolerances);
+  GateDefaultsForClass(args.sensor_class, &gate);
   const std::vector<std::string> shortfalls = PrecisionShortfalls(model, r.sigma, gate);
   if (args.json) {
     nlohmann::json j = ToJson(r, model);
@@ -196,6 +197,7 @@ int RunPlan(const ObservabilityArgs& args) {
   options.horizon = args.horizon;
   options.top = args.top;
   options.dwell_s = args.dwell_s;
+  options.min_continuation = args.min_poses;
   options.motion.rate_dps.setConstant(args.table_rate_dps);
   options.motion.accel_dps2.setConstant(args.table_accel_dps2);
   options.motion.settle_s = args.settle_s;
@@ -238,7 +240,7 @@ int RunPlan(const ObservabilityArgs& args) {
       t_s += args.dwell_s;
       at = p;
     }
-    GateTolerancesForClass(args.sensor_class, &t.gate.tolerances);
+    GateDefaultsForClass(args.sensor_class, &t.gate);
     t.gate.accept_gauge_dependent_correction = args.accept_gauge;
     targets.push_back(t);
     models.push_back(std::move(model));
@@ -406,6 +408,10 @@ void AddObservabilityCommands(CLI::App* app) {
       ->capture_default_str();
   plan->add_option("--settle", plan_args->settle_s, "seconds the table settles after a move")
       ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  plan->add_option("--min-poses", plan_args->min_poses,
+                   "plan at least this many poses, past the predicted gate (a whole session)")
+      ->check(CLI::Range(0, 1000))
       ->capture_default_str();
   plan->add_option("--rate", plan_args->rate_hz, "the device's sample rate, Hz")
       ->check(CLI::PositiveNumber)

@@ -47,7 +47,7 @@ std::vector<TablePose> PlannerSequence(const SensorClass& sensor,
                                     : DriftOptionsForClass(*model, sensor);
     t.sqrt_information = ExpectedPoseSqrtInformation(*model, sensor, o, args.dwell_s, rate_hz);
     t.drift = o.drift;
-    GateTolerancesForClass(args.sensor_class, &t.gate.tolerances);
+    GateDefaultsForClass(args.sensor_class, &t.gate);
     targets.push_back(t);
     models.push_back(std::move(model));
   }
@@ -196,6 +196,11 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       station.warmup_in_instabilities = args.station_warmup;
       station.warmup_tau_s = args.warmup_tau_s;
       station.drift_model = !args.independent;
+      if (args.gate_min_dof >= 0) {
+        GateDefaultsForClass(args.sensor_class, &station.gate);
+        station.gate.min_dof = args.gate_min_dof;
+        station.gate_tolerances_set = true;
+      }
       if (args.at == "first-gate") station.state_dir = state_dir.path;
       daemon::ReplayOnceOutcome replay;
       const double offset_s = static_cast<double>(capture.offset_ns) * 1e-9;
@@ -266,7 +271,8 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       }
       out.p_value = m.value("p_value", 1.0);
       out.gate_pass = m["gate"].value("pass", false);
-      out.poses = m.value("poses", 0);
+      // A calibration document counts its poses in its estimate; the result in the model.
+      out.poses = m.value("poses", args.at == "first-gate" ? out.gate_poses : 0);
       out.session_s = capture.session.duration_s;
       if (const int finished = ++done; !args.json && finished % 20 == 0) {
         std::lock_guard lock(print_mutex);
@@ -295,6 +301,8 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       fmt::print(f, "{}\n",
                  nlohmann::json{{"seed", r.seed},
                                 {"ok", r.ok},
+                                {"gate_poses", r.gate_poses},
+                                {"gate_s", r.gate_s},
                                 {"error", r.error},
                                 {"z", z},
                                 {"p_value", r.p_value},

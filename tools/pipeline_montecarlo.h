@@ -37,6 +37,7 @@ struct PipelineMonteCarloArgs {
   // Which estimate is judged: "end" (after every pose of the plan) or "first-gate" (the
   // calibration the gate first activated, from the state directory's history).
   std::string at = "end";
+  int gate_min_dof = -1;  // the gate's redundant equations (GateOptions::min_dof); < 0: default
   // The simulated table: moves at this rate (deg/s) and acceleration; 0: every move takes 3 s.
   // The planner plans for the same table.
   double table_rate_dps = 0.0;

@@ -67,7 +67,7 @@ int RunPlanCompare(const PlanCompareArgs& args) {
   }
   const CalibratorOptions options = OptionsForClass(*model, sensor);
   GateOptions gate;
-  GateTolerancesForClass(args.sensor_class, &gate.tolerances);
+  GateDefaultsForClass(args.sensor_class, &gate);
   PlannerOptions planner;
   planner.dwell_s = args.dwell_s;
   planner.motion.rate_dps.setConstant(args.table_rate_dps);

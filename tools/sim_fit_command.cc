@@ -96,7 +96,7 @@ int RunFit(const SimArgs& args) {
   GateResult gate;
   if (e.ok) {
     GateOptions gate_options;
-    GateTolerancesForClass(sensor.name, &gate_options.tolerances);
+    GateDefaultsForClass(sensor.name, &gate_options);
     const DataReport data =
         AnalyzeData(*model, e.theta, calibrator.weighted_poses(), ObservabilityOptions{});
     gate = EvaluateGate(*model, e, data, gate_options);
@@ -368,6 +368,9 @@ void AddSimFitCommands(CLI::App* app) {
                  "calibration the gate first activated (first-gate)")
       ->check(CLI::IsMember({"end", "first-gate"}))
       ->capture_default_str();
+  mc->add_option("--gate-min-dof", pipe->gate_min_dof,
+                 "with --pipeline: the gate's least number of redundant equations (default 3)")
+      ->check(CLI::Range(0, 1000));
   mc->add_option("--runs-out", pipe->runs_out,
                  "with --pipeline: one JSON line per run (seed, z per parameter, chi^2 p-value, "
                  "gate) to this file");

@@ -48,7 +48,7 @@ void BM_PlanNextPose(benchmark::State& state) {
     targets[i].model = models[i];
     targets[i].theta = DrawTruth(*models[i], IndustrialClass(), &rng);
     targets[i].captured = Poses(*models[i], static_cast<int>(state.range(0)), &rng);
-    GateTolerancesForClass("consumer", &targets[i].gate.tolerances);
+    GateDefaultsForClass("consumer", &targets[i].gate);
     const CalibratorOptions o = drift ? DriftOptionsForClass(*models[i], IndustrialClass())
                                       : OptionsForClass(*models[i], IndustrialClass());
     targets[i].sqrt_information =

@@ -183,6 +183,16 @@ TEST(Gate, OptionsRejectNonsense) {
   EXPECT_FALSE(GateTolerancesForClass("navigation", &t));
   EXPECT_TRUE(GateTolerancesForClass("consumer", &t));
   EXPECT_NEAR(t.scale_factor, 1e-3, 1e-15);
+  // The whole class default: the consumer class's chi^2 test needs 6 redundant equations.
+  GateOptions c;
+  c.min_p_value = 0.5;
+  EXPECT_TRUE(GateDefaultsForClass("consumer", &c));
+  EXPECT_EQ(c.min_dof, 6);
+  EXPECT_NEAR(c.tolerances.scale_factor, 1e-3, 1e-15);
+  EXPECT_EQ(c.min_p_value, 0.5);  // left as it was
+  EXPECT_TRUE(GateDefaultsForClass("industrial", &c));
+  EXPECT_EQ(c.min_dof, 3);
+  EXPECT_FALSE(GateDefaultsForClass("navigation", &c));
 }
 
 // --- Next-pose planning ------------------------------------------------------------------------
@@ -251,9 +261,9 @@ TEST(Planner, PlannedSessionPassesTheGateInFewerPosesThanTheCube) {
     std::mt19937_64 rng_cube(32), rng_plan(32);
     const SessionOutcome cube = RunSimulatedSession(*model, truth, sensor, options, gate, 5.0, 26,
                                                     FixedSequence(CubePoses26()), &rng_cube);
-    const SessionOutcome planned = RunSimulatedSession(
-        *model, truth, sensor, options, gate, 5.0, 26,
-        PlannedSequence(*model, gate, 5.0, PlannerOptions{}), &rng_plan);
+    const SessionOutcome planned =
+        RunSimulatedSession(*model, truth, sensor, options, gate, 5.0, 26,
+                            PlannedSequence(*model, gate, 5.0, PlannerOptions{}), &rng_plan);
     ASSERT_GT(cube.poses_to_gate, 0) << sensor.name << Join(cube.last_gate.reasons);
     ASSERT_GT(planned.poses_to_gate, 0) << sensor.name << Join(planned.last_gate.reasons);
     EXPECT_LT(planned.poses_to_gate, cube.poses_to_gate) << sensor.name;

@@ -52,6 +52,20 @@ TEST(Config, TheTablesMotionAndWhatThePlannerMinimises) {
   EXPECT_EQ(c.station.plan_objective, PlanObjective::kPoses);
 }
 
+TEST(Config, TheGatesRedundancyFollowsTheClassUnlessSet) {
+  Config c;
+  std::string error;
+  ASSERT_TRUE(ParseConfig("[station]\nsensor_class = \"consumer\"\n", "t.toml", &c, &error))
+      << error;
+  EXPECT_EQ(c.station.gate.min_dof, 6);
+  ASSERT_TRUE(ParseConfig("[station]\nsensor_class = \"consumer\"\n[gate]\nmin_dof = 4\n", "t.toml",
+                          &c, &error))
+      << error;
+  EXPECT_EQ(c.station.gate.min_dof, 4);
+  ASSERT_TRUE(ParseConfig("", "t.toml", &c, &error)) << error;
+  EXPECT_EQ(c.station.gate.min_dof, 3);
+}
+
 TEST(Config, TheDriftModelsSettings) {
   Config c;
   std::string error;
@@ -139,6 +153,7 @@ INSTANTIATE_TEST_SUITE_P(
         Bad{"[table]\naccel_dps2 = [1, 2]\n", "'accel_dps2' must be [x, y, z]"},
         Bad{"[table]\nplan_for = \"speed\"\n", "plan_for must be \"time\" or \"poses\""},
         Bad{"[table]\nrate = 3\n", "unknown key 'rate' in [table]"},
+        Bad{"[gate]\nmin_dof = 2.5\n", "'min_dof' must be a whole number from 0 to 1000"},
         Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\n[[device]]\nname = "
             "\"a\"\nprotocol = \"xbus\"\nport = \"/dev/y\"\n",
             "device name 'a' is given twice"},
