@@ -84,7 +84,7 @@ struct PlannerOptions {
   // The continuation goes on past the predicted gate to at least this many poses (a whole
   // session's plan rather than the shortest one; horizon still bounds it).
   int min_continuation = 0;
-  int top = 5;       // candidates listed in the advice
+  int top = 5;  // candidates listed in the advice
 
   bool IsValid(std::string* error) const;
 };
