@@ -144,7 +144,8 @@ Eigen::MatrixXd DenseJacobian(ceres::Problem* problem) {
 
 }  // namespace
 
-Calibrator::Calibrator(CalibratorOptions options) : options_(std::move(options)) {
+Calibrator::Calibrator(CalibratorOptions options)
+    : options_(std::move(options)), drift_(options_.drift) {
   if (options_.IsValid(&model_error_)) {
     model_ = MakeModel(options_.model, options_.context, &model_error_);
   }
@@ -168,7 +169,7 @@ std::vector<WeightedPose> Calibrator::weighted_poses() const {
   const int ref = TimeOrder(windows).back();
   Eigen::Matrix<double, Eigen::Dynamic, 3> marginal(num_poses(), 3);
   for (int axis = 0; axis < 3; ++axis) {
-    marginal.col(axis) = DriftIncrementCovariance(options_.drift, axis, windows, ref).diagonal();
+    marginal.col(axis) = DriftIncrementCovariance(drift_, axis, windows, ref).diagonal();
   }
   for (std::size_t i = 0; i < out.size(); ++i) {
     Eigen::Matrix3d cov = poses_[i].white;
@@ -282,7 +283,7 @@ bool Calibrator::BuildBlocks(std::string* error) {
     white.push_back(p.white);
   }
   GlsWhitening gls;
-  if (!BuildGlsWhitening(windows, white, options_.drift, &gls, error)) return false;
+  if (!BuildGlsWhitening(windows, white, drift_, &gls, error)) return false;
   order_ = gls.order;
   gls_w_ = gls.W;
   const int n = num_poses();
@@ -303,6 +304,44 @@ bool Calibrator::BuildBlocks(std::string* error) {
 }
 
 Estimate Calibrator::solve() {
+  Estimate est = SolveOnce();
+  if (!options_.identify_drift || !options_.drift.enabled() || !est.ok || !model_ ||
+      model_->gauge_dimension() > 0) {
+    return est;
+  }
+  const DriftScale scale = IdentifyDrift(est);
+  if (!scale.identified) return est;
+  // The configured drift until the poses reject it; then theirs.
+  const double use = scale.use_scale;
+  if (std::abs(std::log(use / drift_scale_)) > 0.05) {
+    drift_scale_ = use;
+    drift_ = ScaledDrift(options_.drift, drift_scale_);
+    est = SolveOnce();
+  }
+  est.drift_scale = scale;
+  est.drift_scale_used = drift_scale_;
+  return est;
+}
+
+DriftScale Calibrator::IdentifyDrift(const Estimate& est) const {
+  const int n = num_poses(), N = model_->num_parameters();
+  Eigen::MatrixXd J(3 * n, N);
+  Eigen::VectorXd r(3 * n);
+  std::vector<Eigen::Vector3d> white;
+  std::vector<TimeWindow> windows;
+  Jacobian3 Ji;
+  for (int i = 0; i < n; ++i) {
+    const Pose& p = poses_[static_cast<std::size_t>(i)];
+    model_->Predict(est.theta, p.weighted.pose, &Ji);
+    J.middleRows<3>(3 * i) = Ji;
+    r.segment<3>(3 * i) = est.residuals[static_cast<std::size_t>(i)].raw;
+    white.push_back(p.white.diagonal());
+    windows.push_back(p.window);
+  }
+  return IdentifyDriftScale(J, r, white, windows, options_.drift, options_.drift_scale);
+}
+
+Estimate Calibrator::SolveOnce() {
   Estimate est;
   est.model = options_.model;
   est.poses = num_poses();
@@ -468,7 +507,8 @@ Estimate Calibrator::solve() {
     }
     const TimeWindow& ref = poses_[static_cast<std::size_t>(order_.back())].host_window;
     est.bias_window = ref;
-    est.drift = options_.drift;
+    est.drift = drift_;
+    est.drift_scale_used = drift_scale_;
     if (!std::isfinite(est.drift.warmup_origin_s)) {
       // On the host's clock, as the bias window (corrected output's sigma uses both).
       est.drift.warmup_origin_s = poses_[static_cast<std::size_t>(order_.front())].host_window.t0_s;

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/bias_drift.h"
+#include "core/drift_identify.h"
 #include "core/fit_check.h"
 #include "core/measurement_model.h"
 #include "core/pose_record.h"
@@ -62,6 +63,12 @@ struct CalibratorOptions {
   // (Estimate::bias_window). Every record needs its time window. pose_offset_sigma, if also set,
   // stays an independent per-pose offset (e.g. the table's repositioning).
   BiasDrift drift;
+  // Identify the drift's strength from the poses (core/drift_identify.h): `drift` is then the
+  // prior, and once the poses reject it the solve uses their own estimate of a scale on it
+  // (re-solving when the scale in use moves by more than 5 %). Needs a drift model and a model
+  // without a gauge.
+  bool identify_drift = false;
+  DriftScaleOptions drift_scale;
 
   int max_iterations = 100;
   double function_tolerance = 1e-12;
@@ -120,8 +127,10 @@ struct Estimate {
   // With a drift model: the time window the bias parameters hold for (the latest pose's) and
   // the drift model, so a user of the estimate can grow the bias sigma with time since.
   std::optional<TimeWindow> bias_window;
-  BiasDrift drift;
-  bool linear_start = false;  // this solve started from the linear form
+  BiasDrift drift;         // the drift model the solve used (the prior times drift_scale_used)
+  DriftScale drift_scale;  // identified from the poses (CalibratorOptions::identify_drift)
+  double drift_scale_used = 1.0;  // 1 until the poses reject the prior, then its use_scale
+  bool linear_start = false;      // this solve started from the linear form
   int iterations = 0;
   std::string termination;
   double solve_time_s = 0.0;  // Ceres' own measurement of the solve
@@ -161,6 +170,9 @@ class Calibrator {
 
  private:
   struct Pose;
+  Estimate SolveOnce();
+  // The drift scale the poses and `est` (a solve) give, with options_.drift as the prior.
+  DriftScale IdentifyDrift(const Estimate& est) const;
   bool StartFromLinearForm(Eigen::VectorXd* theta, std::string* error) const;
 
   // The residual blocks the solver sees: each pose's own (no drift), or each pose's whitened
@@ -177,6 +189,9 @@ class Calibrator {
   std::unique_ptr<ceres::LossFunction> loss_;
   std::vector<Pose> poses_;
   Eigen::VectorXd theta_;  // last estimate, for warm starts
+  // The drift model in use: options_.drift times the identified scale.
+  BiasDrift drift_;
+  double drift_scale_ = 1.0;
   double last_cost_per_dof_ = 0.0;
 };
 

@@ -249,7 +249,8 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   StationOptions& st = c.station;
   if (const toml::table* t = root["station"].as_table()) {
     if (!OnlyKeys(*t,
-                  {"models", "sensor_class", "drift_model", "bias_tau_s", "warmup", "warmup_tau_s"},
+                  {"models", "sensor_class", "drift_model", "identify_drift", "bias_tau_s",
+                   "warmup", "warmup_tau_s"},
                   "[station]", source, error)) {
       return false;
     }
@@ -262,6 +263,14 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
       return false;
     }
     st.drift_model = drift_model == "gauss-markov";
+    if (const toml::node* n = t->get("identify_drift")) {
+      auto v = n->value<bool>();
+      if (!v) {
+        *error = fmt::format("{}: 'identify_drift' must be true or false", Where(*n, source));
+        return false;
+      }
+      st.identify_drift = *v;
+    }
     if (!GetNumber(*t, "bias_tau_s", &st.bias_tau_s, source, error) ||
         !GetNumber(*t, "warmup", &st.warmup_in_instabilities, source, error) ||
         !GetNumber(*t, "warmup_tau_s", &st.warmup_tau_s, source, error)) {

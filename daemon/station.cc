@@ -85,6 +85,14 @@ struct Station::DeviceState {
 
 namespace {
 
+// The drift's identified strength, with the scale the solve used ("used": 1 while the poses do
+// not reject the prior).
+nlohmann::json DriftScaleJson(const Estimate& e) {
+  nlohmann::json j = protocol::ToJson(e.drift_scale);
+  j["used"] = e.drift_scale_used;
+  return j;
+}
+
 // {NAME:{"value","sigma"}} in the model's order; sigma null when undetermined.
 nlohmann::json ParamsJson(const Estimate& e) {
   nlohmann::json params = nlohmann::json::object();
@@ -166,9 +174,11 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
       ModelState m;
       std::string error;
       m.model = MakeModel(name, options_.context, &error);
-      m.calibrator = std::make_unique<Calibrator>(options_.drift_model
-                                                      ? DriftOptionsForClass(*m.model, sensor_)
-                                                      : OptionsForClass(*m.model, sensor_));
+      CalibratorOptions co = options_.drift_model ? DriftOptionsForClass(*m.model, sensor_)
+                                                  : OptionsForClass(*m.model, sensor_);
+      // The class's drift is the prior; the session's poses identify its strength.
+      co.identify_drift = options_.drift_model && options_.identify_drift;
+      m.calibrator = std::make_unique<Calibrator>(co);
       d->models.push_back(std::move(m));
     }
     devices_.push_back(std::move(d));
@@ -331,8 +341,10 @@ nlohmann::json Station::Status(int device) const {
         {"gate", ToJson(m.gate)},
         {"fit_check", ToString(m.estimate.fit.verdict)},
         {"noise_model", co.drift.enabled()
-                            ? protocol::ToJson(co.drift)
+                            ? protocol::ToJson(m.estimate.ok ? m.estimate.drift : co.drift)
                             : nlohmann::json{{"pose_offset_sigma", co.pose_offset_sigma}}},
+        {"drift_scale",
+         m.estimate.ok && co.identify_drift ? DriftScaleJson(m.estimate) : nlohmann::json()},
         {"active_version", m.active_version},
         {"applied_version", m.applied_version}};
   }
@@ -586,8 +598,15 @@ nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& 
     (accel ? r.mag : r.acc).reset();
     records.push_back(protocol::ToJson(r));
   }
-  const nlohmann::json calibrator =
+  nlohmann::json calibrator =
       protocol::CalibratorJson(m.calibrator->options(), options_.sensor_class);
+  if (e.drift.enabled()) {
+    // The drift the solve used (the prior times the identified scale): corrected output's sigma
+    // grows with it, also after a restart; the configured one stays as the prior.
+    calibrator["drift_prior"] = calibrator["drift"];
+    calibrator["drift"] = protocol::ToJson(e.drift);
+    calibrator["drift_scale"] = DriftScaleJson(e);
+  }
   // Device identity and the device-side stored calibration come from the device dialogue of a
   // live station (SetDeviceIdentity); a replay does not have them (null).
   const nlohmann::json provenance = {
@@ -821,6 +840,8 @@ nlohmann::json Station::Result() const {
           {"dof", e.dof},
           {"p_value", e.p_value},
           {"fit_check", protocol::ToJson(e.fit, m.model->sensor())},
+          {"drift_scale",
+           e.ok && m.calibrator->options().identify_drift ? DriftScaleJson(e) : nlohmann::json()},
           {"bias_window", e.bias_window ? protocol::ToJson(*e.bias_window) : nlohmann::json()},
           {"gauge", e.gauge},
           {"warnings", e.warnings},

@@ -48,6 +48,9 @@ struct StationOptions {
   // this many bias instabilities (1 sigma at the first pose) settling with warmup_tau_s.
   // Negative: the class's (100 s; no warm-up; 60 s).
   double bias_tau_s = -1.0;
+  // Identify the drift's strength from the session's poses, with the class's as the prior
+  // (core/drift_identify.h); false: the class's drift as it is.
+  bool identify_drift = true;
   double warmup_in_instabilities = -1.0;
   double warmup_tau_s = -1.0;
   // The table's motion and what the next-pose planner minimises (core/pose_planner.h).

@@ -155,6 +155,13 @@ nlohmann::json ToJson(const BiasDrift& d) {
   return j;
 }
 
+nlohmann::json ToJson(const DriftScale& d) {
+  auto finite = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
+  return {{"identified", d.identified},           {"scale", d.scale},
+          {"log_sigma", finite(d.log_sigma)},     {"data_log_sigma", finite(d.data_log_sigma)},
+          {"prior_log_sigma", d.prior_log_sigma}, {"rejects_prior", d.rejects_prior}};
+}
+
 bool ParseBiasDrift(const nlohmann::json& j, BiasDrift* out) {
   if (!j.is_object()) return false;
   BiasDrift d;
@@ -287,6 +294,17 @@ bool ParseCalibrationDocument(const nlohmann::json& j, CalibrationDocument* out,
   d.dof = j.value("dof", 0);
   d.chi2 = j.value("chi2", 0.0);
   d.p_value = j.value("p_value", 1.0);
+  if (j.contains("calibrator") && j["calibrator"].is_object() &&
+      j["calibrator"].contains("drift_scale") && j["calibrator"]["drift_scale"].is_object()) {
+    const auto& s = j["calibrator"]["drift_scale"];
+    if (s.value("identified", false) && s.contains("data_scale") && s["data_scale"].is_number()) {
+      d.drift_scale = s["data_scale"].get<double>();
+      if (s.contains("data_log_sigma") && s["data_log_sigma"].is_number()) {
+        d.drift_scale_log_sigma = s["data_log_sigma"].get<double>();
+      }
+      if (s.contains("used") && s["used"].is_number()) d.drift_scale_used = s["used"].get<double>();
+    }
+  }
   if (j.contains("fit_check") && j["fit_check"].is_object()) {
     const auto& f = j["fit_check"];
     if (f.contains("verdict") && f["verdict"].is_string()) d.fit_verdict = f["verdict"];

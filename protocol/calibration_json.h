@@ -17,6 +17,7 @@
 #include <Eigen/Core>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -42,6 +43,9 @@ nlohmann::json ToJson(const FitCheck& fit, SensorKind sensor);
 nlohmann::json ToJson(const BiasDrift& drift);
 bool ParseBiasDrift(const nlohmann::json& j, BiasDrift* out);
 nlohmann::json ToJson(const TimeWindow& window);
+// The drift's strength identified from the poses: {"identified","scale","log_sigma",
+// "data_log_sigma","prior_log_sigma","rejects_prior"} (null for an infinite sigma).
+nlohmann::json ToJson(const DriftScale& scale);
 bool ParseTimeWindow(const nlohmann::json& j, TimeWindow* out);
 
 // Every gated parameter's tolerance (GatedParameters, ToleranceFor).
@@ -67,6 +71,9 @@ struct CalibrationDocument {
   double p_value = 1.0;
   std::string fit_verdict;  // FitCheck's, "" when the document predates it
   std::string fit_message;
+  // calibrator.drift_scale: the drift's strength the poses alone give (data_scale, with the 1
+  // sigma of its log) and the scale the solve used (absent: not identified).
+  std::optional<double> drift_scale, drift_scale_log_sigma, drift_scale_used;
   GateResult gate;
   nlohmann::json override_who;  // null unless published by operator override
   nlohmann::json identity;      // provenance.device_identity (null in replays)

@@ -108,6 +108,18 @@ std::string ModelSection(const CalibrationDocument& d) {
         text += fmt::format(", warm-up {:.3g} {} settling with &#964; = {:.0f} s",
                             drift.warmup_sigma.maxCoeff() * unit, unit_name, drift.warmup_tau_s);
       }
+      if (d.drift_scale) {
+        const double used = d.drift_scale_used.value_or(1.0);
+        text += fmt::format(
+            " ({}; the poses give {:.2f} &#215; the configured drift{})",
+            used != 1.0
+                ? fmt::format("identified from the poses: {:.2f} &#215; the configured", used)
+                : "the configured drift: the poses do not reject it",
+            *d.drift_scale,
+            d.drift_scale_log_sigma ? fmt::format(", within a factor {:.2f} (1&#963;)",
+                                                  std::exp(*d.drift_scale_log_sigma))
+                                    : "");
+      }
       text +=
           "; the biases hold over the latest pose's window, and corrected output's &#963; grows "
           "with the time since";

@@ -169,6 +169,8 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
         std::shuffle(o.poses.begin(), o.poses.end(), rng);
       }
       o.session.sensor = sensor;
+      o.session.sensor.acc_bias_instability *= args.drift_scale;
+      o.session.sensor.mag_bias_instability *= args.drift_scale;
       o.session.dwell_s = args.dwell_s;
       o.session.table = table;
       o.session.seed = seed;
@@ -196,6 +198,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       station.warmup_in_instabilities = args.station_warmup;
       station.warmup_tau_s = args.warmup_tau_s;
       station.drift_model = !args.independent;
+      station.identify_drift = args.identify_drift;
       if (args.gate_min_dof >= 0) {
         GateDefaultsForClass(args.sensor_class, &station.gate);
         station.gate.min_dof = args.gate_min_dof;
@@ -365,6 +368,8 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                       {"table_rate_dps", args.table_rate_dps},
                                       {"warmup", args.warmup},
                                       {"random_walk", args.random_walk},
+                                      {"drift_scale", args.drift_scale},
+                                      {"identify_drift", args.identify_drift},
                                       {"station_warmup", args.station_warmup},
                                       {"runs", args.runs},
                                       {"solved", ok},

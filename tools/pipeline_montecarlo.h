@@ -31,6 +31,11 @@ struct PipelineMonteCarloArgs {
   double warmup = 0.0;
   double warmup_tau_s = 60.0;
   double random_walk = 0.0;
+  // The simulated bias instability in units of the class's (the station keeps the class's as
+  // its prior), and whether the station identifies the drift's strength ([station]
+  // identify_drift).
+  double drift_scale = 1.0;
+  bool identify_drift = true;
   // The station's warm-up allowance ([station] warmup, in bias instabilities; negative: none).
   double station_warmup = -1.0;
   bool independent = false;  // the station's model before issue 19 ([station] drift_model)

@@ -368,6 +368,15 @@ void AddSimFitCommands(CLI::App* app) {
                  "calibration the gate first activated (first-gate)")
       ->check(CLI::IsMember({"end", "first-gate"}))
       ->capture_default_str();
+  mc->add_option("--drift-scale", pipe->drift_scale,
+                 "with --pipeline: the simulated bias instability in units of the class's (the "
+                 "station's prior stays the class's)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  mc->add_flag(
+      "--no-identify", [pipe](std::int64_t) { pipe->identify_drift = false; },
+      "with --pipeline: the station does not identify the drift's strength ([station] "
+      "identify_drift = false)");
   mc->add_option("--gate-min-dof", pipe->gate_min_dof,
                  "with --pipeline: the gate's least number of redundant equations (default 3)")
       ->check(CLI::Range(0, 1000));

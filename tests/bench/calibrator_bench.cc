@@ -57,9 +57,10 @@ void BM_Accel13DriftFullSolve(benchmark::State& state) { FullSolve(state, "accel
 
 // The update after one more pose: a calibrator holding n poses and their estimate gets pose n+1
 // and re-solves, warm-started.
-void IncrementalAddPose(benchmark::State& state, bool drift) {
+void IncrementalAddPose(benchmark::State& state, bool drift, bool identify = false) {
   const int n = static_cast<int>(state.range(0));
-  const Session s = MakeSession("accel13", n + 1, 2, drift);
+  Session s = MakeSession("accel13", n + 1, 2, drift);
+  s.options.identify_drift = identify;
   std::string error;
   for (auto _ : state) {
     state.PauseTiming();
@@ -78,6 +79,10 @@ void IncrementalAddPose(benchmark::State& state, bool drift) {
 
 void BM_Accel13IncrementalAddPose(benchmark::State& state) { IncrementalAddPose(state, false); }
 void BM_Accel13DriftIncrementalAddPose(benchmark::State& state) { IncrementalAddPose(state, true); }
+// The same with the drift's strength identified after the solve (the station's default).
+void BM_Accel13IdentifyIncrementalAddPose(benchmark::State& state) {
+  IncrementalAddPose(state, true, true);
+}
 
 BENCHMARK(BM_Accel13FullSolve)
     ->Arg(10)
@@ -98,6 +103,7 @@ BENCHMARK(BM_Accel13DriftFullSolve)
     ->Unit(benchmark::kMillisecond)
     ->Complexity();
 BENCHMARK(BM_Accel13DriftIncrementalAddPose)->Arg(36)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Accel13IdentifyIncrementalAddPose)->Arg(36)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Mag13FullSolve)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Mag22FullSolve)
     ->Arg(10)

@@ -114,6 +114,10 @@ TEST(StationDrift, CorrectedSigmaGrowsWithTheTimeSinceTheCalibration) {
   const double t1 = m["bias_window"]["t1_s"].get<double>();
   EXPECT_GT(t1, m["bias_window"]["t0_s"].get<double>());
   EXPECT_EQ(m["fit_check"]["verdict"], "ok") << m["fit_check"].dump();
+  // The class's drift is right here: identified, and not rejected (the solve used it as it is).
+  EXPECT_TRUE(m["drift_scale"]["identified"].get<bool>()) << m["drift_scale"].dump();
+  EXPECT_FALSE(m["drift_scale"]["rejects_prior"].get<bool>()) << m["drift_scale"].dump();
+  EXPECT_EQ(m["drift_scale"]["used"].get<double>(), 1.0);
 
   Sample s = c.session.samples.back();
   daemon::Station::Corrected now, later;
