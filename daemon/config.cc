@@ -264,12 +264,12 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
     }
     st.drift_model = drift_model == "gauss-markov";
     if (const toml::node* n = t->get("identify_drift")) {
-      auto v = n->value<bool>();
+      const auto* v = n->as_boolean();  // not value<bool>(), which takes 1 for true
       if (!v) {
         *error = fmt::format("{}: 'identify_drift' must be true or false", Where(*n, source));
         return false;
       }
-      st.identify_drift = *v;
+      st.identify_drift = v->get();
     }
     if (!GetNumber(*t, "bias_tau_s", &st.bias_tau_s, source, error) ||
         !GetNumber(*t, "warmup", &st.warmup_in_instabilities, source, error) ||
@@ -343,12 +343,12 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
       DeviceSettings settings;
       if (!GetNumber(*t, "rate_hz", &settings.rate_hz, source, error)) return false;
       if (const toml::node* cn = t->get("configure")) {
-        auto v = cn->value<bool>();
+        const auto* v = cn->as_boolean();  // value<bool>() would take 1 for true
         if (!v) {
           *error = fmt::format("{}: 'configure' must be true or false", Where(*cn, source));
           return false;
         }
-        settings.configure = *v;
+        settings.configure = v->get();
       }
       if (t->get("rate_hz") && !(settings.rate_hz > 0 && settings.rate_hz <= 4000)) {
         *error = fmt::format("{}: 'rate_hz' must be in (0, 4000]", Where(d, source));

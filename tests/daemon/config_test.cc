@@ -79,6 +79,9 @@ TEST(Config, TheDriftModelsSettings) {
   ASSERT_TRUE(ParseConfig("[station]\ndrift_model = \"independent\"\n", "t.toml", &c, &error))
       << error;
   EXPECT_FALSE(c.station.drift_model);
+  EXPECT_TRUE(c.station.identify_drift);
+  ASSERT_TRUE(ParseConfig("[station]\nidentify_drift = false\n", "t.toml", &c, &error)) << error;
+  EXPECT_FALSE(c.station.identify_drift);
 }
 
 TEST(Config, DevicesHaveTheirOwnModelsGatesRatesAndTheLabsReference) {
@@ -154,6 +157,9 @@ INSTANTIATE_TEST_SUITE_P(
         Bad{"[table]\nplan_for = \"speed\"\n", "plan_for must be \"time\" or \"poses\""},
         Bad{"[table]\nrate = 3\n", "unknown key 'rate' in [table]"},
         Bad{"[gate]\nmin_dof = 2.5\n", "'min_dof' must be a whole number from 0 to 1000"},
+        Bad{"[station]\nidentify_drift = 1\n", "'identify_drift' must be true or false"},
+        Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nconfigure = 1\n",
+            "'configure' must be true or false"},
         Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\n[[device]]\nname = "
             "\"a\"\nprotocol = \"xbus\"\nport = \"/dev/y\"\n",
             "device name 'a' is given twice"},
