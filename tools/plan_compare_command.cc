@@ -150,8 +150,9 @@ void AddPlanCompareCommand(CLI::App* app) {
   auto args = std::make_shared<PlanCompareArgs>();
   auto* cmd = app->add_subcommand(
       "plan-vs-cube",
-      "simulated sessions: poses the real calibrator and gate need along the 26-pose cube "
-      "sequence and with next-pose planning");
+      "simulated sessions in memory (independent pose noise; for drift and bytes use montecarlo "
+      "--pipeline): poses and table seconds the real calibrator and gate need along the 26-pose "
+      "cube sequence and with next-pose planning");
   cmd->add_option("--model", args->model, "model (turncal models)")->capture_default_str();
   cmd->add_option("--class", args->sensor_class, "industrial|consumer (noise and tolerances)")
       ->check(CLI::IsMember({"industrial", "consumer"}))
