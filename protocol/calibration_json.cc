@@ -157,9 +157,16 @@ nlohmann::json ToJson(const BiasDrift& d) {
 
 nlohmann::json ToJson(const DriftScale& d) {
   auto finite = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
-  return {{"identified", d.identified},           {"scale", d.scale},
-          {"log_sigma", finite(d.log_sigma)},     {"data_log_sigma", finite(d.data_log_sigma)},
-          {"prior_log_sigma", d.prior_log_sigma}, {"rejects_prior", d.rejects_prior}};
+  nlohmann::json j;
+  j["identified"] = d.identified;
+  j["scale"] = d.scale;
+  j["log_sigma"] = finite(d.log_sigma);
+  j["data_scale"] = d.data_scale;
+  j["data_log_sigma"] = finite(d.data_log_sigma);
+  j["prior_log_sigma"] = d.prior_log_sigma;
+  j["rejects_prior"] = d.rejects_prior;
+  j["use_scale"] = d.use_scale;
+  return j;
 }
 
 bool ParseBiasDrift(const nlohmann::json& j, BiasDrift* out) {

@@ -43,8 +43,8 @@ nlohmann::json ToJson(const FitCheck& fit, SensorKind sensor);
 nlohmann::json ToJson(const BiasDrift& drift);
 bool ParseBiasDrift(const nlohmann::json& j, BiasDrift* out);
 nlohmann::json ToJson(const TimeWindow& window);
-// The drift's strength identified from the poses: {"identified","scale","log_sigma",
-// "data_log_sigma","prior_log_sigma","rejects_prior"} (null for an infinite sigma).
+// The drift's strength identified from the poses: {"identified","scale","log_sigma","data_scale",
+// "data_log_sigma","prior_log_sigma","rejects_prior","use_scale"} (null for an infinite sigma).
 nlohmann::json ToJson(const DriftScale& scale);
 bool ParseTimeWindow(const nlohmann::json& j, TimeWindow* out);
 

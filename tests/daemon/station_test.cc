@@ -118,6 +118,10 @@ TEST(StationDrift, CorrectedSigmaGrowsWithTheTimeSinceTheCalibration) {
   EXPECT_TRUE(m["drift_scale"]["identified"].get<bool>()) << m["drift_scale"].dump();
   EXPECT_FALSE(m["drift_scale"]["rejects_prior"].get<bool>()) << m["drift_scale"].dump();
   EXPECT_EQ(m["drift_scale"]["used"].get<double>(), 1.0);
+  EXPECT_EQ(m["drift_scale"]["use_scale"].get<double>(), 1.0);
+  // The poses' own estimate, within 3 of its sigma of the class's 1.
+  EXPECT_LT(std::abs(std::log(m["drift_scale"]["data_scale"].get<double>())),
+            3 * m["drift_scale"]["data_log_sigma"].get<double>());
 
   Sample s = c.session.samples.back();
   daemon::Station::Corrected now, later;
