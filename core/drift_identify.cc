@@ -114,7 +114,6 @@ DriftScale IdentifyDriftScale(const Eigen::MatrixXd& jacobian, const Eigen::Vect
   const double p2 = options.prior_log_sigma * options.prior_log_sigma;
   // The log-likelihood of u = ln s, and the log-posterior.
   auto like = [&](double u) {
-    ++out.evaluations;
     const double l = reml(std::exp(u));
     return std::isfinite(l) ? l : -INFINITY;
   };

@@ -46,7 +46,6 @@ struct DriftScale {
   // would make the sigma optimistic). 1 otherwise.
   bool rejects_prior = false;
   double use_scale = 1.0;
-  int evaluations = 0;
 };
 
 // The drift model with every 1 sigma multiplied by `scale`.

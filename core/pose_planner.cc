@@ -196,9 +196,8 @@ PlanningTarget TargetFromCalibrator(const Calibrator& calibrator, const Eigen::V
   if (!(white.minCoeff() > 0) && !t.captured_windows.empty()) {
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     for (std::size_t i = 0; i < t.captured.size(); ++i) {
-      const Eigen::Matrix3d& W = t.captured[i].sqrt_information;
-      sum +=
-          (W.transpose() * W).inverse().diagonal() * t.captured_windows[i].duration_s() / dwell_s;
+      sum += WhiteVariance(t.captured[i].sqrt_information) * t.captured_windows[i].duration_s() /
+             dwell_s;
     }
     white = white.cwiseMax(sum / static_cast<double>(t.captured.size()));
   }

@@ -44,6 +44,20 @@ double TableMotion::AxisSeconds(int axis, double angle_rad) const {
   return d / v + v / a;
 }
 
+std::vector<TimeWindow> TableMotion::DwellWindows(const std::vector<TablePose>& poses,
+                                                  double dwell_s, const TablePose& from) const {
+  std::vector<TimeWindow> out;
+  TablePose at = from;
+  double t = 0;
+  for (const auto& p : poses) {
+    t += MoveSeconds(at, p) + settle_s;
+    out.push_back({t, t + dwell_s});
+    t += dwell_s;
+    at = p;
+  }
+  return out;
+}
+
 double TableMotion::MoveSeconds(const TablePose& from, const TablePose& to) const {
   const Eigen::Vector3d d = Travel(from, to);
   double t = 0;

@@ -10,7 +10,9 @@
 
 #include <Eigen/Core>
 #include <string>
+#include <vector>
 
+#include "core/bias_drift.h"
 #include "core/table_pose.h"
 
 namespace turncal {
@@ -31,6 +33,10 @@ struct TableMotion {
   double MoveSeconds(const TablePose& from, const TablePose& to) const;
   // Seconds of one axis's trapezoidal profile over `angle_rad` (either sign).
   double AxisSeconds(int axis, double angle_rad) const;
+  // The dwell windows of `poses` visited in order from `from` at time 0: each after its move and
+  // settling, `dwell_s` long, the next move starting at its end.
+  std::vector<TimeWindow> DwellWindows(const std::vector<TablePose>& poses, double dwell_s,
+                                       const TablePose& from = {}) const;
 };
 
 }  // namespace turncal

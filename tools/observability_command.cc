@@ -231,15 +231,9 @@ int RunPlan(const ObservabilityArgs& args) {
     t.sqrt_information = ExpectedPoseSqrtInformation(*model, sensor, o, args.dwell_s, args.rate_hz);
     t.drift = o.drift;
     // The captured poses as if taken in the file's order from home at the table's rates.
-    TablePose at;
-    double t_s = 0;
-    for (const auto& p : captured) {
+    for (const auto& p : captured)
       t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information});
-      t_s += options.motion.MoveSeconds(at, p) + options.motion.settle_s;
-      if (t.drift.enabled()) t.captured_windows.push_back({t_s, t_s + args.dwell_s});
-      t_s += args.dwell_s;
-      at = p;
-    }
+    if (t.drift.enabled()) t.captured_windows = options.motion.DwellWindows(captured, args.dwell_s);
     GateDefaultsForClass(args.sensor_class, &t.gate);
     t.gate.accept_gauge_dependent_correction = args.accept_gauge;
     targets.push_back(t);

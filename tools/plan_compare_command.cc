@@ -27,13 +27,10 @@ struct PlanCompareArgs {
 // Table seconds of the first `count` poses from home: moves, settling and dwells.
 double SessionSeconds(const std::vector<TablePose>& poses, int count, const TableMotion& table,
                       double dwell_s) {
-  TablePose at;
-  double t = 0;
-  for (int i = 0; i < count && i < static_cast<int>(poses.size()); ++i) {
-    t += table.MoveSeconds(at, poses[static_cast<std::size_t>(i)]) + table.settle_s + dwell_s;
-    at = poses[static_cast<std::size_t>(i)];
-  }
-  return t;
+  if (count <= 0 || poses.empty()) return 0.0;
+  const std::vector<TablePose> first(
+      poses.begin(), poses.begin() + std::min<std::ptrdiff_t>(count, std::ssize(poses)));
+  return table.DwellWindows(first, dwell_s).back().t1_s;
 }
 
 struct Tally {
