@@ -132,6 +132,16 @@ Eigen::Matrix3d SqrtInformation(const Eigen::Matrix3d& V, const Eigen::Vector3d&
   return V * variances.cwiseInverse().cwiseSqrt().asDiagonal() * V.transpose();
 }
 
+}  // namespace
+
+double WhiteFloorFraction(std::int64_t count) {
+  constexpr double kLeast = 0.1;
+  if (count < 2) return kLeast;
+  return std::max(kLeast, 1.0 - 4.0 * std::sqrt(2.0 / static_cast<double>(count)));
+}
+
+namespace {
+
 // Dense Jacobian of all residuals (with the robust loss's reweighting, as the solver sees it).
 Eigen::MatrixXd DenseJacobian(ceres::Problem* problem) {
   ceres::CRSMatrix crs;
@@ -228,10 +238,11 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   const double duration_s = record.sensor_end_s() - record.sensor_start_s();
   double floor_var = 0.0;
   if (options_.noise_density > 0 && duration_s > 0) {
-    floor_var = options_.noise_density * options_.noise_density / (2.0 * duration_s);
+    floor_var = options_.noise_density * options_.noise_density / (2.0 * duration_s) *
+                WhiteFloorFraction(triad->mean_covariance ? 0 : triad->count);
   }
-  // Floor the eigenvalues (the mean is never known better than the white noise allows), then add
-  // the pose-to-pose offset variance.
+  // Floor the eigenvalues (the mean is never known much better than the white noise allows), then
+  // add the pose-to-pose offset variance.
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
   Eigen::Vector3d lambda = eig.eigenvalues().cwiseMax(floor_var).array() +
                            options_.pose_offset_sigma * options_.pose_offset_sigma;

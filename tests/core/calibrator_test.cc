@@ -306,6 +306,54 @@ TEST(Calibrator, NonFiniteOrSingularRecordsAreRefusedWithAReason) {
   EXPECT_TRUE(with_floor.add_pose(zero, &error)) << error;
 }
 
+// The floor on a pose's white covariance must not lift honest windows: over 400 windows of 300
+// white samples at the configured density the mean weighted variance is the true one. The sample
+// covariance's scatter gives the tolerance: per window the mean of 3 eigenvalues has relative sd
+// sqrt(2 / (3 x 299)) = 0.047, over 400 windows 0.0024, so 4 sigma = 0.0094. A floor at the
+// level itself (+4.8 % at n = 300) fails it.
+TEST(Calibrator, WhiteFloorDoesNotInflateHonestWindows) {
+  const SensorClass sensor = IndustrialClass();
+  std::mt19937_64 rng(77);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  const int n = 300;
+  const double sample_sigma = sensor.acc_noise_density * std::sqrt(sensor.rate_hz / 2.0);
+  const double white_mean_var = sample_sigma * sample_sigma / n;
+  CalibratorOptions o;
+  o.model = "accel13";
+  o.noise_density = sensor.acc_noise_density;
+  Calibrator calibrator(o);
+  std::string error;
+  const int windows = 400;
+  for (int k = 0; k < windows; ++k) {
+    Eigen::MatrixXd x(n, 3);
+    for (int i = 0; i < n; ++i) {
+      for (int j = 0; j < 3; ++j) x(i, j) = sample_sigma * normal(rng);
+    }
+    const Eigen::RowVector3d mean = x.colwise().mean();
+    const Eigen::MatrixXd centred = x.rowwise() - mean;
+    TriadStats stats;
+    stats.count = n;
+    stats.mean = Eigen::Vector3d(0, 0, -9.81) + mean.transpose();
+    stats.covariance = centred.transpose() * centred / (n - 1);
+    PoseRecord record;
+    record.t_start_s = 10.0 * k;
+    record.t_end_s = record.t_start_s + n / sensor.rate_hz;
+    record.acc = stats;
+    ASSERT_TRUE(calibrator.add_pose(record, &error)) << error;
+  }
+  double ratio = 0.0;
+  for (const WeightedPose& w : calibrator.weighted_poses()) {
+    const Eigen::Matrix3d cov = (w.sqrt_information * w.sqrt_information).inverse();
+    ratio += cov.trace() / (3.0 * white_mean_var);
+  }
+  ratio /= windows;
+  EXPECT_NEAR(ratio, 1.0, 0.0094);
+  // The floor still stands for what cannot be white noise.
+  EXPECT_NEAR(WhiteFloorFraction(300), 1.0 - 4.0 * std::sqrt(2.0 / 300.0), 1e-12);
+  EXPECT_EQ(WhiteFloorFraction(10), 0.1);
+  EXPECT_EQ(WhiteFloorFraction(0), 0.1);
+}
+
 TEST(Calibrator, InvalidOptionsAreReported) {
   CalibratorOptions o;
   std::string error;
