@@ -109,6 +109,8 @@ struct RunOutcome {
   Eigen::VectorXd z;
   double p_value = 1.0;
   bool gate_pass = false;
+  nlohmann::json gate_reasons = nlohmann::json::array();  // the gate's reasons at the end
+  nlohmann::json rejected = nlohmann::json::array();      // the sequencer's rejection reasons
   int poses = 0;
   double session_s = 0.0;
   std::uint64_t seed = 0;
@@ -213,6 +215,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
           out.gate_poses = j.value("poses", -1);
           out.gate_s = j.value("t", NAN) - offset_s;
         }
+        if (j.value("class", "") == "POSE_REJECTED") out.rejected.push_back(j.value("reason", ""));
       };
       if (!daemon::ReplayOnce(path.path, station, "", on_event, &replay, &e)) {
         out.error = e;
@@ -274,6 +277,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       }
       out.p_value = m.value("p_value", 1.0);
       out.gate_pass = m["gate"].value("pass", false);
+      if (m["gate"].contains("reasons")) out.gate_reasons = m["gate"]["reasons"];
       // A calibration document counts its poses in its estimate; the result in the model.
       out.poses = m.value("poses", args.at == "first-gate" ? out.gate_poses : 0);
       out.session_s = capture.session.duration_s;
@@ -310,6 +314,8 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                 {"z", z},
                                 {"p_value", r.p_value},
                                 {"gate_pass", r.gate_pass},
+                                {"gate_reasons", r.gate_reasons},
+                                {"rejected", r.rejected},
                                 {"poses", r.poses}}
                      .dump());
     }

@@ -380,9 +380,10 @@ void AddSimFitCommands(CLI::App* app) {
   mc->add_option("--gate-min-dof", pipe->gate_min_dof,
                  "with --pipeline: the gate's least number of redundant equations (default 3)")
       ->check(CLI::Range(0, 1000));
-  mc->add_option("--runs-out", pipe->runs_out,
-                 "with --pipeline: one JSON line per run (seed, z per parameter, chi^2 p-value, "
-                 "gate) to this file");
+  mc->add_option(
+      "--runs-out", pipe->runs_out,
+      "with --pipeline: one JSON line per run (seed, z per parameter, chi^2 p-value, "
+      "the gate and its reasons, the poses the sequencer rejected and why) to this file");
   mc->add_option("--keep", pipe->keep_dir,
                  "with --pipeline: keep the captures of runs with a parameter beyond 4 sigma in "
                  "this folder (run-SEED.tcap), for turncald --replay");
