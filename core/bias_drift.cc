@@ -50,6 +50,17 @@ bool BiasDrift::IsValid(std::string* error) const {
   return true;
 }
 
+double BiasDrift::HalvesDifferenceVariance(int axis, double first_s, double second_s) const {
+  if (!(first_s > 0) || !(second_s > 0)) return 0.0;
+  BiasDrift wander = *this;
+  wander.warmup_sigma.setZero();
+  const TimeWindow a{0.0, first_s}, b{first_s, first_s + second_s};
+  const double v = wander.WindowCovariance(axis, a, a, 0.0) +
+                   wander.WindowCovariance(axis, b, b, 0.0) -
+                   2.0 * wander.WindowCovariance(axis, a, b, 0.0);
+  return std::max(0.0, v);
+}
+
 double BiasDrift::WindowCovariance(int axis, const TimeWindow& a, const TimeWindow& b,
                                    double origin_s) const {
   const double ta = std::max(a.duration_s(), 1e-6), tb = std::max(b.duration_s(), 1e-6);

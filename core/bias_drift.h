@@ -55,6 +55,10 @@ struct BiasDrift {
   double VarianceSince(int axis, const TimeWindow& ref, double t_s) const;
   // The 1-sigma wander per axis over `seconds` after the reference window's end.
   Eigen::Vector3d SigmaAfter(const TimeWindow& ref, double seconds) const;
+  // Variance on one axis of the wander's mean over `second_s` seconds minus its mean over the
+  // `first_s` seconds just before: what a still dwell's two halves may differ by through the
+  // sensor's own drift (Gauss-Markov and random walk; the warm-up's slow settling is left out).
+  double HalvesDifferenceVariance(int axis, double first_s, double second_s) const;
   // The window's mean of exp(-(t - origin_s) / warmup_tau_s).
   double WarmupMean(const TimeWindow& window, double origin_s) const;
 };

@@ -90,8 +90,16 @@ void Sequencer::Emit(SequencerEventKind kind, double t_s, std::string reason,
   sink_(e);
 }
 
+void Sequencer::SetDriftScale(int triad, double scale) {
+  if (triad < 0 || triad > 2) return;
+  drift_scale_[static_cast<std::size_t>(triad)] = std::isfinite(scale) && scale > 0 ? scale : 1.0;
+  if (detector_) detector_->SetDriftScale(triad, scale);
+}
+
 void Sequencer::StartDetector(const NoiseProfile& profile, double t_s) {
   detector_ = std::make_unique<StillnessDetector>(profile, options_.stillness);
+  for (int t = 0; t < 3; ++t)
+    detector_->SetDriftScale(t, drift_scale_[static_cast<std::size_t>(t)]);
   required_run_ = detector_->window() +
                   static_cast<std::int64_t>(std::ceil(options_.settle_guard_s * profile.rate_hz));
   if (!options_.noise) {
@@ -500,7 +508,9 @@ void Sequencer::Complete(double t_s) {
     return;
   }
   // The dwell's two halves must agree: a table creeping too slowly for one window to see
-  // (0.1 deg/s moves gravity's projection by 2e-3 m/s^2 per second) shows between them.
+  // (0.1 deg/s moves gravity's projection by 2e-3 m/s^2 per second) shows between them, beyond
+  // what the white noise and the sensor's own bias wander (options' stillness.bias_drift, at the
+  // scale the station identified) explain.
   for (int t = 0; t < 3; ++t) {
     const NoiseProfile& prof = detector_->profile();
     if (!prof.sigma[t] || acc_[t].count() < 4 || first_half_[t].count() < 2) continue;
@@ -509,8 +519,7 @@ void Sequencer::Complete(double t_s) {
     const Eigen::Vector3d m1 = first_half_[t].mean();
     const Eigen::Vector3d m2 = (acc_[t].mean() * n - m1 * n1) / (n - n1);
     for (int a = 0; a < 3; ++a) {
-      const double limit =
-          detector_->drift_z() * (*prof.sigma[t])[a] * std::sqrt(1 / n1 + 1 / (n - n1));
+      const double limit = detector_->HalvesDriftLimit(t, a, n1, n - n1);
       const double drift = std::abs(m2[a] - m1[a]);
       if (!(drift <= limit)) {
         const std::string why = fmt::format(

@@ -30,6 +30,7 @@
 // sent, on the host clock: its receive time, or earlier when its device clock shows it was read
 // late, in a backlog (HostClock).
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -140,6 +141,9 @@ class Sequencer {
   const SampleCounts& totals() const { return totals_; }
   std::int64_t captured() const { return captured_; }
   std::int64_t rejected() const { return rejected_; }
+  // Scales the bias wander the stillness and creep tests allow for on one triad (kTriadAcc,
+  // kTriadGyr, kTriadMag): the drift's strength the calibrator identified, as a sigma factor.
+  void SetDriftScale(int triad, double scale);
 
  private:
   enum class State { kIdle, kWaiting, kCollecting, kSegmentDone, kScheduleDone };
@@ -168,6 +172,7 @@ class Sequencer {
   ExclusionObserver excluded_;
   NoiseMeter meter_;
   std::unique_ptr<StillnessDetector> detector_;
+  std::array<double, 3> drift_scale_{1.0, 1.0, 1.0};
   std::int64_t required_run_ = 0;
 
   State state_ = State::kIdle;

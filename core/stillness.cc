@@ -321,6 +321,13 @@ bool StillnessOptions::IsValid(std::string* error) const {
     }
     return false;
   }
+  for (const BiasDrift& d : bias_drift) {
+    std::string why;
+    if (!d.IsValid(&why)) {
+      if (error) *error = "stillness: the bias wander allowed for: " + why;
+      return false;
+    }
+  }
   return true;
 }
 
@@ -355,7 +362,27 @@ StillnessDetector::StillnessDetector(const NoiseProfile& profile, const Stillnes
   const double dof = profile.sigma_dof;
   q_var_ = VarianceRatioLimit(options.false_alarm, w_ - 1, dof);
   z_ = TwoSidedZ(options.false_alarm, dof);
+  for (int t = 0; t < 3; ++t) SetDriftScale(t, 1.0);
   finding_.kind = StillFinding::kFilling;
+}
+
+double StillnessDetector::HalvesDriftLimit(int triad, int axis, double n1, double n2) const {
+  const auto t = static_cast<std::size_t>(triad);
+  if (!profile_.sigma[t] || !(n1 > 0) || !(n2 > 0)) return 0.0;
+  const double sigma = (*profile_.sigma[t])[axis];
+  const double scale = drift_scale_[t];
+  const double wander = options_.bias_drift[t].HalvesDifferenceVariance(axis, n1 / profile_.rate_hz,
+                                                                        n2 / profile_.rate_hz);
+  return z_ * std::sqrt(sigma * sigma * (1 / n1 + 1 / n2) + scale * scale * wander);
+}
+
+void StillnessDetector::SetDriftScale(int triad, double scale) {
+  const auto t = static_cast<std::size_t>(triad);
+  drift_scale_[t] = std::isfinite(scale) && scale > 0 ? scale : 1.0;
+  for (int a = 0; a < 3; ++a) {
+    window_drift_limit_[3 * t + static_cast<std::size_t>(a)] =
+        HalvesDriftLimit(triad, a, h_, w_ - h_);
+  }
 }
 
 const Eigen::Vector3d& StillnessDetector::At(std::size_t logical, int triad) const {
@@ -511,7 +538,7 @@ void StillnessDetector::Evaluate() {
       consider(StillFinding::kVariance, t, a, std::sqrt(var), sigma * std::sqrt(q_var_));
       const double drift = (s1_[c] - h1_[c]) / n2 - h1_[c] / n1;
       consider(StillFinding::kDrift, t, a, std::abs(drift),
-               z_ * sigma * std::sqrt(1 / n1 + 1 / n2));
+               window_drift_limit_[static_cast<std::size_t>(c)]);
       if (t == kTriadGyr) {
         const double mean = anchor_[c] + s1_[c] / n;
         const double limit = z_ * std::sqrt(sigma * sigma / n + profile_.gyr_bias_sigma_radps *
@@ -530,6 +557,9 @@ std::string StillnessDetector::DescribeLimits() const {
       "drift <= {:.2f} sigma sqrt(4/W), gyro rate <= {:.2f} sigma + {:.3g} rad/s",
       w_, w_ / profile_.rate_hz, options_.false_alarm, q_var_, z_, z_,
       options_.gyr_bias_drift_radps);
+  bool wander = false;
+  for (const BiasDrift& d : options_.bias_drift) wander |= d.enabled();
+  if (wander) out += " (the drift test allows for the bias wander too)";
   return out;
 }
 

@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "core/bias_drift.h"
 #include "core/sample.h"
 #include "core/synthetic.h"
 
@@ -130,6 +131,11 @@ struct StillnessOptions {
   double outlier_k = 5.0;  // robust sigmas for an isolated outlier
   // Gyro bias change allowed after the profile was measured (temperature, instability).
   double gyr_bias_drift_radps = 2e-3;
+  // The bias wander of each triad (kTriadAcc, kTriadGyr, kTriadMag) that the halves' drift tests
+  // allow for besides the white noise: within a dwell a sensor's own drift looks like a slowly
+  // creeping table, and a consumer accelerometer's (0.02 m/s^2, tau 100 s) moves the halves of a
+  // 3 s dwell twice as far apart as its white noise does. Zero (the default): white noise only.
+  std::array<BiasDrift, 3> bias_drift{};
   bool IsValid(std::string* error) const;
 };
 
@@ -166,6 +172,13 @@ class StillnessDetector {
   const NoiseProfile& profile() const { return profile_; }
   // The two-sided quantile the drift test uses (normal, or Student's t for a measured noise).
   double drift_z() const { return z_; }
+  // The limit on |mean(second) - mean(first)| on one axis of a triad for halves of n1 and n2
+  // samples: z sqrt(sigma^2 (1/n1 + 1/n2) + the bias wander's variance between them, scaled).
+  double HalvesDriftLimit(int triad, int axis, double n1, double n2) const;
+  // Scales a triad's bias wander (a sigma factor: the drift's strength the calibrator identified
+  // from the session; 1 = options' bias_drift as given).
+  void SetDriftScale(int triad, double scale);
+  double drift_scale(int triad) const { return drift_scale_[static_cast<std::size_t>(triad)]; }
 
  private:
   const Eigen::Vector3d& At(std::size_t logical, int triad) const;
@@ -188,6 +201,8 @@ class StillnessDetector {
   std::vector<double> scratch_;
   double q_var_ = 0.0;
   double z_ = 0.0;  // two-sided quantile of the drift and rate tests
+  std::array<double, 3> drift_scale_{1.0, 1.0, 1.0};
+  std::array<double, 9> window_drift_limit_{};  // HalvesDriftLimit for the window's halves
   std::int64_t still_run_ = 0;
   StillFinding finding_;
 };

@@ -155,6 +155,15 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
     auto d = std::make_unique<DeviceState>();
     d->name = device_names[i];
     SequencerOptions so = options_.sequencer;
+    // A still dwell's halves may differ by the sensor's own bias wander, not only by its white
+    // noise: the class's Gauss-Markov drift, scaled by what the calibrator identifies (Apply).
+    for (int t : {kTriadAcc, kTriadMag}) {
+      BiasDrift& wander = so.stillness.bias_drift[static_cast<std::size_t>(t)];
+      if (wander.enabled()) continue;
+      wander.gm_sigma = Eigen::Vector3d::Constant(t == kTriadAcc ? sensor_.acc_bias_instability
+                                                                 : sensor_.mag_bias_instability);
+      wander.gm_tau_s = sensor_.bias_tau_s;
+    }
     // The noise this session measured before a restart: stillness is judged as before.
     NoiseProfile stored;
     if (!so.noise && !options_.state_dir.empty() &&
@@ -693,6 +702,11 @@ void Station::Apply(std::size_t device, std::size_t model, double t_s, const Upd
   }
   m.estimate = job.estimate;
   m.estimate_poses = job.device_poses;
+  if (m.estimate.ok && m.calibrator->options().identify_drift) {
+    d.sequencer->SetDriftScale(
+        m.model->sensor() == SensorKind::kAccelerometer ? kTriadAcc : kTriadMag,
+        m.estimate.drift_scale_used);
+  }
   m.rank = job.rank;
   m.gate = job.gate;
   if (sink_ && !resuming) {

@@ -67,6 +67,27 @@ TEST(BiasDrift, RandomWalkIncrementsDoNotDependOnTheOrigin) {
   EXPECT_NEAR(d.VarianceSince(0, {0, 6}, 3), 0.01 * 6 / 12, 1e-9);
 }
 
+// What a still dwell's halves may differ by through the wander: for a Wiener process the two
+// halves' means straddle u(T1), each at q^2 T / 3 from it, so q^2 (T1 + T2) / 3 exactly; for a
+// Gauss-Markov process the kernel's double integrals; a warm-up is not counted.
+TEST(BiasDrift, HalvesDifferenceVarianceIsTheWandersBetweenAdjacentWindows) {
+  BiasDrift rw;
+  rw.rw_density = Eigen::Vector3d::Constant(0.1);
+  EXPECT_NEAR(rw.HalvesDifferenceVariance(1, 1.5, 2.5), 0.01 * (1.5 + 2.5) / 3, 1e-12);
+  BiasDrift gm;
+  gm.gm_sigma = Eigen::Vector3d(0.06, 0.0, 0.0);
+  gm.gm_tau_s = 100.0;
+  gm.warmup_sigma = Eigen::Vector3d::Constant(1.0);  // left out
+  const auto k = [](double t, double s) { return 0.0036 * std::exp(-std::abs(t - s) / 100.0); };
+  const TimeWindow a{0, 1.5}, b{1.5, 3.0};
+  const double quadrature = Quadrature(a, a, k) + Quadrature(b, b, k) - 2 * Quadrature(a, b, k);
+  EXPECT_NEAR(gm.HalvesDifferenceVariance(0, 1.5, 1.5), quadrature, 1e-3 * quadrature);
+  // Short against tau, the Gauss-Markov process is a random walk of q^2 = 2 sigma^2 / tau.
+  EXPECT_NEAR(gm.HalvesDifferenceVariance(0, 1.5, 1.5), 2 * 0.0036 / 100 * 3.0 / 3, 0.02 * 7.2e-5);
+  EXPECT_EQ(gm.HalvesDifferenceVariance(1, 1.5, 1.5), 0.0);
+  EXPECT_EQ(gm.HalvesDifferenceVariance(0, 0.0, 1.5), 0.0);
+}
+
 TEST(BiasDrift, SigmaGrowsWithTimeSinceTheCalibrationToTheStationaryLimit) {
   BiasDrift d;
   d.gm_sigma = Eigen::Vector3d::Constant(1.0);

@@ -974,6 +974,65 @@ TEST(Sequencer, CreepDuringTheDwellIsRejected) {
   EXPECT_EQ(c.captured.size(), 25u);
 }
 
+// A consumer sensor whose bias wanders at three times its class's instability (0.06 m/s^2,
+// tau 100 s): over a 3 s dwell its halves differ by ~8e-3 m/s^2, five times their white noise's
+// 1.6e-3, so the creep test that counts white noise only rejects many still poses (25 of 36 in
+// the station before it allowed for the wander). Allowing for the class's wander at the scale the
+// calibrator identified keeps every pose (a false alarm of ~1e-8 per test); a creeping table
+// beyond the wander (0.5 deg/s) is still rejected.
+TEST(Sequencer, ASensorsOwnBiasWanderIsNotACreepingTable) {
+  Session s;
+  std::string error;
+  s.accel = MakeModel("accel13", ModelContext{}, &error);
+  s.mag = MakeModel("mag13", ModelContext{}, &error);
+  s.poses = CubePoses26();
+  s.options.rate_hz = 100.0;
+  s.options.seed = 11;
+  const SensorClass consumer = ConsumerClass();
+  s.options.sensor = consumer;
+  s.options.sensor.acc_bias_instability *= 3;
+  s.options.sensor.mag_bias_instability *= 3;
+  s.sim = SimulateSession(*s.accel, *s.mag, s.poses, s.options);
+
+  Collected white_only;
+  Sequencer strict(SequencerOptions{}, Collect(&white_only));
+  Replay(s, &strict);
+  EXPECT_GE(white_only.rejected.size(), 5u);
+  for (const auto& e : white_only.rejected) {
+    EXPECT_NE(e.reason.find("drifted"), std::string::npos) << e.reason;
+  }
+
+  SequencerOptions o;
+  o.stillness.bias_drift[kTriadAcc].gm_sigma =
+      Eigen::Vector3d::Constant(consumer.acc_bias_instability);
+  o.stillness.bias_drift[kTriadMag].gm_sigma =
+      Eigen::Vector3d::Constant(consumer.mag_bias_instability);
+  for (int t : {kTriadAcc, kTriadMag}) o.stillness.bias_drift[t].gm_tau_s = consumer.bias_tau_s;
+  Collected wander;
+  Sequencer allowing(o, Collect(&wander));
+  allowing.SetDriftScale(kTriadAcc, 3.0);
+  allowing.SetDriftScale(kTriadMag, 3.0);
+  Replay(s, &allowing);
+  EXPECT_EQ(wander.rejected.size(), 0u) << wander.rejected[0].reason;
+  EXPECT_EQ(wander.captured.size(), 26u);
+
+  Collected crept;
+  Sequencer creep(o, Collect(&crept));
+  creep.SetDriftScale(kTriadAcc, 3.0);
+  creep.SetDriftScale(kTriadMag, 3.0);
+  const auto& ev = s.sim.events[6];
+  Replay(s, &creep, [&](Sample* x) {
+    const double t = x->t_host_ns * 1e-9;
+    if (t > ev.t_s && t < ev.dwell_end_s) {
+      x->acc_mps2->x() += 9.80665 * std::sin(0.5 * M_PI / 180 * (t - ev.t_s));
+    }
+    return true;
+  });
+  ASSERT_EQ(crept.rejected.size(), 1u);
+  EXPECT_EQ(crept.rejected[0].index, 6);
+  EXPECT_NE(crept.rejected[0].reason.find("acc x"), std::string::npos) << crept.rejected[0].reason;
+}
+
 TEST(Sequencer, StreamThatStopsDuringTheDwellIsRejectedByTick) {
   const Session s = Simulate();
   Collected c;
