@@ -96,10 +96,23 @@ void Sequencer::SetDriftScale(int triad, double scale) {
   if (detector_) detector_->SetDriftScale(triad, scale);
 }
 
+void Sequencer::SetIdentifiedDrift(int triad, const IdentifiedDrift& identified) {
+  if (triad < 0 || triad > 2) return;
+  identified_[static_cast<std::size_t>(triad)] = identified;
+  drift_scale_[static_cast<std::size_t>(triad)] = identified.scale;
+  if (detector_) detector_->SetIdentifiedDrift(triad, identified);
+}
+
 void Sequencer::StartDetector(const NoiseProfile& profile, double t_s) {
   detector_ = std::make_unique<StillnessDetector>(profile, options_.stillness);
-  for (int t = 0; t < 3; ++t)
-    detector_->SetDriftScale(t, drift_scale_[static_cast<std::size_t>(t)]);
+  for (int t = 0; t < 3; ++t) {
+    const auto k = static_cast<std::size_t>(t);
+    if (identified_[k]) {
+      detector_->SetIdentifiedDrift(t, *identified_[k]);
+    } else if (drift_scale_[k] != 1.0) {
+      detector_->SetDriftScale(t, drift_scale_[k]);
+    }
+  }
   required_run_ = detector_->window() +
                   static_cast<std::int64_t>(std::ceil(options_.settle_guard_s * profile.rate_hz));
   if (!options_.noise) {

@@ -144,6 +144,8 @@ class Sequencer {
   // Scales the bias wander the stillness and creep tests allow for on one triad (kTriadAcc,
   // kTriadGyr, kTriadMag): the drift's strength the calibrator identified, as a sigma factor.
   void SetDriftScale(int triad, double scale);
+  // The same from a calibrator's identification, recorded in the noise profile (noise()).
+  void SetIdentifiedDrift(int triad, const IdentifiedDrift& identified);
 
  private:
   enum class State { kIdle, kWaiting, kCollecting, kSegmentDone, kScheduleDone };
@@ -173,6 +175,7 @@ class Sequencer {
   NoiseMeter meter_;
   std::unique_ptr<StillnessDetector> detector_;
   std::array<double, 3> drift_scale_{1.0, 1.0, 1.0};
+  std::array<std::optional<IdentifiedDrift>, 3> identified_;
   std::int64_t required_run_ = 0;
 
   State state_ = State::kIdle;

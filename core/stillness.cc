@@ -362,7 +362,11 @@ StillnessDetector::StillnessDetector(const NoiseProfile& profile, const Stillnes
   const double dof = profile.sigma_dof;
   q_var_ = VarianceRatioLimit(options.false_alarm, w_ - 1, dof);
   z_ = TwoSidedZ(options.false_alarm, dof);
-  for (int t = 0; t < 3; ++t) SetDriftScale(t, 1.0);
+  // A stored profile carries what the calibrators identified before a restart.
+  for (int t = 0; t < 3; ++t) {
+    const auto& stored = profile_.identified_drift[static_cast<std::size_t>(t)];
+    SetDriftScale(t, stored ? stored->scale : 1.0);
+  }
   finding_.kind = StillFinding::kFilling;
 }
 
@@ -374,6 +378,11 @@ double StillnessDetector::HalvesDriftLimit(int triad, int axis, double n1, doubl
   const double wander = options_.bias_drift[t].HalvesDifferenceVariance(axis, n1 / profile_.rate_hz,
                                                                         n2 / profile_.rate_hz);
   return z_ * std::sqrt(sigma * sigma * (1 / n1 + 1 / n2) + scale * scale * wander);
+}
+
+void StillnessDetector::SetIdentifiedDrift(int triad, const IdentifiedDrift& identified) {
+  profile_.identified_drift[static_cast<std::size_t>(triad)] = identified;
+  SetDriftScale(triad, identified.scale);
 }
 
 void StillnessDetector::SetDriftScale(int triad, double scale) {

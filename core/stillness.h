@@ -59,6 +59,14 @@ struct StillSample {
 };
 StillSample ToStillSample(const Sample& sample);
 
+// A triad's bias wander as the calibrator identified it from the session's poses
+// (core/drift_identify.h): the configured drift times the scale the solve used.
+struct IdentifiedDrift {
+  BiasDrift drift;
+  double scale = 1.0;  // on the configured drift's sigma
+  int poses = 0;       // identified from this many poses
+};
+
 // What the detector knows of the sensor's noise.
 struct NoiseProfile {
   // Per-sample 1 sigma per axis of each triad; absent: the triad is not used for stillness.
@@ -70,6 +78,9 @@ struct NoiseProfile {
   // Degrees of freedom of the sigma estimates; infinite when configured from a datasheet.
   double sigma_dof = std::numeric_limits<double>::infinity();
   std::string source;  // e.g. "measured over 1.00 s (100 samples)"
+  // Per triad, the bias wander identified from the poses (absent until a calibrator has); the
+  // stillness tests allow for it, and it is kept with the profile across restarts.
+  std::array<std::optional<IdentifiedDrift>, 3> identified_drift;
 
   bool IsValid(std::string* error) const;
   std::string Describe() const;
@@ -179,6 +190,8 @@ class StillnessDetector {
   // from the session; 1 = options' bias_drift as given).
   void SetDriftScale(int triad, double scale);
   double drift_scale(int triad) const { return drift_scale_[static_cast<std::size_t>(triad)]; }
+  // Records what a calibrator identified in the profile and scales the allowance by it.
+  void SetIdentifiedDrift(int triad, const IdentifiedDrift& identified);
 
  private:
   const Eigen::Vector3d& At(std::size_t logical, int triad) const;

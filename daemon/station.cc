@@ -363,6 +363,8 @@ nlohmann::json Station::Status(int device) const {
           {"rejected", d.sequencer->rejected()},
           {"busy", d.sequencer->busy()},
           {"noise", d.sequencer->noise() ? "measured" : "measuring"},
+          {"noise_profile",
+           d.sequencer->noise() ? protocol::ToJson(*d.sequencer->noise()) : nlohmann::json()},
           {"current", d.sequencer->busy() ? d.current : nlohmann::json()},
           {"samples",
            {{"used", t.used}, {"flagged", t.flagged}, {"outliers", t.outliers}, {"lost", t.lost}}},
@@ -687,6 +689,27 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   }
 }
 
+// The drift a calibrator identified goes to the device's noise profile: the sequencer's
+// stillness tests allow for it, and noise/DEVICE.json keeps it (rewritten when the scale moves by
+// more than 1 %, or the triad had none).
+void Station::RecordIdentifiedDrift(std::size_t device, const ModelState& m) {
+  DeviceState& d = *devices_[device];
+  const int triad = m.model->sensor() == SensorKind::kAccelerometer ? kTriadAcc : kTriadMag;
+  const NoiseProfile* before = d.sequencer->noise();
+  const auto& stored = before ? before->identified_drift[static_cast<std::size_t>(triad)]
+                              : std::optional<IdentifiedDrift>();
+  const bool moved =
+      !stored || std::abs(std::log(m.estimate.drift_scale_used / stored->scale)) > 0.01;
+  d.sequencer->SetIdentifiedDrift(
+      triad, IdentifiedDrift{m.estimate.drift, m.estimate.drift_scale_used, m.estimate.poses});
+  const NoiseProfile* noise = d.sequencer->noise();
+  if (!moved || options_.state_dir.empty() || noise == nullptr) return;
+  auto error = std::make_shared<std::string>();
+  Defer([dir = options_.state_dir, name = d.name, profile = *noise,
+         error] { WriteNoiseProfile(dir, name, profile, error.get()); },
+        [this, name = d.name, error] { NoteWrite(name, *error); });
+}
+
 void Station::Apply(std::size_t device, std::size_t model, double t_s, const UpdateJob& job,
                     bool resuming) {
   DeviceState& d = *devices_[device];
@@ -702,11 +725,7 @@ void Station::Apply(std::size_t device, std::size_t model, double t_s, const Upd
   }
   m.estimate = job.estimate;
   m.estimate_poses = job.device_poses;
-  if (m.estimate.ok && m.calibrator->options().identify_drift) {
-    d.sequencer->SetDriftScale(
-        m.model->sensor() == SensorKind::kAccelerometer ? kTriadAcc : kTriadMag,
-        m.estimate.drift_scale_used);
-  }
+  if (m.estimate.ok && m.calibrator->options().identify_drift) RecordIdentifiedDrift(device, m);
   m.rank = job.rank;
   m.gate = job.gate;
   if (sink_ && !resuming) {

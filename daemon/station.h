@@ -158,6 +158,7 @@ class Station : public ReplayTarget {
   struct UpdateJob;
   // `work` on the executor (inline without one), then `done` unless the station is gone.
   void Defer(std::function<void()> work, std::function<void()> done);
+  void RecordIdentifiedDrift(std::size_t device, const ModelState& m);
   void Apply(std::size_t device, std::size_t model, double t_s, const UpdateJob& job,
              bool resuming);
   void Resume();

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "core/units.h"
+#include "protocol/calibration_json.h"
 #include "protocol/json_vec3.h"
 
 namespace turncal::protocol {
@@ -153,6 +154,14 @@ nlohmann::json ToJson(const NoiseProfile& p) {
                       {"source", p.source}};
   if (p.device_period_s) j["device_period_s"] = *p.device_period_s;
   if (std::isfinite(p.sigma_dof)) j["sigma_dof"] = p.sigma_dof;
+  nlohmann::json identified = nlohmann::json::object();
+  for (int t = 0; t < 3; ++t) {
+    const auto& d = p.identified_drift[static_cast<std::size_t>(t)];
+    if (!d) continue;
+    identified[TriadName(t)] = {
+        {"drift", ToJson(d->drift)}, {"scale", d->scale}, {"poses", d->poses}};
+  }
+  if (!identified.empty()) j["identified_drift"] = identified;
   return j;
 }
 
@@ -185,6 +194,22 @@ bool ParseNoiseProfile(const nlohmann::json& j, NoiseProfile* out, std::string* 
   }
   if (j.contains("sigma_dof") && j["sigma_dof"].is_number()) {
     p.sigma_dof = j["sigma_dof"].get<double>();
+  }
+  if (j.contains("identified_drift")) {
+    const auto& identified = j["identified_drift"];
+    if (!identified.is_object()) return fail("identified_drift malformed");
+    for (int t = 0; t < 3; ++t) {
+      if (!identified.contains(TriadName(t))) continue;
+      const auto& e = identified[TriadName(t)];
+      IdentifiedDrift d;
+      if (!e.is_object() || !e.contains("drift") || !ParseBiasDrift(e["drift"], &d.drift) ||
+          !e.contains("scale") || !e["scale"].is_number() || !(e["scale"].get<double>() > 0)) {
+        return fail("an identified drift is malformed");
+      }
+      d.scale = e["scale"].get<double>();
+      d.poses = e.value("poses", 0);
+      p.identified_drift[static_cast<std::size_t>(t)] = d;
+    }
   }
   p.source = j.value("source", std::string("stored")) + " (stored)";
   if (!p.IsValid(error)) return false;

@@ -110,6 +110,8 @@ TEST(StationDrift, TheSequencerAllowsForTheDriftTheCalibratorIdentified) {
   const std::string path = WriteCapture(c, "wander");
   daemon::StationOptions options;
   options.sensor_class = "consumer";
+  options.state_dir = ::testing::TempDir() + "wander_state_" + std::to_string(::getpid());
+  std::filesystem::remove_all(options.state_dir);
   daemon::ReplayOnceOutcome outcome;
   std::vector<nlohmann::json> rejections;
   const auto on_event = [&](const nlohmann::json& e) {
@@ -129,6 +131,20 @@ TEST(StationDrift, TheSequencerAllowsForTheDriftTheCalibratorIdentified) {
     // The poses reject the class's drift and find about three times it.
     EXPECT_GT(m["drift_scale"]["used"].get<double>(), 1.5) << name << m["drift_scale"].dump();
   }
+  // The device's noise profile keeps what was identified, per triad, across restarts.
+  NoiseProfile stored;
+  ASSERT_TRUE(daemon::ReadNoiseProfile(options.state_dir, "imu", &stored));
+  for (int t : {kTriadAcc, kTriadMag}) {
+    const auto& d = stored.identified_drift[static_cast<std::size_t>(t)];
+    ASSERT_TRUE(d.has_value()) << t;
+    const auto& m = dev["models"][t == kTriadAcc ? "accel13" : "mag13"];
+    EXPECT_NEAR(d->scale, m["drift_scale"]["used"].get<double>(),
+                0.011 * m["drift_scale"]["used"].get<double>());
+    const double prior = t == kTriadAcc ? ConsumerClass().acc_bias_instability
+                                        : ConsumerClass().mag_bias_instability;
+    EXPECT_NEAR(d->drift.gm_sigma.x(), d->scale * prior, 1e-9);
+  }
+  std::filesystem::remove_all(options.state_dir);
 }
 
 TEST(StationDrift, CorrectedSigmaGrowsWithTheTimeSinceTheCalibration) {

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/sequencer.h"
+#include "protocol/sequencer_json.h"
 #include "turncal/version.h"
 
 namespace turncal::protocol {
@@ -20,6 +21,42 @@ TEST(Messages, VersionGreetingCarriesProtocolVersion) {
   EXPECT_EQ(v["release"], kVersion);
   // JSON Lines: one object on one line.
   EXPECT_EQ(v.dump().find('\n'), std::string::npos);
+}
+
+// noise/DEVICE.json: the profile with the drift the calibrators identified round-trips; a file
+// from before it had one still parses; a malformed one is refused with a reason.
+TEST(NoiseProfileJson, IdentifiedDriftRoundTripsAndOldFilesStillParse) {
+  NoiseProfile p;
+  p.sigma[kTriadAcc] = Eigen::Vector3d(0.014, 0.013, 0.015);
+  p.sigma[kTriadMag] = Eigen::Vector3d::Constant(5e-4);
+  p.rate_hz = 100;
+  p.source = "measured over 1.00 s (100 samples)";
+  IdentifiedDrift acc;
+  acc.drift.gm_sigma = Eigen::Vector3d::Constant(0.058);
+  acc.drift.gm_tau_s = 100;
+  acc.scale = 2.9;
+  acc.poses = 32;
+  p.identified_drift[kTriadAcc] = acc;
+  const nlohmann::json j = ToJson(p);
+  NoiseProfile back;
+  std::string error;
+  ASSERT_TRUE(ParseNoiseProfile(j, &back, &error)) << error;
+  ASSERT_TRUE(back.identified_drift[kTriadAcc].has_value());
+  EXPECT_FALSE(back.identified_drift[kTriadMag].has_value());
+  EXPECT_EQ(back.identified_drift[kTriadAcc]->scale, 2.9);
+  EXPECT_EQ(back.identified_drift[kTriadAcc]->poses, 32);
+  EXPECT_EQ(back.identified_drift[kTriadAcc]->drift.gm_sigma, acc.drift.gm_sigma);
+  EXPECT_EQ(back.identified_drift[kTriadAcc]->drift.gm_tau_s, 100);
+
+  nlohmann::json old = j;
+  old.erase("identified_drift");
+  ASSERT_TRUE(ParseNoiseProfile(old, &back, &error)) << error;
+  EXPECT_FALSE(back.identified_drift[kTriadAcc].has_value());
+
+  nlohmann::json bad = j;
+  bad["identified_drift"]["acc"]["scale"] = -1;
+  EXPECT_FALSE(ParseNoiseProfile(bad, &back, &error));
+  EXPECT_NE(error.find("identified drift"), std::string::npos) << error;
 }
 
 TEST(Messages, ErrorCarriesItsMessage) {
