@@ -250,7 +250,8 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   if (const toml::table* t = root["station"].as_table()) {
     if (!OnlyKeys(*t,
                   {"models", "sensor_class", "drift_model", "identify_drift", "bias_tau_s",
-                   "warmup", "warmup_tau_s"},
+                   "warmup", "warmup_tau_s", "acc_noise_density", "acc_bias_instability",
+                   "mag_noise_rms", "mag_bias_instability", "acc_random_walk", "mag_random_walk"},
                   "[station]", source, error)) {
       return false;
     }
@@ -282,6 +283,24 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
       *error =
           fmt::format("{}: [station] bias_tau_s and warmup_tau_s must be > 0, warmup >= 0", source);
       return false;
+    }
+    // The noise prior measured on this sensor (turncal noise): densities and instabilities > 0,
+    // random walks >= 0.
+    const std::pair<const char*, double*> noise[] = {
+        {"acc_noise_density", &st.acc_noise_density},
+        {"acc_bias_instability", &st.acc_bias_instability},
+        {"mag_noise_rms", &st.mag_noise_rms},
+        {"mag_bias_instability", &st.mag_bias_instability},
+        {"acc_random_walk", &st.acc_random_walk},
+        {"mag_random_walk", &st.mag_random_walk}};
+    for (const auto& [key, value] : noise) {
+      if (!GetNumber(*t, key, value, source, error)) return false;
+      const bool walk = std::string_view(key).find("random_walk") != std::string_view::npos;
+      if (t->contains(key) && !(walk ? *value >= 0 : *value > 0)) {
+        *error = fmt::format("{}: [station] {} must be {} (turncal noise fits it from a long rest)",
+                             source, key, walk ? ">= 0" : "> 0");
+        return false;
+      }
     }
     if (!GetModels(*t, &st.models, source, error)) return false;
   }

@@ -148,6 +148,12 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
     sensor_.warmup_in_instabilities = options_.warmup_in_instabilities;
   }
   if (options_.warmup_tau_s > 0) sensor_.warmup_tau_s = options_.warmup_tau_s;
+  if (options_.acc_noise_density > 0) sensor_.acc_noise_density = options_.acc_noise_density;
+  if (options_.acc_bias_instability > 0)
+    sensor_.acc_bias_instability = options_.acc_bias_instability;
+  if (options_.mag_noise_rms > 0) sensor_.mag_noise_rms = options_.mag_noise_rms;
+  if (options_.mag_bias_instability > 0)
+    sensor_.mag_bias_instability = options_.mag_bias_instability;
   if (!options_.gate_tolerances_set) {
     GateDefaultsForClass(options_.sensor_class, &options_.gate);
   }
@@ -163,6 +169,8 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
       wander.gm_sigma = Eigen::Vector3d::Constant(t == kTriadAcc ? sensor_.acc_bias_instability
                                                                  : sensor_.mag_bias_instability);
       wander.gm_tau_s = sensor_.bias_tau_s;
+      wander.rw_density = Eigen::Vector3d::Constant(
+          std::max(0.0, t == kTriadAcc ? options_.acc_random_walk : options_.mag_random_walk));
     }
     // The noise this session measured before a restart: stillness is judged as before.
     NoiseProfile stored;
@@ -185,8 +193,15 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
       m.model = MakeModel(name, options_.context, &error);
       CalibratorOptions co = options_.drift_model ? DriftOptionsForClass(*m.model, sensor_)
                                                   : OptionsForClass(*m.model, sensor_);
-      // The class's drift is the prior; the session's poses identify its strength.
+      // The class's drift (or the one configured) is the prior; the session's poses identify
+      // its strength.
       co.identify_drift = options_.drift_model && options_.identify_drift;
+      if (options_.drift_model) {
+        const double rw = m.model->sensor() == SensorKind::kAccelerometer
+                              ? options_.acc_random_walk
+                              : options_.mag_random_walk;
+        if (rw > 0) co.drift.rw_density = Eigen::Vector3d::Constant(rw);
+      }
       m.calibrator = std::make_unique<Calibrator>(co);
       d->models.push_back(std::move(m));
     }

@@ -53,6 +53,16 @@ struct StationOptions {
   bool identify_drift = true;
   double warmup_in_instabilities = -1.0;
   double warmup_tau_s = -1.0;
+  // The noise prior measured on this sensor (turncal noise on a long rest) instead of the
+  // class's: white density and Gauss-Markov sigma of the accelerometer (m/s^2/sqrt(Hz), m/s^2),
+  // the magnetometer's per-sample noise and Gauss-Markov sigma (device unit), and a bias random
+  // walk of each (unit/sqrt(s); the class has none). Negative: the class's.
+  double acc_noise_density = -1.0;
+  double acc_bias_instability = -1.0;
+  double mag_noise_rms = -1.0;
+  double mag_bias_instability = -1.0;
+  double acc_random_walk = -1.0;
+  double mag_random_walk = -1.0;
   // The table's motion and what the next-pose planner minimises (core/pose_planner.h).
   TableMotion table;
   PlanObjective plan_objective = PlanObjective::kTime;

@@ -136,7 +136,9 @@ const std::map<std::string, Manual>& Manuals() {
         "model fitted to it: white-noise density N, a Gauss-Markov bias instability (sigma, tau), "
         "a random walk, and the IEEE flat-bottom figure. Record the sensor at rest for several "
         "times the longest correlation time you care about; use --from/--to to keep only the "
-        "rest. The fitted values are what [station] drift and noise settings expect.",
+        "rest. The fitted values go into turncald.toml's [station] as the noise prior: "
+        "acc_noise_density, acc_bias_instability (GM sigma), bias_tau_s (GM tau), acc_random_walk "
+        "and the mag_ equivalents (docs/ACCURACY.md \"Drift\").",
         "turncal noise rest.tcap --svg rest-allan.svg\n"
         "turncal noise imu.bin --protocol mip --to 600 --json\n"
         "turncal noise xsens_acc.mat --triad acc --to 45   # imu_tk's text columns (raw counts)",

@@ -82,6 +82,18 @@ TEST(Config, TheDriftModelsSettings) {
   EXPECT_TRUE(c.station.identify_drift);
   ASSERT_TRUE(ParseConfig("[station]\nidentify_drift = false\n", "t.toml", &c, &error)) << error;
   EXPECT_FALSE(c.station.identify_drift);
+  // The noise prior turncal noise measured on this sensor, instead of the class's.
+  ASSERT_TRUE(ParseConfig(
+      "[station]\nacc_noise_density = 4e-4\nacc_bias_instability = 2e-3\nmag_noise_rms = 6e-4\n"
+      "mag_bias_instability = 3e-4\nacc_random_walk = 1e-5\nmag_random_walk = 0\n",
+      "t.toml", &c, &error))
+      << error;
+  EXPECT_EQ(c.station.acc_noise_density, 4e-4);
+  EXPECT_EQ(c.station.acc_bias_instability, 2e-3);
+  EXPECT_EQ(c.station.mag_noise_rms, 6e-4);
+  EXPECT_EQ(c.station.mag_bias_instability, 3e-4);
+  EXPECT_EQ(c.station.acc_random_walk, 1e-5);
+  EXPECT_EQ(c.station.mag_random_walk, 0.0);
 }
 
 TEST(Config, DevicesHaveTheirOwnModelsGatesRatesAndTheLabsReference) {
@@ -158,6 +170,9 @@ INSTANTIATE_TEST_SUITE_P(
         Bad{"[table]\nrate = 3\n", "unknown key 'rate' in [table]"},
         Bad{"[gate]\nmin_dof = 2.5\n", "'min_dof' must be a whole number from 0 to 1000"},
         Bad{"[station]\nidentify_drift = 1\n", "'identify_drift' must be true or false"},
+        Bad{"[station]\nacc_bias_instability = 0\n", "acc_bias_instability must be > 0"},
+        Bad{"[station]\nmag_random_walk = -1e-6\n", "mag_random_walk must be >= 0"},
+        Bad{"[station]\nacc_noise_density = \"4e-4\"\n", "'acc_noise_density' must be a number"},
         Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nconfigure = 1\n",
             "'configure' must be true or false"},
         Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\n[[device]]\nname = "

@@ -147,6 +147,24 @@ TEST(StationDrift, TheSequencerAllowsForTheDriftTheCalibratorIdentified) {
   std::filesystem::remove_all(options.state_dir);
 }
 
+// A noise prior measured on the sensor (turncal noise) replaces the class's in the calibrators'
+// drift model; the class's stays where nothing is configured.
+TEST(StationDrift, AConfiguredNoisePriorReplacesTheClasss) {
+  daemon::StationOptions options;
+  options.acc_bias_instability = 1e-3;
+  options.acc_random_walk = 2e-5;
+  options.bias_tau_s = 250;
+  const daemon::Station station({"imu"}, options, {});
+  const nlohmann::json status = station.Status(0);
+  const auto& acc = status["models"]["accel13"]["noise_model"];
+  EXPECT_EQ(acc["gauss_markov_sigma"][0].get<double>(), 1e-3) << acc.dump();
+  EXPECT_EQ(acc["gauss_markov_tau_s"].get<double>(), 250.0);
+  EXPECT_EQ(acc["random_walk"][2].get<double>(), 2e-5);
+  const auto& mag = status["models"]["mag13"]["noise_model"];
+  EXPECT_EQ(mag["gauss_markov_sigma"][0].get<double>(), IndustrialClass().mag_bias_instability);
+  EXPECT_EQ(mag["random_walk"][0].get<double>(), 0.0);
+}
+
 TEST(StationDrift, CorrectedSigmaGrowsWithTheTimeSinceTheCalibration) {
   tools::SimCaptureOptions o;
   o.protocol = drivers::Protocol::kMip;
