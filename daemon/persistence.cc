@@ -11,8 +11,8 @@
 #include <fstream>
 
 #include "drivers/atomic_file.h"
-#include "protocol/report_html.h"
 #include "protocol/sequencer_json.h"
+#include "report/html.h"
 
 namespace turncal::daemon {
 namespace fs = std::filesystem;
@@ -177,10 +177,10 @@ bool WriteDeviceReport(const std::string& state_dir, const std::string& device,
     return false;
   }
   std::string html, why;
-  protocol::ReportOptions options;
+  report::ReportOptions options;
   options.source = state_dir;
   options.generated_utc = generated_utc;
-  if (!protocol::RenderReportHtml(calibrations, options, &html, &why)) {
+  if (!report::RenderReportHtml(calibrations, options, &html, &why)) {
     *error = fmt::format("report of {}: {}", device, why);
     return false;
   }

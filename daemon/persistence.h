@@ -8,7 +8,7 @@
 //   noise/DEVICE.json              the noise profile this session measured
 //   sessions/UTCTIME/              earlier sessions' journals and noise profiles (`reset`)
 //   reports/DEVICE.html            the calibration report of the device's active calibrations
-//                                  (protocol/report_html.h), rewritten after activations
+//                                  (report/html.h), rewritten after activations
 //
 // A kill -9 can leave the journal's last line incomplete; loading skips it and says so.
 
@@ -62,7 +62,7 @@ bool WriteActiveCalibration(const std::string& state_dir, const std::string& dev
                             const std::string& model, const nlohmann::json& calibration,
                             std::string* error);
 
-// reports/DEVICE.html: the calibration report (protocol/report_html.h) of the device's active
+// reports/DEVICE.html: the calibration report (report/html.h) of the device's active
 // calibrations of `models`, written atomically. `generated_utc` is shown in its header. False
 // with a message (no calibration of those models, a render or write failure).
 bool WriteDeviceReport(const std::string& state_dir, const std::string& device,

@@ -9,7 +9,7 @@
 
 #include "drivers/atomic_file.h"
 #include "drivers/transport/transport.h"
-#include "protocol/report_html.h"
+#include "report/html.h"
 #include "tools/client_connection.h"
 #include "tools/report_state_dir.h"
 
@@ -59,7 +59,7 @@ int RunHtmlReport(const HtmlReportArgs& args) {
   std::map<std::string, DeviceCalibrations> devices;
   if (!ReadStateDirCalibrations(state_dir, args.device, &devices, &error)) return Fail(error);
   const bool several = devices.size() > 1;
-  protocol::ReportOptions options;
+  report::ReportOptions options;
   options.source = state_dir;
   options.generated_utc = drivers::UtcNowIso8601();
   for (auto& [device, d] : devices) {
@@ -68,7 +68,7 @@ int RunHtmlReport(const HtmlReportArgs& args) {
       if (!note.empty()) fmt::print(stderr, "turncal report: {}: {}\n", d.paths[i], note);
     }
     std::string html;
-    if (!protocol::RenderReportHtml(d.calibrations, options, &html, &error)) {
+    if (!report::RenderReportHtml(d.calibrations, options, &html, &error)) {
       std::string files;
       for (const auto& p : d.paths) files += (files.empty() ? "" : ", ") + p;
       return Fail(fmt::format("{} ({})", error, files));

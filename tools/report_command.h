@@ -1,6 +1,6 @@
 #pragma once
 // `turncal report -o FILE | --state-dir DIR [--device D]`: the HTML calibration report
-// (protocol/report_html.h) of each device with active calibrations, read from the state
+// (report/html.h) of each device with active calibrations, read from the state
 // directory -- DIR, or the running daemon's (its `status` reply names it). One file per device:
 // FILE itself for one device; with several and no --device, FILE with the device's name put
 // before the extension (report.html -> report.imu1.html). Prints each file written.

@@ -6,7 +6,7 @@
 #include <string_view>
 #include <vector>
 
-namespace turncal::protocol::svg {
+namespace turncal::report::svg {
 
 // Text and attribute values for HTML and SVG: & < > " ' replaced by entities.
 std::string Escape(std::string_view text);
@@ -51,4 +51,4 @@ std::string Close();
 const char* Color(int i);
 const char* Dash(int i);
 
-}  // namespace turncal::protocol::svg
+}  // namespace turncal::report::svg

@@ -1,4 +1,4 @@
-#include "protocol/report_plots.h"
+#include "report/plots.h"
 
 #include <fmt/format.h>
 
@@ -6,9 +6,9 @@
 #include <cmath>
 
 #include "core/reference.h"
-#include "protocol/report_svg.h"
+#include "report/svg.h"
 
-namespace turncal::protocol {
+namespace turncal::report {
 namespace {
 
 using svg::Escape;
@@ -56,7 +56,7 @@ ResidualUnit ResidualUnitFor(const MeasurementModel& model) {
   return {1e3, "mG"};
 }
 
-std::string ResidualsSvg(const CalibrationDocument& doc, const ModelAnalysis& a) {
+std::string ResidualsSvg(const protocol::CalibrationDocument& doc, const ModelAnalysis& a) {
   const std::string id = "residuals-" + doc.model;
   const MeasurementModel& model = *doc.measurement_model;
   const std::string title = fmt::format("{} residuals per pose before and after calibration ({})",
@@ -144,7 +144,7 @@ std::string ResidualsSvg(const CalibrationDocument& doc, const ModelAnalysis& a)
   return o + svg::Close();
 }
 
-std::string CoverageSvg(const CalibrationDocument& doc, const ModelAnalysis& a) {
+std::string CoverageSvg(const protocol::CalibrationDocument& doc, const ModelAnalysis& a) {
   const std::string id = "coverage-" + doc.model;
   const bool accel = doc.measurement_model->sensor() == SensorKind::kAccelerometer;
   const std::string vector_name = accel ? "gravity g" : "the Earth field B";
@@ -203,7 +203,7 @@ std::string CoverageSvg(const CalibrationDocument& doc, const ModelAnalysis& a) 
   return o + svg::Close();
 }
 
-std::string ConvergenceSvg(const CalibrationDocument& doc, const ModelAnalysis& a) {
+std::string ConvergenceSvg(const protocol::CalibrationDocument& doc, const ModelAnalysis& a) {
   const std::string id = "convergence-" + doc.model;
   const MeasurementModel& model = *doc.measurement_model;
   const std::string title = fmt::format("{} convergence: sigma as poses were added", doc.model);
@@ -295,4 +295,4 @@ std::string ConvergenceSvg(const CalibrationDocument& doc, const ModelAnalysis& 
   return o + svg::Close();
 }
 
-}  // namespace turncal::protocol
+}  // namespace turncal::report

@@ -1,5 +1,5 @@
 #pragma once
-// What the calibration report (protocol/report_html.h) shows of one calibration, computed from
+// What the calibration report (report/html.h) shows of one calibration, computed from
 // its document with core's models, calibrator and observability analysis: residuals per pose
 // before (nominal parameters) and after (the estimate), where the reference vector pointed in the
 // sensor frame, each parameter's sigma as poses were added, and the data-level observability.
@@ -13,7 +13,7 @@
 #include "core/observability.h"
 #include "protocol/calibration_json.h"
 
-namespace turncal::protocol {
+namespace turncal::report {
 
 // Residuals (measured mean - prediction) of the poses whose record carries the model's triad, in
 // the triad's unit (m/s^2 for accelerometers, the device's unit for magnetometers).
@@ -52,6 +52,6 @@ struct ModelAnalysis {
 };
 
 // Everything above for one calibration document.
-ModelAnalysis AnalyzeCalibration(const CalibrationDocument& doc);
+ModelAnalysis AnalyzeCalibration(const protocol::CalibrationDocument& doc);
 
-}  // namespace turncal::protocol
+}  // namespace turncal::report

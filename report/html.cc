@@ -1,4 +1,4 @@
-#include "protocol/report_html.h"
+#include "report/html.h"
 
 #include <fmt/format.h>
 
@@ -6,13 +6,13 @@
 #include <cmath>
 
 #include "protocol/calibration_json.h"
-#include "protocol/report_analysis.h"
-#include "protocol/report_plots.h"
-#include "protocol/report_sections.h"
-#include "protocol/report_svg.h"
+#include "report/analysis.h"
+#include "report/plots.h"
+#include "report/sections.h"
+#include "report/svg.h"
 #include "turncal/version.h"
 
-namespace turncal::protocol {
+namespace turncal::report {
 namespace {
 
 using svg::Escape;
@@ -57,7 +57,7 @@ std::string IdentityHtml(const nlohmann::json& identity) {
   return o + "</table>";
 }
 
-std::string SummaryHtml(const std::vector<CalibrationDocument>& docs) {
+std::string SummaryHtml(const std::vector<protocol::CalibrationDocument>& docs) {
   std::string o =
       "<table class=\"summary\"><thead><tr><th>model</th><th>version</th><th>calibrated (UTC)"
       "</th><th>software</th><th>poses</th><th>rank</th><th>&#967;&#178; / dof</th><th>gate</th>"
@@ -73,7 +73,7 @@ std::string SummaryHtml(const std::vector<CalibrationDocument>& docs) {
   return o + "</tbody></table>";
 }
 
-std::string ModelSection(const CalibrationDocument& d) {
+std::string ModelSection(const protocol::CalibrationDocument& d) {
   const ModelAnalysis a = AnalyzeCalibration(d);
   const MeasurementModel& model = *d.measurement_model;
   std::string o = fmt::format("<section class=\"model\" id=\"model-{}\">", Escape(d.model));
@@ -175,9 +175,9 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
     if (error) *error = "no calibration to report";
     return false;
   }
-  std::vector<CalibrationDocument> docs(calibrations.size());
+  std::vector<protocol::CalibrationDocument> docs(calibrations.size());
   for (std::size_t i = 0; i < calibrations.size(); ++i) {
-    if (!ParseCalibrationDocument(calibrations[i], &docs[i], error)) return false;
+    if (!protocol::ParseCalibrationDocument(calibrations[i], &docs[i], error)) return false;
     if (docs[i].device != docs[0].device) {
       if (error) {
         *error = fmt::format(
@@ -218,4 +218,4 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   return true;
 }
 
-}  // namespace turncal::protocol
+}  // namespace turncal::report

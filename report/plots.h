@@ -11,9 +11,9 @@
 #include <string>
 
 #include "protocol/calibration_json.h"
-#include "protocol/report_analysis.h"
+#include "report/analysis.h"
 
-namespace turncal::protocol {
+namespace turncal::report {
 
 // A triad's residual in the unit the report shows: mg for accelerometers, mG for magnetometers
 // (the device unit taken as Gauss, as core/parameter.h's ForDisplay does).
@@ -23,8 +23,8 @@ struct ResidualUnit {
 };
 ResidualUnit ResidualUnitFor(const MeasurementModel& model);
 
-std::string ResidualsSvg(const CalibrationDocument& doc, const ModelAnalysis& analysis);
-std::string CoverageSvg(const CalibrationDocument& doc, const ModelAnalysis& analysis);
-std::string ConvergenceSvg(const CalibrationDocument& doc, const ModelAnalysis& analysis);
+std::string ResidualsSvg(const protocol::CalibrationDocument& doc, const ModelAnalysis& analysis);
+std::string CoverageSvg(const protocol::CalibrationDocument& doc, const ModelAnalysis& analysis);
+std::string ConvergenceSvg(const protocol::CalibrationDocument& doc, const ModelAnalysis& analysis);
 
-}  // namespace turncal::protocol
+}  // namespace turncal::report

@@ -1,10 +1,10 @@
-// The calibration report (protocol/report_html.h) on calibrations the station wrote from
+// The calibration report (report/html.h) on calibrations the station wrote from
 // simulated sessions: the document is well formed, self-contained and script-free, every plot is
 // there with its id, the parameter table holds every parameter with the stored estimate, the
 // residuals shrink by the factor the records themselves give, and malformed calibrations are
 // refused with a message.
 
-#include "protocol/report_html.h"
+#include "report/html.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -157,7 +157,7 @@ TEST_F(CalibrationReport, IsOneWellFormedScriptFreeDocumentWithEveryPlotAndParam
     std::string html, error;
     const auto start = std::chrono::steady_clock::now();
     ASSERT_TRUE(
-        protocol::RenderReportHtml(s.calibrations, {s.dir, "2030-01-01T00:00:00Z"}, &html, &error))
+        report::RenderReportHtml(s.calibrations, {s.dir, "2030-01-01T00:00:00Z"}, &html, &error))
         << error;
     const double render_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
@@ -229,7 +229,7 @@ TEST_F(CalibrationReport, IsOneWellFormedScriptFreeDocumentWithEveryPlotAndParam
 TEST_F(CalibrationReport, ResidualRmsShrinksByTheFactorTheRecordsGive) {
   for (const Session& s : *sessions_) {
     std::string html, error;
-    ASSERT_TRUE(protocol::RenderReportHtml(s.calibrations, {}, &html, &error)) << error;
+    ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {}, &html, &error)) << error;
     for (const auto& c : s.calibrations) {
       const std::string model_name = c["model"];
       auto model = MakeModel(model_name, ModelContext{}, &error);
@@ -279,7 +279,7 @@ TEST_F(CalibrationReport, WithoutRecordsThePlotsSayWhatIsMissing) {
   std::vector<nlohmann::json> calibrations = (*sessions_)[0].calibrations;
   for (auto& c : calibrations) c["provenance"].erase("records");
   std::string html, error;
-  ASSERT_TRUE(protocol::RenderReportHtml(calibrations, {}, &html, &error)) << error;
+  ASSERT_TRUE(report::RenderReportHtml(calibrations, {}, &html, &error)) << error;
   EXPECT_EQ(CheckWellFormed(html), "");
   for (const char* kind : {"residuals-accel13", "convergence-accel13", "coverage-mag13"}) {
     EXPECT_NE(html.find(std::string("id=\"") + kind + "\""), std::string::npos) << kind;
@@ -293,7 +293,7 @@ TEST_F(CalibrationReport, MalformedInputGivesAnErrorNotACrash) {
   std::string html = "untouched", error;
   auto refused = [&](const std::vector<nlohmann::json>& docs, const std::string& words) {
     error.clear();
-    EXPECT_FALSE(protocol::RenderReportHtml(docs, {}, &html, &error)) << words;
+    EXPECT_FALSE(report::RenderReportHtml(docs, {}, &html, &error)) << words;
     EXPECT_NE(error.find(words), std::string::npos) << "error: " << error;
     EXPECT_EQ(html, "untouched");
   };
@@ -343,7 +343,7 @@ TEST_F(CalibrationReport, MalformedInputGivesAnErrorNotACrash) {
         mutated[key] = replacement;
       }
       std::string out;
-      (protocol::RenderReportHtml({mutated}, {}, &out, &error) ? rendered : refusals)++;
+      (report::RenderReportHtml({mutated}, {}, &out, &error) ? rendered : refusals)++;
     }
   }
   std::printf("mutated calibrations: %d refused, %d rendered\n", refusals, rendered);

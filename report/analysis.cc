@@ -1,4 +1,4 @@
-#include "protocol/report_analysis.h"
+#include "report/analysis.h"
 
 #include <fmt/format.h>
 
@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace turncal::protocol {
+namespace turncal::report {
 namespace {
 
 const TriadStats* TriadOf(const MeasurementModel& model, const PoseRecord& record) {
@@ -23,7 +23,7 @@ Eigen::Vector3d Rms(const std::vector<Eigen::Vector3d>& v) {
 double RmsTotal(const Eigen::Vector3d& rms_axis) { return std::sqrt(rms_axis.squaredNorm() / 3); }
 
 // The reference vector in the nominal case frame: M C_p^q R3(beta) v.
-std::vector<Eigen::Vector3d> ReferenceDirections(const CalibrationDocument& doc) {
+std::vector<Eigen::Vector3d> ReferenceDirections(const protocol::CalibrationDocument& doc) {
   const MeasurementModel& model = *doc.measurement_model;
   const bool accel = model.sensor() == SensorKind::kAccelerometer;
   const Eigen::Vector3d v_ned = accel ? doc.context.reference.g_ned : doc.context.reference.B_ned;
@@ -40,7 +40,7 @@ std::vector<Eigen::Vector3d> ReferenceDirections(const CalibrationDocument& doc)
 
 }  // namespace
 
-ModelAnalysis AnalyzeCalibration(const CalibrationDocument& doc) {
+ModelAnalysis AnalyzeCalibration(const protocol::CalibrationDocument& doc) {
   ModelAnalysis a;
   const MeasurementModel& model = *doc.measurement_model;
   a.reference_dir_sensor = ReferenceDirections(doc);
@@ -111,4 +111,4 @@ ModelAnalysis AnalyzeCalibration(const CalibrationDocument& doc) {
   return a;
 }
 
-}  // namespace turncal::protocol
+}  // namespace turncal::report

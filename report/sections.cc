@@ -1,14 +1,14 @@
-#include "protocol/report_sections.h"
+#include "report/sections.h"
 
 #include <fmt/format.h>
 
 #include <cmath>
 
 #include "core/accel_physical.h"
-#include "protocol/report_plots.h"
-#include "protocol/report_svg.h"
+#include "report/plots.h"
+#include "report/svg.h"
 
-namespace turncal::protocol {
+namespace turncal::report {
 namespace {
 
 using svg::Escape;
@@ -56,7 +56,7 @@ Mat3<double> AccelG(const Eigen::VectorXd& theta, const Mat3<double>& mounting) 
 }
 
 // 1 sigma of each entry of G(theta): J cov J^T by central differences (steps of 1e-7).
-bool AccelGSigma(const CalibrationDocument& doc, Mat3<double>* sigma) {
+bool AccelGSigma(const protocol::CalibrationDocument& doc, Mat3<double>* sigma) {
   const Eigen::Index n = doc.theta.size();
   if (doc.covariance.rows() != n || !doc.covariance.allFinite()) return false;
   Eigen::MatrixXd jacobian(9, n);
@@ -78,7 +78,7 @@ bool AccelGSigma(const CalibrationDocument& doc, Mat3<double>* sigma) {
 
 }  // namespace
 
-std::string GateHtml(const CalibrationDocument& doc) {
+std::string GateHtml(const protocol::CalibrationDocument& doc) {
   const GateResult& g = doc.gate;
   std::string o = fmt::format(R"(<p class="verdict {}">Publish gate: <strong>{}</strong>)",
                               g.pass ? "pass" : "fail", g.pass ? "PASS" : "FAIL");
@@ -94,7 +94,7 @@ std::string GateHtml(const CalibrationDocument& doc) {
   return o;
 }
 
-std::string ParameterTableHtml(const CalibrationDocument& doc) {
+std::string ParameterTableHtml(const protocol::CalibrationDocument& doc) {
   const MeasurementModel& model = *doc.measurement_model;
   std::string o = fmt::format(
       R"(<table class="params" id="params-{}"><thead><tr><th>parameter</th><th>kind</th>)"
@@ -140,7 +140,7 @@ std::string ParameterTableHtml(const CalibrationDocument& doc) {
   return o + "</p>";
 }
 
-std::string PhysicalFormHtml(const CalibrationDocument& doc) {
+std::string PhysicalFormHtml(const protocol::CalibrationDocument& doc) {
   const MeasurementModel& model = *doc.measurement_model;
   std::string o;
   if (model.sensor() == SensorKind::kAccelerometer) {
@@ -191,7 +191,7 @@ std::string PhysicalFormHtml(const CalibrationDocument& doc) {
   return o;
 }
 
-std::string ResidualSummaryHtml(const CalibrationDocument& doc, const ModelAnalysis& a) {
+std::string ResidualSummaryHtml(const protocol::CalibrationDocument& doc, const ModelAnalysis& a) {
   if (!a.has_records) {
     return "<p class=\"missing\">No residuals: " + Escape(a.no_records_reason) + ".</p>";
   }
@@ -220,7 +220,7 @@ std::string ResidualSummaryHtml(const CalibrationDocument& doc, const ModelAnaly
   return o;
 }
 
-std::string ObservabilityHtml(const CalibrationDocument& doc, const ModelAnalysis& a) {
+std::string ObservabilityHtml(const protocol::CalibrationDocument& doc, const ModelAnalysis& a) {
   std::string o = fmt::format(
       "<p>Rank recorded with the calibration: {} of {} parameters ({} when the model's gauge "
       "directions are set aside).</p>",
@@ -270,4 +270,4 @@ std::string ObservabilityHtml(const CalibrationDocument& doc, const ModelAnalysi
   return o;
 }
 
-}  // namespace turncal::protocol
+}  // namespace turncal::report

@@ -1,11 +1,11 @@
-#include "protocol/report_svg.h"
+#include "report/svg.h"
 
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 
-namespace turncal::protocol::svg {
+namespace turncal::report::svg {
 
 std::string Escape(std::string_view text) {
   std::string out;
@@ -173,4 +173,4 @@ const char* Dash(int i) {
   return kDashes[(std::max(i, 0) / 12) % 4];
 }
 
-}  // namespace turncal::protocol::svg
+}  // namespace turncal::report::svg

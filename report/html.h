@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-namespace turncal::protocol {
+namespace turncal::report {
 
 struct ReportOptions {
   // Where the calibrations came from (a state directory), shown in the header; may be empty.
@@ -28,9 +28,9 @@ struct ReportOptions {
 
 // Renders the report of the device all `calibrations` belong to (one per model, any order; the
 // report lists them by model name). False with a message, and *html untouched, when the list is
-// empty, a document is malformed (ParseCalibrationDocument), two documents name different
+// empty, a document is malformed (protocol::ParseCalibrationDocument), two documents name different
 // devices or the same model.
 bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const ReportOptions& options,
                       std::string* html, std::string* error);
 
-}  // namespace turncal::protocol
+}  // namespace turncal::report

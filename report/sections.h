@@ -1,0 +1,24 @@
+#pragma once
+// The calibration report's HTML sections for one model (report/html.h assembles them):
+// the gate's verdict, the parameter table in the units an engineer reads, the model's other
+// form (G for the accelerometers; G and K for the magnetometers), the residual summary and the
+// observability summary. All text is escaped.
+
+#include <string>
+
+#include "protocol/calibration_json.h"
+#include "report/analysis.h"
+
+namespace turncal::report {
+
+std::string GateHtml(const protocol::CalibrationDocument& doc);
+// One row per parameter, <tr id="param-MODEL-NAME" data-value=... data-sigma=...> with the
+// stored value and sigma at full precision (SI units) beside the displayed ones.
+std::string ParameterTableHtml(const protocol::CalibrationDocument& doc);
+std::string PhysicalFormHtml(const protocol::CalibrationDocument& doc);
+std::string ResidualSummaryHtml(const protocol::CalibrationDocument& doc,
+                                const ModelAnalysis& analysis);
+std::string ObservabilityHtml(const protocol::CalibrationDocument& doc,
+                              const ModelAnalysis& analysis);
+
+}  // namespace turncal::report
