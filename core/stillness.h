@@ -27,7 +27,7 @@
 
 #include "core/bias_drift.h"
 #include "core/sample.h"
-#include "core/synthetic.h"
+#include "core/sensor_class.h"
 
 namespace turncal {
 

@@ -6,7 +6,7 @@
 // motion simulator) take the shorter way round; the middle axis moves through its range.
 //
 // The planner weighs a pose's information against these seconds (core/pose_planner.h), and the
-// session simulator moves at the same rates when asked to (core/session_sim.h).
+// session simulator moves at the same rates when asked to (sim/session_sim.h).
 
 #include <Eigen/Core>
 #include <string>

@@ -21,7 +21,7 @@
 #include "core/pose_planner.h"
 #include "core/publish_gate.h"
 #include "core/sequencer.h"
-#include "core/synthetic.h"
+#include "core/sensor_class.h"
 #include "daemon/capture_replay.h"
 
 namespace turncal::daemon {

@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "core/synthetic.h"
+#include "core/sensor_class.h"
 #include "core/units.h"
 #include "protocol/json_vec3.h"
 #include "protocol/sequencer_json.h"

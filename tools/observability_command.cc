@@ -10,10 +10,10 @@
 #include "core/observability.h"
 #include "core/pose_planner.h"
 #include "core/publish_gate.h"
-#include "core/synthetic.h"
 #include "core/units.h"
 #include "protocol/observability_json.h"
 #include "protocol/pose_file.h"
+#include "sim/synthetic.h"
 
 namespace turncal::tools {
 

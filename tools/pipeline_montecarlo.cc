@@ -16,12 +16,12 @@
 #include <thread>
 
 #include "core/pose_planner.h"
-#include "core/session_sim.h"
-#include "core/synthetic.h"
 #include "daemon/persistence.h"
 #include "daemon/replay_once.h"
 #include "protocol/calibration_json.h"
-#include "tools/sim_capture.h"
+#include "sim/capture.h"
+#include "sim/session_sim.h"
+#include "sim/synthetic.h"
 
 namespace turncal::tools {
 
@@ -142,7 +142,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
   }
   std::vector<TablePose> plan = DefaultSessionPoses();
   if (args.plan == "planner") {
-    plan = PlannerSequence(sensor, args, table, SimDefaultRateHz(*protocol), &error);
+    plan = PlannerSequence(sensor, args, table, sim::SimDefaultRateHz(*protocol), &error);
     if (plan.empty()) {
       fmt::print(stderr, "turncal montecarlo: {}\n", error);
       return 1;
@@ -162,7 +162,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       RunOutcome& out = outcomes[static_cast<std::size_t>(run)];
       const std::uint64_t seed = args.seed * 1000003 + static_cast<std::uint64_t>(run);
       out.seed = seed;
-      SimCaptureOptions o;
+      sim::SimCaptureOptions o;
       o.protocol = *protocol;
       (accel ? o.accel_model : o.mag_model) = args.model;
       o.poses = plan;
@@ -181,16 +181,16 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       o.session.warmup_tau_s = args.warmup_tau_s;
       o.session.acc_random_walk = args.random_walk * sensor.acc_bias_instability / 10.0;
       o.session.mag_random_walk = args.random_walk * sensor.mag_bias_instability / 10.0;
-      SimCapture capture;
+      sim::SimCapture capture;
       std::string e;
-      if (!BuildSimCapture(o, &capture, &e)) {
+      if (!sim::BuildSimCapture(o, &capture, &e)) {
         out.error = e;
         continue;
       }
       // The capture and the state directory are removed whichever way the run ends.
       const RemovedOnExit path((dir / fmt::format("run-{}.tcap", run)).string());
       const RemovedOnExit state_dir((dir / fmt::format("state-{}", run)).string());
-      if (!WriteSimCapture(capture, path.path, &e)) {
+      if (!sim::WriteSimCapture(capture, path.path, &e)) {
         out.error = e;
         continue;
       }

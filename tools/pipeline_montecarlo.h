@@ -1,6 +1,6 @@
 #pragma once
 // `turncal montecarlo --pipeline`: is the reported sigma honest through the whole pipeline?
-// Every run simulates a session as bytes (tools/sim_capture.h, exactly what `turncal sim`
+// Every run simulates a session as bytes (sim/capture.h, exactly what `turncal sim`
 // writes), writes the capture, replays it through the station exactly as `turncald --replay
 // CAPTURE --once` does (daemon/replay_once.h) with only the model under test configured, and
 // compares every parameter with the truth the simulator defines for it (the biases over the

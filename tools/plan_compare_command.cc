@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <nlohmann/json.hpp>
 
-#include "core/simulated_session.h"
+#include "sim/simulated_session.h"
 
 namespace turncal::tools {
 

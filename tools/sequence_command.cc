@@ -8,10 +8,10 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "core/synthetic.h"
 #include "daemon/capture_replay.h"
 #include "protocol/pose_file.h"
 #include "protocol/sequencer_json.h"
+#include "sim/synthetic.h"
 
 namespace turncal::tools {
 namespace {

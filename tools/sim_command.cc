@@ -17,13 +17,13 @@
 #include <thread>
 
 #include "core/measurement_model.h"
-#include "core/session_sim.h"
 #include "core/units.h"
 #include "drivers/atomic_file.h"
 #include "drivers/capture/tcap.h"
 #include "protocol/pose_file.h"
-#include "tools/sim_capture.h"
-#include "tools/sim_live.h"
+#include "sim/capture.h"
+#include "sim/live.h"
+#include "sim/session_sim.h"
 
 namespace turncal::tools {
 
@@ -54,7 +54,7 @@ struct SimCommandArgs {
   std::vector<std::string> lives;  // ptys (or writable ttys/files) to stream to at real time
   std::string live;                // the first of lives
   double live_speed = 1.0;
-  std::string controller;  // turncald's socket: play the controller (tools/sim_live.h)
+  std::string controller;  // turncald's socket: play the controller (sim/live.h)
   double answer_timeout_s = 120;
   int retries = 2;
   double bit_error_rate = 0;
@@ -63,7 +63,7 @@ struct SimCommandArgs {
 };
 
 // "POSE:mid", "POSE:between", optionally ":DEVICE" (index among the --live devices).
-bool ParseUnplug(const std::string& text, LiveSimOptions::Unplug* u, std::string* error) {
+bool ParseUnplug(const std::string& text, sim::LiveSimOptions::Unplug* u, std::string* error) {
   std::vector<std::string> parts;
   std::size_t at = 0;
   for (;;) {
@@ -138,7 +138,7 @@ nlohmann::json TruthJson(const MeasurementModel& m, const Eigen::VectorXd& theta
   return j;
 }
 
-nlohmann::json TruthFor(const SimCapture& capture, const std::vector<TablePose>& poses,
+nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TablePose>& poses,
                         const SimCommandArgs& args) {
   std::string error;
   const SimulatedSession& session = capture.session;
@@ -197,8 +197,8 @@ nlohmann::json TruthFor(const SimCapture& capture, const std::vector<TablePose>&
       {"poses", pose_list}};
 }
 
-int RunController(const SimCommandArgs& args, SimCaptureOptions options) {
-  std::vector<LiveSimDevice> devices;
+int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
+  std::vector<sim::LiveSimDevice> devices;
   std::string error;
   nlohmann::json truths = nlohmann::json::array();
   for (std::size_t i = 0; i < args.lives.size(); ++i) {
@@ -209,12 +209,12 @@ int RunController(const SimCommandArgs& args, SimCaptureOptions options) {
                  name);
       return 2;
     }
-    SimCaptureOptions o = options;
+    sim::SimCaptureOptions o = options;
     o.protocol = *protocol;
     o.session.seed = options.session.seed + i;
-    LiveSimDevice d;
+    sim::LiveSimDevice d;
     d.path = args.lives[i];
-    if (!BuildSimCapture(o, &d.capture, &error)) {
+    if (!sim::BuildSimCapture(o, &d.capture, &error)) {
       fmt::print(stderr, "turncal sim: {}\n", error);
       return 2;
     }
@@ -235,7 +235,7 @@ int RunController(const SimCommandArgs& args, SimCaptureOptions options) {
       return 1;
     }
   }
-  LiveSimOptions live;
+  sim::LiveSimOptions live;
   live.speed = args.live_speed;
   live.controller = args.controller;
   live.answer_timeout_s = args.answer_timeout_s;
@@ -244,15 +244,15 @@ int RunController(const SimCommandArgs& args, SimCaptureOptions options) {
   live.fault_seed = args.seed * 7919 + 17;
   live.unplug_s = args.unplug_s;
   for (const auto& text : args.unplugs) {
-    LiveSimOptions::Unplug u;
+    sim::LiveSimOptions::Unplug u;
     if (!ParseUnplug(text, &u, &error)) {
       fmt::print(stderr, "turncal sim: {}\n", error);
       return 2;
     }
     live.unplugs.push_back(u);
   }
-  LiveSimReport report;
-  if (!RunLiveSim(&devices, live, &report, &error)) {
+  sim::LiveSimReport report;
+  if (!sim::RunLiveSim(&devices, live, &report, &error)) {
     fmt::print(stderr, "turncal sim: {}\n", error);
     return 1;
   }
@@ -298,7 +298,7 @@ int RunSim(const SimCommandArgs& args) {
                args.protocol);
     return 2;
   }
-  SimCaptureOptions options;
+  sim::SimCaptureOptions options;
   options.protocol = *protocol;
   std::string error;
   for (const auto& m : args.models) {
@@ -352,15 +352,15 @@ int RunSim(const SimCommandArgs& args) {
   options.burst_ms = args.burst_ms;
 
   if (!args.controller.empty()) return RunController(args, options);
-  SimCapture capture;
-  if (!BuildSimCapture(options, &capture, &error)) {
+  sim::SimCapture capture;
+  if (!sim::BuildSimCapture(options, &capture, &error)) {
     fmt::print(stderr, "turncal sim: {}\n", error);
     return 2;
   }
   const SimulatedSession& session = capture.session;
   const std::vector<drivers::CaptureRecord>& records = capture.records;
 
-  if (!args.output.empty() && !WriteSimCapture(capture, args.output, &error)) {
+  if (!args.output.empty() && !sim::WriteSimCapture(capture, args.output, &error)) {
     fmt::print(stderr, "turncal sim: {}\n", error);
     return 1;
   }
@@ -377,7 +377,7 @@ int RunSim(const SimCommandArgs& args) {
     }
   }
   if (args.faults) {
-    const SimFaultReport& f = capture.faults;
+    const sim::SimFaultReport& f = capture.faults;
     const std::string early =
         f.early_pose_index < 0
             ? std::string()
@@ -470,8 +470,8 @@ void AddSimCommand(CLI::App* app) {
       fmt::format("inject faults: bit flips (~1 frame in 500), dropped bytes (~1 in 700), "
                   "one saturated sample, pose 1 announced {} s before the table finishes "
                   "its move ({} s before its dwell)",
-                  kSimEarlyBeforeMoveEnd_s,
-                  SessionSimOptions{}.settle_s + kSimEarlyBeforeMoveEnd_s));
+                  sim::kSimEarlyBeforeMoveEnd_s,
+                  SessionSimOptions{}.settle_s + sim::kSimEarlyBeforeMoveEnd_s));
   cmd->add_option("--live", args->lives,
                   "also stream the device's bytes to this pty at real time (pose events on "
                   "standard output); with --controller: a pty to create (or an existing tty) "

@@ -9,9 +9,9 @@
 #include "core/accel_physical.h"
 #include "core/calibrator.h"
 #include "core/publish_gate.h"
-#include "core/session_sim.h"
-#include "core/synthetic.h"
 #include "protocol/observability_json.h"
+#include "sim/session_sim.h"
+#include "sim/synthetic.h"
 #include "tools/pipeline_montecarlo.h"
 
 namespace turncal::tools {

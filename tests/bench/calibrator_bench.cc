@@ -5,7 +5,7 @@
 #include <benchmark/benchmark.h>
 
 #include "core/calibrator.h"
-#include "core/synthetic.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

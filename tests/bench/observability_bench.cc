@@ -4,7 +4,7 @@
 
 #include "core/observability.h"
 #include "core/pose_planner.h"
-#include "core/synthetic.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

@@ -9,8 +9,8 @@
 
 #include "core/calibrator.h"
 #include "core/gls_whitening.h"
-#include "core/session_sim.h"
-#include "core/synthetic.h"
+#include "sim/session_sim.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "core/mag22_gauge.h"
-#include "core/synthetic.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

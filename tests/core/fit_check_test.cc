@@ -8,8 +8,8 @@
 
 #include "core/calibrator.h"
 #include "core/publish_gate.h"
-#include "core/session_sim.h"
-#include "core/synthetic.h"
+#include "sim/session_sim.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

@@ -9,7 +9,7 @@
 
 #include "core/calibrator.h"
 #include "core/mag22_gauge.h"
-#include "core/synthetic.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

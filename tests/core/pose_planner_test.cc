@@ -10,9 +10,9 @@
 
 #include "core/calibrator.h"
 #include "core/drift_design.h"
-#include "core/synthetic.h"
 #include "core/table_motion.h"
 #include "core/units.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

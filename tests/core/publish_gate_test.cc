@@ -6,8 +6,8 @@
 #include <cmath>
 
 #include "core/pose_planner.h"
-#include "core/simulated_session.h"
-#include "core/synthetic.h"
+#include "sim/simulated_session.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

@@ -1,4 +1,4 @@
-// The position sequencer on simulated sessions (core/session_sim.h): records per pose, their
+// The position sequencer on simulated sessions (sim/session_sim.h): records per pose, their
 // accuracy against the simulator's truth, windows clear of motion, early announcements, bit
 // flips, lost samples, wrong announcements, schedule mode.
 
@@ -16,9 +16,9 @@
 #include <random>
 
 #include "core/host_clock.h"
-#include "core/session_sim.h"
-#include "core/synthetic.h"
 #include "core/triad_accumulator.h"
+#include "sim/session_sim.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

@@ -1,5 +1,5 @@
 // Issue "Position sequencer", acceptance on captures from `turncal sim` (built in-process by the
-// same function, tools/sim_capture.h), replayed through the decoders into the sequencer exactly as
+// same function, sim/capture.h), replayed through the decoders into the sequencer exactly as
 // live data would go (daemon/capture_replay.h).
 
 #include <gtest/gtest.h>
@@ -9,9 +9,9 @@
 #include <cstdio>
 #include <set>
 
-#include "core/synthetic.h"
 #include "daemon/capture_replay.h"
-#include "tools/sim_capture.h"
+#include "sim/capture.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {
@@ -21,12 +21,12 @@ using daemon::ReplayOptions;
 using daemon::ReplayResult;
 
 struct Built {
-  tools::SimCapture capture;
+  sim::SimCapture capture;
   std::unique_ptr<MeasurementModel> accel, mag;
 };
 
 Built Build(drivers::Protocol protocol, bool faults) {
-  tools::SimCaptureOptions o;
+  sim::SimCaptureOptions o;
   o.protocol = protocol;
   o.poses = CubePoses26();
   o.faults = faults;
@@ -36,13 +36,13 @@ Built Build(drivers::Protocol protocol, bool faults) {
   o.session.sensor.mag_bias_instability = 0;
   Built b;
   std::string error;
-  EXPECT_TRUE(tools::BuildSimCapture(o, &b.capture, &error)) << error;
+  EXPECT_TRUE(sim::BuildSimCapture(o, &b.capture, &error)) << error;
   b.accel = MakeModel(b.capture.accel_model, ModelContext{}, &error);
   b.mag = MakeModel(b.capture.mag_model, ModelContext{}, &error);
   return b;
 }
 
-ReplayResult Replay(const tools::SimCapture& c, const ReplayOptions& options) {
+ReplayResult Replay(const sim::SimCapture& c, const ReplayOptions& options) {
   std::vector<std::uint8_t> bytes;
   const std::string header = drivers::EncodeCaptureHeader(c.header);
   bytes.assign(header.begin(), header.end());
@@ -57,7 +57,7 @@ ReplayResult Replay(const tools::SimCapture& c, const ReplayOptions& options) {
   return result;
 }
 
-double CaptureTime(const tools::SimCapture& c, double session_t_s) {
+double CaptureTime(const sim::SimCapture& c, double session_t_s) {
   return static_cast<double>(c.offset_ns) * 1e-9 + session_t_s;
 }
 

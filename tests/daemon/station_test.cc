@@ -13,16 +13,16 @@
 #include <filesystem>
 #include <fstream>
 
-#include "core/synthetic.h"
 #include "core/units.h"
 #include "daemon/persistence.h"
 #include "daemon/replay_once.h"
-#include "tools/sim_capture.h"
+#include "sim/capture.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {
 
-std::string WriteCapture(const tools::SimCapture& c, const std::string& stem) {
+std::string WriteCapture(const sim::SimCapture& c, const std::string& stem) {
   const std::string path = ::testing::TempDir() + stem + "_" + std::to_string(::getpid()) + ".tcap";
   std::string error;
   auto writer = drivers::CaptureWriter::Create(path, c.header, &error);
@@ -36,16 +36,16 @@ std::string WriteCapture(const tools::SimCapture& c, const std::string& stem) {
 class StationReplay : public ::testing::TestWithParam<drivers::Protocol> {};
 
 TEST_P(StationReplay, EstimatesFromBytesAreWithinFourSigmaOfTheTruth) {
-  tools::SimCaptureOptions o;
+  sim::SimCaptureOptions o;
   o.protocol = GetParam();
   // Seed 10: with the drift-aware calibrator, seed 9's xbus magnetometer ends at chi^2 = 141 on
   // 92 dof (p = 0.00057), below the gate's 0.001, so its gate refuses -- which the gate does
   // for about one session in a thousand per model by design; turncal montecarlo --pipeline
   // shows the chi^2 p-values uniform over 200 sessions (docs/ACCURACY.md).
   o.session.seed = 10;
-  tools::SimCapture c;
+  sim::SimCapture c;
   std::string error;
-  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
   const std::string path = WriteCapture(c, "station");
   const std::string result_path = path + ".result.json";
   daemon::ReplayOnceOutcome outcome;
@@ -98,15 +98,15 @@ TEST_P(StationReplay, EstimatesFromBytesAreWithinFourSigmaOfTheTruth) {
 // scale each calibrator identifies (fed back after every solve). Before it did, the station
 // rejected 25 of 36 such poses as a creeping table and the gate could not pass.
 TEST(StationDrift, TheSequencerAllowsForTheDriftTheCalibratorIdentified) {
-  tools::SimCaptureOptions o;
+  sim::SimCaptureOptions o;
   o.protocol = drivers::Protocol::kMip;
   o.session.seed = 23;
   o.session.sensor = ConsumerClass();
   o.session.sensor.acc_bias_instability *= 3;
   o.session.sensor.mag_bias_instability *= 3;
-  tools::SimCapture c;
+  sim::SimCapture c;
   std::string error;
-  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
   const std::string path = WriteCapture(c, "wander");
   daemon::StationOptions options;
   options.sensor_class = "consumer";
@@ -166,12 +166,12 @@ TEST(StationDrift, AConfiguredNoisePriorReplacesTheClasss) {
 }
 
 TEST(StationDrift, CorrectedSigmaGrowsWithTheTimeSinceTheCalibration) {
-  tools::SimCaptureOptions o;
+  sim::SimCaptureOptions o;
   o.protocol = drivers::Protocol::kMip;
   o.session.seed = 21;
-  tools::SimCapture c;
+  sim::SimCapture c;
   std::string error;
-  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
   const std::string path = WriteCapture(c, "drift");
   daemon::StationOptions options;
   options.models = {"accel13"};
@@ -221,13 +221,13 @@ TEST(StationDrift, CorrectedSigmaGrowsWithTheTimeSinceTheCalibration) {
 // the move from the latest captured pose at the configured rates, settling and the dwell; the
 // plan's seconds add up; plan_for = "poses" switches the objective.
 TEST(StationPlanning, NextPoseCountsTheTablesSecondsFromTheLatestPose) {
-  tools::SimCaptureOptions o;
+  sim::SimCaptureOptions o;
   o.protocol = drivers::Protocol::kMip;
   o.session.seed = 22;
   o.poses.resize(5);
-  tools::SimCapture c;
+  sim::SimCapture c;
   std::string error;
-  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
   const std::string path = WriteCapture(c, "planning");
   for (const PlanObjective objective : {PlanObjective::kTime, PlanObjective::kPoses}) {
     daemon::StationOptions options;
@@ -279,23 +279,23 @@ INSTANTIATE_TEST_SUITE_P(Protocols, StationReplay,
 // with the estimates an uninterrupted run gives; versions of the active calibration continue
 // and earlier ones are kept in the history.
 TEST(StationPersistence, ResumesAfterACrashWithEveryCapturedPose) {
-  tools::SimCaptureOptions o;
+  sim::SimCaptureOptions o;
   o.protocol = drivers::Protocol::kXbus;
   o.poses = CubePoses26();
   o.session.seed = 12;
-  tools::SimCapture c;
+  sim::SimCapture c;
   std::string error;
-  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
   // The cut: pose 12 (the 13th) captured, the table still resting (its dwell ends 1.4 s later).
   const auto& ev = c.session.events[12];
   const auto cut_ns = static_cast<std::uint64_t>(c.offset_ns + std::llround((ev.t_s + 3.6) * 1e9));
-  tools::SimCapture first = c, second = c;
+  sim::SimCapture first = c, second = c;
   first.records.clear();
   second.records.clear();
   for (const auto& r : c.records) (r.t_ns <= cut_ns ? first : second).records.push_back(r);
   const std::string dir = ::testing::TempDir() + "station_state_" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
-  auto run = [&](const tools::SimCapture& part, const std::string& state_dir,
+  auto run = [&](const sim::SimCapture& part, const std::string& state_dir,
                  std::vector<nlohmann::json>* events) {
     daemon::StationOptions so;
     so.state_dir = state_dir;
@@ -375,13 +375,13 @@ TEST(StationPersistence, ResumesAfterACrashWithEveryCapturedPose) {
 // the journal on disk. The station's work goes to a queue here (the daemon's worker thread): while
 // the journal appends wait, no pose is answered; each answer comes after its own append.
 TEST(StationPersistence, PoseIsAnsweredOnlyOnceItsRecordIsJournaled) {
-  tools::SimCaptureOptions o;
+  sim::SimCaptureOptions o;
   o.protocol = drivers::Protocol::kXbus;
   o.poses = CubePoses26();
   o.session.seed = 5;
-  tools::SimCapture c;
+  sim::SimCapture c;
   std::string error;
-  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
   const std::string dir = ::testing::TempDir() + "station_answer_" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
   daemon::StationOptions so;
@@ -466,14 +466,14 @@ namespace {
 // A device's own models and gate; corrected samples with the calibration's sigma; a restarted
 // station applies what it published before; an operator override is recorded.
 TEST(StationLive, PerDeviceModelsCorrectionRestartAndOverride) {
-  tools::SimCaptureOptions o;
+  sim::SimCaptureOptions o;
   o.protocol = drivers::Protocol::kXbus;
   o.poses = CubePoses26();
   o.session.seed = 21;
   o.accel_model = "accel12";  // the device's own model is the one its truth follows
-  tools::SimCapture c;
+  sim::SimCapture c;
   std::string error;
-  ASSERT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
   const std::string dir = ::testing::TempDir() + "station_live_" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
   daemon::StationOptions so;
@@ -535,7 +535,7 @@ TEST(StationLive, PerDeviceModelsCorrectionRestartAndOverride) {
   EXPECT_FALSE(few.PublishOverride("imu", "accel13", {{"operator", "x"}}, &error));  // no poses
   EXPECT_NE(error.find("no estimate"), std::string::npos) << error;
   {
-    tools::SimCapture part = c;
+    sim::SimCapture part = c;
     part.records.clear();
     const auto cut =
         static_cast<std::uint64_t>(c.offset_ns + std::llround(c.session.events[5].t_s * 1e9));

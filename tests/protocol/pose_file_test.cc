@@ -4,9 +4,9 @@
 
 #include <cmath>
 
-#include "core/synthetic.h"
 #include "core/units.h"
 #include "protocol/observability_json.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {

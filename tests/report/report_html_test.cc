@@ -20,11 +20,11 @@
 #include <regex>
 
 #include "core/measurement_model.h"
-#include "core/synthetic.h"
 #include "daemon/persistence.h"
 #include "daemon/station.h"
 #include "protocol/sequencer_json.h"
-#include "tools/sim_capture.h"
+#include "sim/capture.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 namespace {
@@ -39,15 +39,15 @@ struct Session {
 Session RunSession(const std::string& stem, drivers::Protocol protocol,
                    const std::string& accel_model, const std::string& mag_model,
                    std::uint64_t seed) {
-  tools::SimCaptureOptions o;
+  sim::SimCaptureOptions o;
   o.protocol = protocol;
   o.accel_model = accel_model;
   o.mag_model = mag_model;
   o.poses = CubePoses26();
   o.session.seed = seed;
-  tools::SimCapture c;
+  sim::SimCapture c;
   std::string error;
-  EXPECT_TRUE(tools::BuildSimCapture(o, &c, &error)) << error;
+  EXPECT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
   Session s;
   s.dir = ::testing::TempDir() + "report_" + stem + "_" + std::to_string(::getpid());
   std::filesystem::remove_all(s.dir);

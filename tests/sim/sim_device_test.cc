@@ -1,7 +1,7 @@
-// The device emulator behind `turncal sim --live` (tools/sim_device.h) against the real
+// The device emulator behind `turncal sim --live` (sim/device.h) against the real
 // configuration dialogues: an in-memory link hands what the dialogue writes to the emulator and
 // queues its replies, with sample frames interleaved whenever the emulator says it streams.
-#include "tools/sim_device.h"
+#include "sim/device.h"
 
 #include <gtest/gtest.h>
 
@@ -13,9 +13,9 @@
 #include "drivers/mip/mip_encoder.h"
 #include "drivers/xbus/xbus_dialogue.h"
 #include "drivers/xbus/xbus_encoder.h"
-#include "tools/sim_capture.h"
+#include "sim/capture.h"
 
-namespace turncal::tools {
+namespace turncal::sim {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
@@ -494,7 +494,7 @@ TEST(XbusLegacyEmulator, ReportsTheLayoutTheSimulatorStreams) {
 }
 
 TEST(XbusLegacyEmulator, TheLayoutIsTheOneSimCaptureWrites) {
-  // tools/sim_capture.cc keeps its layout to itself; its capture header says which it used.
+  // sim/capture.cc keeps its layout to itself; its capture header says which it used.
   SimCaptureOptions options;
   options.protocol = Protocol::kXbusLegacy;
   options.poses = {TablePose{}};
@@ -546,4 +546,4 @@ TEST(Gx2Emulator, StreamsAlwaysAndAnswersNothing) {
 }
 
 }  // namespace
-}  // namespace turncal::tools
+}  // namespace turncal::sim

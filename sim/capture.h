@@ -1,5 +1,5 @@
 #pragma once
-// The capture `turncal sim` writes, built in memory: the simulated session (core/session_sim.h)
+// The capture `turncal sim` writes, built in memory: the simulated session (sim/session_sim.h)
 // turned into .tcap records (the device's start-up traffic, the encoded sample frames in bursts,
 // the controller's pose events, an "end" event), with faults injected on request. `turncal sim`
 // writes exactly these records; tests build the same capture in-process from the same options.
@@ -15,11 +15,11 @@
 #include <string>
 #include <vector>
 
-#include "core/session_sim.h"
 #include "drivers/capture/tcap.h"
 #include "drivers/device_spec.h"
+#include "sim/session_sim.h"
 
-namespace turncal::tools {
+namespace turncal::sim {
 
 // --faults: the early pose announcement comes this long before the table finishes its move into
 // the pose (so settle_s + this before the dwell starts), while the table is still visibly moving.
@@ -83,4 +83,4 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
 // with a message when the file cannot be written.
 bool WriteSimCapture(const SimCapture& capture, const std::string& path, std::string* error);
 
-}  // namespace turncal::tools
+}  // namespace turncal::sim

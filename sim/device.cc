@@ -1,4 +1,4 @@
-#include "tools/sim_device.h"
+#include "sim/device.h"
 
 #include <algorithm>
 #include <chrono>
@@ -12,7 +12,7 @@
 #include "drivers/xbus/xbus_decoder.h"
 #include "drivers/xbus/xbus_encoder.h"
 
-namespace turncal::tools {
+namespace turncal::sim {
 
 namespace {
 
@@ -505,4 +505,4 @@ std::unique_ptr<DeviceEmulator> DeviceEmulator::Make(drivers::Protocol protocol,
   return nullptr;
 }
 
-}  // namespace turncal::tools
+}  // namespace turncal::sim

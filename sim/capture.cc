@@ -1,6 +1,6 @@
-#include "tools/sim_capture.h"
+#include "sim/capture.h"
 
-#include "tools/sim_device.h"
+#include "sim/device.h"
 
 #include <fmt/format.h>
 
@@ -18,7 +18,7 @@
 #include "drivers/mip/mip_encoder.h"
 #include "drivers/xbus/xbus_encoder.h"
 
-namespace turncal::tools {
+namespace turncal::sim {
 
 namespace {
 
@@ -44,7 +44,7 @@ ProtocolDefaults Defaults(drivers::Protocol p) {
   return {100.0, 115200, 10};
 }
 
-// temp, calibrated, counter: what the device emulator reports (tools/sim_device.h).
+// temp, calibrated, counter: what the device emulator reports (sim/device.h).
 constexpr drivers::XbusLegacyLayout kLegacyLayout = kSimXbusLegacyLayout;
 
 }  // namespace
@@ -315,4 +315,4 @@ bool WriteSimCapture(const SimCapture& capture, const std::string& path, std::st
   return writer->Close(error);
 }
 
-}  // namespace turncal::tools
+}  // namespace turncal::sim

@@ -12,7 +12,7 @@
 #include "core/calibrator.h"
 #include "core/pose_planner.h"
 #include "core/publish_gate.h"
-#include "core/synthetic.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 

@@ -68,10 +68,10 @@
 #include "drivers/mip/mip_dialogue.h"
 #include "drivers/xbus/xbus_decoder.h"
 
-namespace turncal::tools {
+namespace turncal::sim {
 
 // The legacy MTData layout the simulator streams for xbus-legacy: temperature, calibrated data
-// (acc, gyr, mag as f32) and the sample counter, 42 data bytes. tools/sim_capture.cc encodes its
+// (acc, gyr, mag as f32) and the sample counter, 42 data bytes. sim/capture.cc encodes its
 // frames with a layout of the same value (kLegacyLayout, local to that file).
 inline constexpr drivers::XbusLegacyLayout kSimXbusLegacyLayout{0x0003, 0x00000001};
 
@@ -147,4 +147,4 @@ class DeviceEmulator {
   std::function<std::int64_t()> now_ns_;
 };
 
-}  // namespace turncal::tools
+}  // namespace turncal::sim

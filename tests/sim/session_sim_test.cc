@@ -1,4 +1,4 @@
-#include "core/session_sim.h"
+#include "sim/session_sim.h"
 
 #include <gtest/gtest.h>
 

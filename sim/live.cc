@@ -1,4 +1,4 @@
-#include "tools/sim_live.h"
+#include "sim/live.h"
 
 #include <fcntl.h>
 #include <fmt/format.h>
@@ -21,9 +21,9 @@
 #include <set>
 
 #include "core/units.h"
-#include "tools/sim_device.h"
+#include "sim/device.h"
 
-namespace turncal::tools {
+namespace turncal::sim {
 
 namespace {
 
@@ -676,4 +676,4 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
   return true;
 }
 
-}  // namespace turncal::tools
+}  // namespace turncal::sim

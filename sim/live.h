@@ -2,7 +2,7 @@
 // `turncal sim --live PTY... --controller SOCKET`: the simulator plays the turntable, its sensors
 // and the lab's controller against a running turncald. Each simulated device streams its frames
 // into a pseudo-terminal at real time (times the speed) and answers the daemon's configuration
-// dialogue through the device emulator (tools/sim_device.h), sending no samples while the host
+// dialogue through the device emulator (sim/device.h), sending no samples while the host
 // has it idle or in config state. The controller announces every pose on the daemon's socket
 // when the table has settled and -- like a real controller -- holds the table there until every
 // device has answered: while it waits past the planned dwell, the devices keep streaming the
@@ -23,9 +23,9 @@
 #include <string>
 #include <vector>
 
-#include "tools/sim_capture.h"
+#include "sim/capture.h"
 
-namespace turncal::tools {
+namespace turncal::sim {
 
 struct LiveSimDevice {
   std::string path;
@@ -73,4 +73,4 @@ struct LiveSimReport {
 bool RunLiveSim(std::vector<LiveSimDevice>* devices, const LiveSimOptions& options,
                 LiveSimReport* report, std::string* error);
 
-}  // namespace turncal::tools
+}  // namespace turncal::sim

@@ -1,16 +1,11 @@
 #pragma once
-// In-memory synthetic calibration data with known truth: sensor classes of SENSORS.md, truth
-// drawn near nominal, pose designs, and the per-pose statistics a stationary window would give.
-// Pure computation with an explicit random generator, for tests, the Monte Carlo check and the
-// core-level demonstration. (The byte-level simulator `turncal sim` builds on the same classes.)
+// The sensor classes of SENSORS.md (noise, error magnitudes, rates) and the calibrator options
+// that match them: what the station assumes of a sensor before its own data say more.
 
-#include <random>
 #include <string>
-#include <vector>
 
 #include "core/calibrator.h"
 #include "core/measurement_model.h"
-#include "core/pose_record.h"
 
 namespace turncal {
 
@@ -52,19 +47,6 @@ SensorClass ConsumerClass();
 // By name; false when unknown.
 bool SensorClassByName(const std::string& name, SensorClass* out);
 
-// Truth near nominal with the class's error magnitudes; beta uniform in [-0.3, 0.3] rad. mag22's
-// truth is in the gauge of Calibrator (det K_ = 1, dB orthogonal to R3(beta) B_NED).
-Eigen::VectorXd DrawTruth(const MeasurementModel& model, const SensorClass& sensor,
-                          std::mt19937_64* rng);
-
-// n table poses whose "down" directions are uniform on the sphere and psi uniform.
-std::vector<TablePose> RandomPoses(int n, std::mt19937_64* rng);
-// The classic 26-position design: down along the 6 faces, 12 edges and 8 corners of a cube,
-// with psi cycling through 0, 90, 180, 270 degrees so the heading is excited.
-std::vector<TablePose> CubePoses26();
-// All poses turning about the table's outer (z) axis only: the degenerate design.
-std::vector<TablePose> AboutZPoses(int n);
-
 // Calibrator options matching the class's noise for `model` (the pose-to-pose offset and the
 // white-noise density of the triad the model uses).
 CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorClass& sensor);
@@ -81,13 +63,5 @@ Eigen::Matrix3d ExpectedPoseSqrtInformation(const MeasurementModel& model,
                                             const SensorClass& sensor,
                                             const CalibratorOptions& options, double dwell_s,
                                             double rate_hz);
-
-// The record a stationary window of `dwell_s` at `pose` would give: the true measurement plus
-// white noise averaged over the window and a bias-instability offset, with the sample covariance
-// of the white noise (what the window's samples show). The offset is invisible inside one
-// window: the calibrator must be told of it (CalibratorOptions::pose_offset_sigma).
-PoseRecord SimulateRecord(const MeasurementModel& model, const Eigen::VectorXd& truth,
-                          const TablePose& pose, const SensorClass& sensor, double dwell_s,
-                          std::mt19937_64* rng);
 
 }  // namespace turncal

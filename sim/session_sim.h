@@ -23,8 +23,8 @@
 #include "core/measurement_model.h"
 #include "core/pose_record.h"
 #include "core/sample.h"
-#include "core/synthetic.h"
 #include "core/table_motion.h"
+#include "sim/synthetic.h"
 
 namespace turncal {
 

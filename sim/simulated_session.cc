@@ -1,4 +1,4 @@
-#include "core/simulated_session.h"
+#include "sim/simulated_session.h"
 
 namespace turncal {
 
