@@ -18,100 +18,6 @@
 
 namespace turncal::daemon {
 
-struct Station::ModelState {
-  std::unique_ptr<MeasurementModel> model;
-  std::unique_ptr<Calibrator> calibrator;
-  Estimate estimate;
-  // How many of the device's poses (poses_used, records_used) `estimate` saw: later poses may be
-  // captured while its solve runs, and a calibration carries only its own evidence.
-  std::size_t estimate_poses = 0;
-  GateResult gate;
-  int rank = 0;
-  int active_version = 0;  // 0: no active calibration
-  Estimate active;
-  // The calibration live samples are corrected with: the active one, or the one stored in the
-  // state directory when the station started (version 0 / empty: none).
-  int applied_version = 0;
-  Eigen::VectorXd applied_theta;
-  Eigen::MatrixXd applied_covariance;  // empty when unknown
-  // With a drift model: when the applied bias held, and how the bias wanders since (the
-  // corrected output's sigma grows with the time since).
-  std::optional<TimeWindow> applied_bias_window;
-  BiasDrift applied_drift;
-  // The correction as y = A raw + c, when the model's correction is affine in the raw sample (all
-  // four models are: checked numerically when the calibration is applied). Live samples are
-  // corrected with it, without the model's per-sample matrix solves.
-  bool applied_affine = false;
-  Eigen::Matrix3d applied_A = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d applied_c = Eigen::Vector3d::Zero();
-
-  void Apply(int version, const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance,
-             const std::optional<TimeWindow>& bias_window, const BiasDrift& drift) {
-    applied_version = version;
-    applied_theta = theta;
-    applied_covariance = covariance;
-    applied_bias_window = bias_window;
-    applied_drift = drift;
-    applied_c = model->Correct(theta, Eigen::Vector3d::Zero());
-    for (int i = 0; i < 3; ++i) {
-      applied_A.col(i) = model->Correct(theta, Eigen::Vector3d::Unit(i)) - applied_c;
-    }
-    // Affine when a point away from the probes maps the same both ways.
-    const Eigen::Vector3d probe(0.83, -1.37, 2.11);
-    const Eigen::Vector3d exact = model->Correct(theta, probe);
-    const Eigen::Vector3d affine = applied_A * probe + applied_c;
-    applied_affine = exact.allFinite() && (exact - affine).norm() <= 1e-12 * (1.0 + exact.norm());
-  }
-  // The calibrator is solved on the service's worker thread; this guards it.
-  std::unique_ptr<std::mutex> calibrator_mutex = std::make_unique<std::mutex>();
-};
-
-struct Station::DeviceState {
-  std::string name;
-  std::unique_ptr<Sequencer> sequencer;
-  std::vector<ModelState> models;
-  std::vector<TablePose> poses_used;
-  std::vector<PoseRecord> records_used;  // the same poses' records (a calibration's evidence)
-  int poses = 0;
-  bool noise_stored = false;  // the sequencer uses the profile kept in the state directory
-  GateOptions gate;           // the station's, or the device's own
-  nlohmann::json identity;    // from the device dialogue (null in replays)
-  nlohmann::json current;     // the pose being collected: its last sequencer event
-  // reports/NAME.html is rewritten after an activation, at most every kReportIntervalNs (the
-  // render re-solves the calibration pose by pose: tens of ms on the worker).
-  bool report_due = false;
-  std::int64_t report_written_ns = std::numeric_limits<std::int64_t>::min() / 2;
-};
-
-namespace {
-
-// The drift's identified strength, with the scale the solve used ("used": 1 while the poses do
-// not reject the prior).
-nlohmann::json DriftScaleJson(const Estimate& e) {
-  nlohmann::json j = protocol::ToJson(e.drift_scale);
-  j["used"] = e.drift_scale_used;
-  return j;
-}
-
-// {NAME:{"value","sigma"}} in the model's order; sigma null when undetermined.
-nlohmann::json ParamsJson(const Estimate& e) {
-  nlohmann::json params = nlohmann::json::object();
-  // A refused solve (too few poses) names its parameters but has no values yet.
-  if (e.theta.size() != static_cast<Eigen::Index>(e.parameters.size()) ||
-      e.sigma.size() != e.theta.size()) {
-    return params;
-  }
-  for (std::size_t i = 0; i < e.parameters.size(); ++i) {
-    const auto k = static_cast<Eigen::Index>(i);
-    params[e.parameters[i].name] = {
-        {"value", e.theta[k]},
-        {"sigma", std::isfinite(e.sigma[k]) ? nlohmann::json(e.sigma[k]) : nlohmann::json()}};
-  }
-  return params;
-}
-
-}  // namespace
-
 bool StationOptions::IsValid(std::string* error) const {
   if (!sequencer.IsValid(error) || !gate.IsValid(error) || !table.IsValid(error)) return false;
   SensorClass c;
@@ -160,18 +66,7 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
   for (std::size_t i = 0; i < device_names.size(); ++i) {
     auto d = std::make_unique<DeviceState>();
     d->name = device_names[i];
-    SequencerOptions so = options_.sequencer;
-    // A still dwell's halves may differ by the sensor's own bias wander, not only by its white
-    // noise: the class's Gauss-Markov drift, scaled by what the calibrator identifies (Apply).
-    for (int t : {kTriadAcc, kTriadMag}) {
-      BiasDrift& wander = so.stillness.bias_drift[static_cast<std::size_t>(t)];
-      if (wander.enabled()) continue;
-      wander.gm_sigma = Eigen::Vector3d::Constant(t == kTriadAcc ? sensor_.acc_bias_instability
-                                                                 : sensor_.mag_bias_instability);
-      wander.gm_tau_s = sensor_.bias_tau_s;
-      wander.rw_density = Eigen::Vector3d::Constant(
-          std::max(0.0, t == kTriadAcc ? options_.acc_random_walk : options_.mag_random_walk));
-    }
+    SequencerOptions so = DevicePipeline::SequencerOptionsFor(options_, sensor_);
     // The noise this session measured before a restart: stillness is judged as before.
     NoiseProfile stored;
     if (!so.noise && !options_.state_dir.empty() &&
@@ -187,24 +82,8 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
       if (it->second.models) models = *it->second.models;
       if (it->second.gate) d->gate = *it->second.gate;
     }
-    for (const auto& name : models) {
-      ModelState m;
-      std::string error;
-      m.model = MakeModel(name, options_.context, &error);
-      CalibratorOptions co = options_.drift_model ? DriftOptionsForClass(*m.model, sensor_)
-                                                  : OptionsForClass(*m.model, sensor_);
-      // The class's drift (or the one configured) is the prior; the session's poses identify
-      // its strength.
-      co.identify_drift = options_.drift_model && options_.identify_drift;
-      if (options_.drift_model) {
-        const double rw = m.model->sensor() == SensorKind::kAccelerometer
-                              ? options_.acc_random_walk
-                              : options_.mag_random_walk;
-        if (rw > 0) co.drift.rw_density = Eigen::Vector3d::Constant(rw);
-      }
-      m.calibrator = std::make_unique<Calibrator>(co);
-      d->models.push_back(std::move(m));
-    }
+    for (const auto& name : models)
+      d->models.push_back(ModelPipeline::Make(name, options_, sensor_));
     devices_.push_back(std::move(d));
   }
   if (!options_.state_dir.empty()) {
@@ -220,48 +99,11 @@ void Station::LoadApplied() {
     for (ModelState& m : d->models) {
       nlohmann::json stored;
       if (!ReadActiveCalibration(options_.state_dir, d->name, m.model->name(), &stored)) continue;
-      const auto& params = m.model->parameters();
-      Eigen::VectorXd theta(static_cast<Eigen::Index>(params.size()));
-      bool ok = stored.contains("version") && stored["version"].is_number_integer() &&
-                stored.contains("params") && stored["params"].is_object();
-      for (std::size_t i = 0; ok && i < params.size(); ++i) {
-        const auto it = stored["params"].find(params[i].name);
-        ok = it != stored["params"].end() && it->is_object() && (*it)["value"].is_number();
-        if (ok) theta[static_cast<Eigen::Index>(i)] = (*it)["value"].get<double>();
-      }
-      if (!ok) {
+      if (!m.ApplyStored(stored)) {
         Publish({{"class", "ERROR"},
                  {"device", d->name},
                  {"model", m.model->name()},
                  {"message", "the stored calibration is unreadable and is not applied"}});
-        continue;
-      }
-      std::optional<TimeWindow> window;
-      TimeWindow w;
-      if (stored.contains("bias_window") && protocol::ParseTimeWindow(stored["bias_window"], &w)) {
-        window = w;
-      }
-      BiasDrift drift;
-      if (stored.contains("calibrator") && stored["calibrator"].is_object() &&
-          stored["calibrator"].contains("drift")) {
-        protocol::ParseBiasDrift(stored["calibrator"]["drift"], &drift);
-      }
-      m.Apply(stored["version"].get<int>(), theta, Eigen::MatrixXd(), window, drift);
-      const auto& cov = stored.value("covariance", nlohmann::json());
-      if (cov.is_array() && cov.size() == params.size()) {
-        Eigen::MatrixXd c(theta.size(), theta.size());
-        bool good = true;
-        for (std::size_t r = 0; good && r < params.size(); ++r) {
-          good = cov[r].is_array() && cov[r].size() == params.size();
-          for (std::size_t k = 0; good && k < params.size(); ++k) {
-            good = cov[r][k].is_number();
-            if (good) {
-              c(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(k)) =
-                  cov[r][k].get<double>();
-            }
-          }
-        }
-        if (good) m.applied_covariance = c;
       }
     }
   }
@@ -285,70 +127,17 @@ bool Station::HasAppliedCalibration(int device) const {
   return false;
 }
 
-namespace {
-
-// 1 sigma per axis of model.Correct(theta, raw) from cov(theta): J cov J^T with J by central
-// differences (steps of 1e-6 of each parameter's scale); nullopt without a usable covariance.
-// `bias_drift_var`, per axis, is added to the bias parameters' variance: how far the bias may
-// have wandered since the calibration.
-std::optional<Eigen::Vector3d> CorrectionSigma(const MeasurementModel& model,
-                                               const Eigen::VectorXd& theta,
-                                               Eigen::MatrixXd covariance,
-                                               const Eigen::Vector3d& raw,
-                                               const Eigen::Vector3d& bias_drift_var) {
-  const Eigen::Index n = theta.size();
-  if (covariance.rows() != n || covariance.cols() != n || !covariance.allFinite()) {
-    return std::nullopt;
-  }
-  const auto& params = model.parameters();
-  for (Eigen::Index k = 0; k < n; ++k) {
-    const std::string& name = params[static_cast<std::size_t>(k)].name;
-    if (name == "bx" || name == "by" || name == "bz")
-      covariance(k, k) += bias_drift_var[name[1] - 'x'];
-  }
-  Jacobian3 jacobian(3, n);
-  Eigen::VectorXd t = theta;
-  for (Eigen::Index k = 0; k < n; ++k) {
-    const double h = 1e-6 * std::max(1.0, std::abs(theta[k]));
-    t[k] = theta[k] + h;
-    const Eigen::Vector3d up = model.Correct(t, raw);
-    t[k] = theta[k] - h;
-    const Eigen::Vector3d down = model.Correct(t, raw);
-    t[k] = theta[k];
-    jacobian.col(k) = (up - down) / (2 * h);
-  }
-  const Eigen::Matrix3d c = jacobian * covariance * jacobian.transpose();
-  return c.diagonal().cwiseMax(0.0).cwiseSqrt();
-}
-
-}  // namespace
-
 bool Station::Correct(int device, const Sample& sample, Corrected* out, bool with_sigma) const {
   *out = Corrected{};
   for (const ModelState& m : devices_[static_cast<std::size_t>(device)]->models) {
     if (m.applied_version <= 0) continue;
-    const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
+    const bool accel = m.accel();
     const std::optional<Eigen::Vector3d>& raw = accel ? sample.acc_mps2 : sample.mag;
     if (!raw) continue;
     std::optional<Eigen::Vector3d>& target = accel ? out->acc_mps2 : out->mag;
     if (target) continue;  // the first model of a sensor in the configured order wins
-    target = m.applied_affine ? Eigen::Vector3d(m.applied_A * *raw + m.applied_c)
-                              : m.model->Correct(m.applied_theta, *raw);
-    if (with_sigma) {
-      Eigen::Vector3d drift_var = Eigen::Vector3d::Zero();
-      if (m.applied_bias_window && m.applied_drift.enabled()) {
-        const double t_s = static_cast<double>(sample.t_host_ns) * 1e-9;
-        const TimeWindow& w = *m.applied_bias_window;
-        // A clock before the calibration's (the host restarted since): the time since is
-        // unknown, so the wander's long-term limit (infinite for a random walk).
-        const double since_s = t_s >= w.t0_s ? t_s : w.t1_s + 1e9;
-        for (int axis = 0; axis < 3; ++axis) {
-          drift_var[axis] = m.applied_drift.VarianceSince(axis, w, since_s);
-        }
-      }
-      (accel ? out->acc_sigma : out->mag_sigma) =
-          CorrectionSigma(*m.model, m.applied_theta, m.applied_covariance, *raw, drift_var);
-    }
+    target = m.Correct(*raw, static_cast<double>(sample.t_host_ns) * 1e-9,
+                       with_sigma ? &(accel ? out->acc_sigma : out->mag_sigma) : nullptr);
     (accel ? out->acc_frame : out->mag_frame) = ToString(m.model->corrected_frame());
     out->versions.emplace_back(m.model->name(), m.applied_version);
   }
@@ -356,34 +145,7 @@ bool Station::Correct(int device, const Sample& sample, Corrected* out, bool wit
 }
 
 nlohmann::json Station::Status(int device) const {
-  const DeviceState& d = *devices_[static_cast<std::size_t>(device)];
-  nlohmann::json models = nlohmann::json::object();
-  for (const ModelState& m : d.models) {
-    const CalibratorOptions& co = m.calibrator->options();
-    models[m.model->name()] = {
-        {"poses", m.estimate.poses},
-        {"gate", ToJson(m.gate)},
-        {"fit_check", ToString(m.estimate.fit.verdict)},
-        {"noise_model", co.drift.enabled()
-                            ? protocol::ToJson(m.estimate.ok ? m.estimate.drift : co.drift)
-                            : nlohmann::json{{"pose_offset_sigma", co.pose_offset_sigma}}},
-        {"drift_scale",
-         m.estimate.ok && co.identify_drift ? DriftScaleJson(m.estimate) : nlohmann::json()},
-        {"active_version", m.active_version},
-        {"applied_version", m.applied_version}};
-  }
-  const SampleCounts& t = d.sequencer->totals();
-  return {{"poses", d.poses},
-          {"captured", d.sequencer->captured()},
-          {"rejected", d.sequencer->rejected()},
-          {"busy", d.sequencer->busy()},
-          {"noise", d.sequencer->noise() ? "measured" : "measuring"},
-          {"noise_profile",
-           d.sequencer->noise() ? protocol::ToJson(*d.sequencer->noise()) : nlohmann::json()},
-          {"current", d.sequencer->busy() ? d.current : nlohmann::json()},
-          {"samples",
-           {{"used", t.used}, {"flagged", t.flagged}, {"outliers", t.outliers}, {"lost", t.lost}}},
-          {"models", models}};
+  return devices_[static_cast<std::size_t>(device)]->StatusJson();
 }
 
 Station::~Station() { *alive_ = false; }
@@ -597,80 +359,6 @@ void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) 
   }
 }
 
-nlohmann::json Station::CalibrationJson(const DeviceState& d, const ModelState& m) const {
-  const Estimate& e = m.estimate;
-  nlohmann::json order = nlohmann::json::array();
-  for (const auto& p : e.parameters) order.push_back(p.name);
-  nlohmann::json covariance = nlohmann::json::array();
-  for (Eigen::Index r = 0; r < e.covariance.rows(); ++r) {
-    nlohmann::json row = nlohmann::json::array();
-    for (Eigen::Index c = 0; c < e.covariance.cols(); ++c) {
-      const double v = e.covariance(r, c);
-      row.push_back(std::isfinite(v) ? nlohmann::json(v) : nlohmann::json());
-    }
-    covariance.push_back(row);
-  }
-  const std::size_t n = std::min(m.estimate_poses, d.poses_used.size());
-  nlohmann::json poses = nlohmann::json::array();
-  for (std::size_t i = 0; i < n; ++i) poses.push_back(ToJson(d.poses_used[i]));
-  // The records themselves, with the model's triad only, so that the calibration can be
-  // re-evaluated (the report's residuals and convergence) without the journal, which `reset`
-  // archives.
-  const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
-  nlohmann::json records = nlohmann::json::array();
-  for (std::size_t i = 0; i < n && i < d.records_used.size(); ++i) {
-    PoseRecord r = d.records_used[i];
-    r.gyr.reset();
-    (accel ? r.mag : r.acc).reset();
-    records.push_back(protocol::ToJson(r));
-  }
-  nlohmann::json calibrator =
-      protocol::CalibratorJson(m.calibrator->options(), options_.sensor_class);
-  if (e.drift.enabled()) {
-    // The drift the solve used (the prior times the identified scale): corrected output's sigma
-    // grows with it, also after a restart; the configured one stays as the prior.
-    calibrator["drift_prior"] = calibrator["drift"];
-    calibrator["drift"] = protocol::ToJson(e.drift);
-    calibrator["drift_scale"] = DriftScaleJson(e);
-  }
-  // Device identity and the device-side stored calibration come from the device dialogue of a
-  // live station (SetDeviceIdentity); a replay does not have them (null).
-  const nlohmann::json provenance = {
-      {"poses", poses}, {"records", records}, {"device_identity", d.identity}};
-  return {{"schema", 1},
-          {"class", "CALIBRATION"},
-          {"device", d.name},
-          {"model", m.model->name()},
-          {"version", m.active_version},
-          {"software", kVersion},
-          {"time", drivers::UtcNowIso8601()},
-          {"params", ParamsJson(e)},
-          {"parameter_order", order},
-          {"covariance", covariance},
-          {"gauge", e.gauge},
-          {"bias_window", e.bias_window ? protocol::ToJson(*e.bias_window) : nlohmann::json()},
-          {"rank", m.rank},
-          {"chi2", e.chi2},
-          {"dof", e.dof},
-          {"p_value", e.p_value},
-          {"fit_check", protocol::ToJson(e.fit, m.model->sensor())},
-          {"gate", ToJson(m.gate)},
-          {"tolerances", protocol::TolerancesJson(*m.model, d.gate)},
-          {"context", protocol::ToJson(options_.context)},
-          {"calibrator", calibrator},
-          {"provenance", provenance}};
-}
-
-// What one model's update computes (on the solve worker when there is one).
-struct Station::UpdateJob {
-  std::size_t device_poses = 0;  // the device's poses when the update was queued, this one included
-  bool added = false;
-  std::string error;
-  Estimate estimate;
-  int rank = 0;
-  GateResult gate;
-};
-
 void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   DeviceState& d = *devices_[device];
   ++d.poses;
@@ -680,23 +368,10 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
     ModelState& m = d.models[mi];
     const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
     if (accel ? !record.acc : !record.mag) continue;
-    auto job = std::make_shared<UpdateJob>();
+    auto job = std::make_shared<ModelUpdate>();
     job->device_poses = d.records_used.size();
     // The calibrator is only touched under its lock (the worker solves; NextPose reads).
-    auto work = [&m, record, job, gate = d.gate] {
-      std::lock_guard lock(*m.calibrator_mutex);
-      job->added = m.calibrator->add_pose(record, &job->error);
-      if (!job->added) return;
-      job->estimate = m.calibrator->solve();
-      if (job->estimate.ok) {
-        const DataReport data = AnalyzeData(*m.model, job->estimate.theta,
-                                            m.calibrator->weighted_poses(), ObservabilityOptions{});
-        job->rank = data.analysis.rank;
-        job->gate = EvaluateGate(*m.model, job->estimate, data, gate);
-      } else {
-        job->gate.reasons.push_back("no estimate: " + job->estimate.error);
-      }
-    };
+    auto work = [&m, record, job, gate = d.gate] { m.AddAndSolve(record, gate, job.get()); };
     // The station may be replaced (reset, reload) before `done` runs: Defer guards it.
     Defer(std::move(work), [this, device, mi, t_s, job, resuming = resuming_] {
       Apply(device, mi, t_s, *job, resuming);
@@ -709,14 +384,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
 // more than 1 %, or the triad had none).
 void Station::RecordIdentifiedDrift(std::size_t device, const ModelState& m) {
   DeviceState& d = *devices_[device];
-  const int triad = m.model->sensor() == SensorKind::kAccelerometer ? kTriadAcc : kTriadMag;
-  const NoiseProfile* before = d.sequencer->noise();
-  const auto& stored = before ? before->identified_drift[static_cast<std::size_t>(triad)]
-                              : std::optional<IdentifiedDrift>();
-  const bool moved =
-      !stored || std::abs(std::log(m.estimate.drift_scale_used / stored->scale)) > 0.01;
-  d.sequencer->SetIdentifiedDrift(
-      triad, IdentifiedDrift{m.estimate.drift, m.estimate.drift_scale_used, m.estimate.poses});
+  const bool moved = d.RecordIdentifiedDrift(m);
   const NoiseProfile* noise = d.sequencer->noise();
   if (!moved || options_.state_dir.empty() || noise == nullptr) return;
   auto error = std::make_shared<std::string>();
@@ -725,7 +393,7 @@ void Station::RecordIdentifiedDrift(std::size_t device, const ModelState& m) {
         [this, name = d.name, error] { NoteWrite(name, *error); });
 }
 
-void Station::Apply(std::size_t device, std::size_t model, double t_s, const UpdateJob& job,
+void Station::Apply(std::size_t device, std::size_t model, double t_s, const ModelUpdate& job,
                     bool resuming) {
   DeviceState& d = *devices_[device];
   ModelState& m = d.models[model];
@@ -745,16 +413,7 @@ void Station::Apply(std::size_t device, std::size_t model, double t_s, const Upd
   m.gate = job.gate;
   if (sink_ && !resuming) {
     // Every gated parameter's sigma against its tolerance (the watch view's bars).
-    nlohmann::json precision = nlohmann::json::object();
-    if (m.estimate.ok && m.estimate.sigma.size() == m.model->num_parameters()) {
-      const auto& params = m.model->parameters();
-      for (int j : GatedParameters(*m.model)) {
-        const double sigma = m.estimate.sigma[j];
-        precision[params[static_cast<std::size_t>(j)].name] = {
-            {"sigma", std::isfinite(sigma) ? nlohmann::json(sigma) : nlohmann::json()},
-            {"tolerance", ToleranceFor(params[static_cast<std::size_t>(j)], d.gate)}};
-      }
-    }
+    const nlohmann::json precision = m.PrecisionJson(d.gate);
     sink_({{"class", "ESTIMATE"},
            {"t", t_s},
            {"device", d.name},
@@ -777,7 +436,7 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
                        const nlohmann::json& override_who) {
   ++m.active_version;
   m.active = m.estimate;
-  nlohmann::json calibration = CalibrationJson(d, m);
+  nlohmann::json calibration = d.CalibrationJson(m, options_.sensor_class, options_.context);
   if (!override_who.is_null()) calibration["override"] = override_who;
   nlohmann::json event = {{"class", "CALIBRATION_ACTIVE"},
                           {"t", t_s},
@@ -850,20 +509,7 @@ nlohmann::json Station::NextPose(const std::string& device) const {
   if (i < 0)
     return {{"class", "NEXT_POSE"}, {"ok", false}, {"error", "no device '" + device + "'"}};
   const DeviceState& d = *devices_[static_cast<std::size_t>(i)];
-  std::vector<PlanningTarget> targets;
-  for (const ModelState& m : d.models) {
-    // The drift model and the poses' times: a new pose is weighed by what it adds given every
-    // earlier one at the time the table would reach it (core/pose_planner.h).
-    // A new pose's white noise from the device's own noise profile when it has one.
-    const NoiseProfile* noise = d.sequencer->noise();
-    const int triad = m.model->sensor() == SensorKind::kAccelerometer ? kTriadAcc : kTriadMag;
-    std::lock_guard lock(*m.calibrator_mutex);  // a solve in progress finishes first
-    targets.push_back(
-        TargetFromCalibrator(*m.calibrator, m.estimate.ok ? m.estimate.theta : m.model->nominal(),
-                             options_.sequencer.dwell_s, d.gate,
-                             noise ? noise->sigma[static_cast<std::size_t>(triad)] : std::nullopt,
-                             noise ? noise->rate_hz : 0.0));
-  }
+  const std::vector<PlanningTarget> targets = d.PlanningTargets(options_.sequencer.dwell_s);
   PlannerOptions planner;
   planner.motion = options_.table;
   planner.objective = options_.plan_objective;
@@ -875,37 +521,7 @@ nlohmann::json Station::NextPose(const std::string& device) const {
 
 nlohmann::json Station::Result() const {
   nlohmann::json devices = nlohmann::json::object();
-  for (const auto& d : devices_) {
-    nlohmann::json models = nlohmann::json::object();
-    for (const ModelState& m : d->models) {
-      const Estimate& e = m.estimate;
-      models[m.model->name()] = {
-          {"ok", e.ok},
-          {"poses", e.poses},
-          {"params", ParamsJson(e)},
-          {"rank", m.rank},
-          {"chi2", e.chi2},
-          {"dof", e.dof},
-          {"p_value", e.p_value},
-          {"fit_check", protocol::ToJson(e.fit, m.model->sensor())},
-          {"drift_scale",
-           e.ok && m.calibrator->options().identify_drift ? DriftScaleJson(e) : nlohmann::json()},
-          {"bias_window", e.bias_window ? protocol::ToJson(*e.bias_window) : nlohmann::json()},
-          {"gauge", e.gauge},
-          {"warnings", e.warnings},
-          {"gate", ToJson(m.gate)},
-          {"active_version", m.active_version}};
-    }
-    devices[d->name] = {{"poses", d->poses},
-                        {"samples",
-                         {{"used", d->sequencer->totals().used},
-                          {"flagged", d->sequencer->totals().flagged},
-                          {"outliers", d->sequencer->totals().outliers},
-                          {"lost", d->sequencer->totals().lost}}},
-                        {"captured", d->sequencer->captured()},
-                        {"rejected", d->sequencer->rejected()},
-                        {"models", models}};
-  }
+  for (const auto& d : devices_) devices[d->name] = d->ResultJson();
   return {{"class", "RESULT"}, {"devices", devices}};
 }
 

@@ -1,7 +1,10 @@
 #pragma once
-// One turntable station (DESIGN.md "Data flow"): per device a Sequencer, and per model a
-// Calibrator; after every captured pose the estimates are updated, the data-level observability
-// analysis and the publish gate run, and events say what happened. When a model's gate passes for
+// One turntable station (DESIGN.md "Data flow", docs/ARCHITECTURE.md): per device a pipeline
+// (daemon/device_pipeline.h: its sequencer, poses and noise profile), per model of each device a
+// pipeline (daemon/model_pipeline.h: calibrator, estimate, gate, applied calibration). The station
+// wires them: after every captured pose the estimates are updated on the solve worker, the
+// data-level observability analysis and the publish gate run, poses and calibrations are
+// persisted, and events say what happened. When a model's gate passes for
 // the first time its calibration becomes active (versioned). The result has the shape DESIGN.md
 // promises for `--result-out` and `turncal result --json`.
 //
@@ -20,9 +23,11 @@
 #include "core/observability.h"
 #include "core/pose_planner.h"
 #include "core/publish_gate.h"
-#include "core/sequencer.h"
 #include "core/sensor_class.h"
+#include "core/sequencer.h"
 #include "daemon/capture_replay.h"
+#include "daemon/device_pipeline.h"
+#include "daemon/model_pipeline.h"
 
 namespace turncal::daemon {
 
@@ -157,23 +162,21 @@ class Station : public ReplayTarget {
   // POSE_CAPTURED / CALIBRATION_ACTIVE carry "saved": false.
   nlohmann::json PersistenceStatus() const;
 
-  struct ModelState;
-  struct DeviceState;
+  using ModelState = ModelPipeline;
+  using DeviceState = DevicePipeline;
 
  private:
   void OnSequencerEvent(std::size_t device, const SequencerEvent& event);  // timed captures
   void HandleSequencerEvent(std::size_t device, const SequencerEvent& event);
   void WriteReport(std::size_t device, std::int64_t now_ns, bool now);
   void Update(std::size_t device, const PoseRecord& record, double t_s);
-  struct UpdateJob;
   // `work` on the executor (inline without one), then `done` unless the station is gone.
   void Defer(std::function<void()> work, std::function<void()> done);
   void RecordIdentifiedDrift(std::size_t device, const ModelState& m);
-  void Apply(std::size_t device, std::size_t model, double t_s, const UpdateJob& job,
+  void Apply(std::size_t device, std::size_t model, double t_s, const ModelUpdate& job,
              bool resuming);
   void Resume();
   void Publish(const nlohmann::json& event);
-  nlohmann::json CalibrationJson(const DeviceState& d, const ModelState& m) const;
   void Activate(DeviceState& d, ModelState& m, double t_s, const nlohmann::json& override_who);
   void LoadApplied();
   // Counts a state-directory write's outcome; publishes ERROR when it failed.

@@ -1,0 +1,158 @@
+#include "daemon/device_pipeline.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "daemon/station.h"
+#include "drivers/transport/transport.h"
+#include "protocol/calibration_json.h"
+#include "protocol/observability_json.h"
+#include "protocol/sequencer_json.h"
+#include "turncal/version.h"
+
+namespace turncal::daemon {
+
+SequencerOptions DevicePipeline::SequencerOptionsFor(const StationOptions& options,
+                                                     const SensorClass& sensor) {
+  SequencerOptions so = options.sequencer;
+  // A still dwell's halves may differ by the sensor's own bias wander, not only by its white
+  // noise: the class's Gauss-Markov drift, scaled by what the calibrator identifies.
+  for (int t : {kTriadAcc, kTriadMag}) {
+    BiasDrift& wander = so.stillness.bias_drift[static_cast<std::size_t>(t)];
+    if (wander.enabled()) continue;
+    wander.gm_sigma = Eigen::Vector3d::Constant(t == kTriadAcc ? sensor.acc_bias_instability
+                                                               : sensor.mag_bias_instability);
+    wander.gm_tau_s = sensor.bias_tau_s;
+    wander.rw_density = Eigen::Vector3d::Constant(
+        std::max(0.0, t == kTriadAcc ? options.acc_random_walk : options.mag_random_walk));
+  }
+  return so;
+}
+
+bool DevicePipeline::RecordIdentifiedDrift(const ModelPipeline& m) {
+  const int triad = m.accel() ? kTriadAcc : kTriadMag;
+  const NoiseProfile* before = sequencer->noise();
+  const auto& stored = before ? before->identified_drift[static_cast<std::size_t>(triad)]
+                              : std::optional<IdentifiedDrift>();
+  const bool moved =
+      !stored || std::abs(std::log(m.estimate.drift_scale_used / stored->scale)) > 0.01;
+  sequencer->SetIdentifiedDrift(
+      triad, IdentifiedDrift{m.estimate.drift, m.estimate.drift_scale_used, m.estimate.poses});
+  return moved;
+}
+
+std::vector<PlanningTarget> DevicePipeline::PlanningTargets(double dwell_s) const {
+  std::vector<PlanningTarget> targets;
+  for (const ModelPipeline& m : models) {
+    // The drift model and the poses' times: a new pose is weighed by what it adds given every
+    // earlier one at the time the table would reach it (core/pose_planner.h).
+    // A new pose's white noise from the device's own noise profile when it has one.
+    const NoiseProfile* noise = sequencer->noise();
+    const int triad = m.accel() ? kTriadAcc : kTriadMag;
+    std::lock_guard lock(*m.calibrator_mutex);  // a solve in progress finishes first
+    targets.push_back(TargetFromCalibrator(
+        *m.calibrator, m.estimate.ok ? m.estimate.theta : m.model->nominal(), dwell_s, gate,
+        noise ? noise->sigma[static_cast<std::size_t>(triad)] : std::nullopt,
+        noise ? noise->rate_hz : 0.0));
+  }
+  return targets;
+}
+
+nlohmann::json DevicePipeline::CalibrationJson(const ModelPipeline& m,
+                                               const std::string& sensor_class,
+                                               const ModelContext& context) const {
+  const DevicePipeline& d = *this;
+  const Estimate& e = m.estimate;
+  nlohmann::json order = nlohmann::json::array();
+  for (const auto& p : e.parameters) order.push_back(p.name);
+  nlohmann::json covariance = nlohmann::json::array();
+  for (Eigen::Index r = 0; r < e.covariance.rows(); ++r) {
+    nlohmann::json row = nlohmann::json::array();
+    for (Eigen::Index c = 0; c < e.covariance.cols(); ++c) {
+      const double v = e.covariance(r, c);
+      row.push_back(std::isfinite(v) ? nlohmann::json(v) : nlohmann::json());
+    }
+    covariance.push_back(row);
+  }
+  const std::size_t n = std::min(m.estimate_poses, d.poses_used.size());
+  nlohmann::json pose_list = nlohmann::json::array();
+  for (std::size_t i = 0; i < n; ++i) pose_list.push_back(ToJson(d.poses_used[i]));
+  // The records themselves, with the model's triad only, so that the calibration can be
+  // re-evaluated (the report's residuals and convergence) without the journal, which `reset`
+  // archives.
+  const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
+  nlohmann::json records = nlohmann::json::array();
+  for (std::size_t i = 0; i < n && i < d.records_used.size(); ++i) {
+    PoseRecord r = d.records_used[i];
+    r.gyr.reset();
+    (accel ? r.mag : r.acc).reset();
+    records.push_back(protocol::ToJson(r));
+  }
+  nlohmann::json calibrator = protocol::CalibratorJson(m.calibrator->options(), sensor_class);
+  if (e.drift.enabled()) {
+    // The drift the solve used (the prior times the identified scale): corrected output's sigma
+    // grows with it, also after a restart; the configured one stays as the prior.
+    calibrator["drift_prior"] = calibrator["drift"];
+    calibrator["drift"] = protocol::ToJson(e.drift);
+    calibrator["drift_scale"] = DriftScaleJson(e);
+  }
+  // Device identity and the device-side stored calibration come from the device dialogue of a
+  // live station (SetDeviceIdentity); a replay does not have them (null).
+  const nlohmann::json provenance = {
+      {"poses", pose_list}, {"records", records}, {"device_identity", d.identity}};
+  return {{"schema", 1},
+          {"class", "CALIBRATION"},
+          {"device", d.name},
+          {"model", m.model->name()},
+          {"version", m.active_version},
+          {"software", kVersion},
+          {"time", drivers::UtcNowIso8601()},
+          {"params", ParamsJson(e)},
+          {"parameter_order", order},
+          {"covariance", covariance},
+          {"gauge", e.gauge},
+          {"bias_window", e.bias_window ? protocol::ToJson(*e.bias_window) : nlohmann::json()},
+          {"rank", m.rank},
+          {"chi2", e.chi2},
+          {"dof", e.dof},
+          {"p_value", e.p_value},
+          {"fit_check", protocol::ToJson(e.fit, m.model->sensor())},
+          {"gate", ToJson(m.gate)},
+          {"tolerances", protocol::TolerancesJson(*m.model, d.gate)},
+          {"context", protocol::ToJson(context)},
+          {"calibrator", calibrator},
+          {"provenance", provenance}};
+}
+
+nlohmann::json DevicePipeline::StatusJson() const {
+  nlohmann::json model_status = nlohmann::json::object();
+  for (const ModelPipeline& m : models) model_status[m.model->name()] = m.StatusJson();
+  const SampleCounts& t = sequencer->totals();
+  return {{"poses", poses},
+          {"captured", sequencer->captured()},
+          {"rejected", sequencer->rejected()},
+          {"busy", sequencer->busy()},
+          {"noise", sequencer->noise() ? "measured" : "measuring"},
+          {"noise_profile",
+           sequencer->noise() ? protocol::ToJson(*sequencer->noise()) : nlohmann::json()},
+          {"current", sequencer->busy() ? current : nlohmann::json()},
+          {"samples",
+           {{"used", t.used}, {"flagged", t.flagged}, {"outliers", t.outliers}, {"lost", t.lost}}},
+          {"models", model_status}};
+}
+
+nlohmann::json DevicePipeline::ResultJson() const {
+  nlohmann::json model_results = nlohmann::json::object();
+  for (const ModelPipeline& m : models) model_results[m.model->name()] = m.ResultJson();
+  return {{"poses", poses},
+          {"samples",
+           {{"used", sequencer->totals().used},
+            {"flagged", sequencer->totals().flagged},
+            {"outliers", sequencer->totals().outliers},
+            {"lost", sequencer->totals().lost}}},
+          {"captured", sequencer->captured()},
+          {"rejected", sequencer->rejected()},
+          {"models", model_results}};
+}
+
+}  // namespace turncal::daemon
