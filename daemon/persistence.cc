@@ -10,7 +10,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "drivers/atomic_file.h"
+#include "daemon/atomic_file.h"
 #include "protocol/sequencer_json.h"
 #include "report/html.h"
 
@@ -113,8 +113,8 @@ bool WriteNoiseProfile(const std::string& state_dir, const std::string& device,
     *error = fmt::format("cannot create '{}': {}", dir.string(), ec.message());
     return false;
   }
-  return drivers::WriteFileAtomically((dir / (device + ".json")).string(),
-                                      protocol::ToJson(profile).dump(2) + "\n", error);
+  return WriteFileAtomically((dir / (device + ".json")).string(),
+                             protocol::ToJson(profile).dump(2) + "\n", error);
 }
 
 bool ReadNoiseProfile(const std::string& state_dir, const std::string& device,
@@ -155,13 +155,13 @@ bool WriteActiveCalibration(const std::string& state_dir, const std::string& dev
     const int version = old.contains("version") && old["version"].is_number_integer()
                             ? old["version"].get<int>()
                             : 0;
-    if (!drivers::WriteFileAtomically(
+    if (!WriteFileAtomically(
             (history / fmt::format("{}.{}.v{}.json", device, model, version)).string(),
             old.dump(2) + "\n", error)) {
       return false;
     }
   }
-  return drivers::WriteFileAtomically(path.string(), calibration.dump(2) + "\n", error);
+  return WriteFileAtomically(path.string(), calibration.dump(2) + "\n", error);
 }
 
 bool WriteDeviceReport(const std::string& state_dir, const std::string& device,
@@ -191,7 +191,7 @@ bool WriteDeviceReport(const std::string& state_dir, const std::string& device,
     *error = fmt::format("report of {}: cannot create {}: {}", device, dir.string(), ec.message());
     return false;
   }
-  return drivers::WriteFileAtomically((dir / (device + ".html")).string(), html, error);
+  return WriteFileAtomically((dir / (device + ".html")).string(), html, error);
 }
 
 bool ArchiveSession(const std::string& state_dir, std::string* archived, std::string* error) {

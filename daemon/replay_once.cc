@@ -2,7 +2,7 @@
 
 #include <fmt/format.h>
 
-#include "drivers/atomic_file.h"
+#include "daemon/atomic_file.h"
 #include "drivers/capture/tcap.h"
 
 namespace turncal::daemon {
@@ -36,7 +36,7 @@ bool ReplayOnce(const std::string& path, const StationOptions& options,
                                                        {"lost_samples", c.lost_samples}};
   }
   if (!result_out.empty() &&
-      !drivers::WriteFileAtomically(result_out, outcome->result.dump(2) + "\n", error)) {
+      !WriteFileAtomically(result_out, outcome->result.dump(2) + "\n", error)) {
     return false;
   }
   return true;

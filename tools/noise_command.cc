@@ -10,8 +10,8 @@
 #include <sstream>
 
 #include "core/allan.h"
+#include "daemon/atomic_file.h"
 #include "daemon/capture_replay.h"
-#include "drivers/atomic_file.h"
 #include "drivers/capture/tcap.h"
 #include "drivers/decoder_factory.h"
 
@@ -280,7 +280,7 @@ int Run(const NoiseArgs& args) {
                args.file);
     return 1;
   }
-  if (!args.svg.empty() && !drivers::WriteFileAtomically(args.svg, Svg(results), &error)) {
+  if (!args.svg.empty() && !daemon::WriteFileAtomically(args.svg, Svg(results), &error)) {
     fmt::print(stderr, "turncal noise: {}\n", error);
     return 1;
   }

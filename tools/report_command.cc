@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
-#include "drivers/atomic_file.h"
+#include "daemon/atomic_file.h"
 #include "drivers/transport/transport.h"
 #include "report/html.h"
 #include "tools/client_connection.h"
@@ -74,7 +74,7 @@ int RunHtmlReport(const HtmlReportArgs& args) {
       return Fail(fmt::format("{} ({})", error, files));
     }
     const std::string path = several ? ReportPathForDevice(args.output, device) : args.output;
-    if (!drivers::WriteFileAtomically(path, html, &error)) return Fail(error);
+    if (!daemon::WriteFileAtomically(path, html, &error)) return Fail(error);
     std::vector<std::string> models;
     for (const auto& c : d.calibrations) models.push_back(c.value("model", "?"));
     if (args.json) {

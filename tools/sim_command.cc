@@ -18,7 +18,7 @@
 
 #include "core/measurement_model.h"
 #include "core/units.h"
-#include "drivers/atomic_file.h"
+#include "daemon/atomic_file.h"
 #include "drivers/capture/tcap.h"
 #include "protocol/pose_file.h"
 #include "sim/capture.h"
@@ -230,7 +230,7 @@ int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
     // Written before the session starts, so a test can read it while the session runs.
     nlohmann::json truth = truths[0];
     truth["devices"] = truths;
-    if (!drivers::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
+    if (!daemon::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
       fmt::print(stderr, "turncal sim: {}\n", error);
       return 1;
     }
@@ -371,7 +371,7 @@ int RunSim(const SimCommandArgs& args) {
 
   if (!args.truth_out.empty()) {
     const nlohmann::json truth = TruthFor(capture, options.poses, args);
-    if (!drivers::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
+    if (!daemon::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
       fmt::print(stderr, "turncal sim: {}\n", error);
       return 1;
     }

@@ -6,9 +6,9 @@
 #include <string>
 #include <string_view>
 
-namespace turncal::drivers {
+namespace turncal::daemon {
 
 // False with a message naming the path and the system error.
 bool WriteFileAtomically(const std::string& path, std::string_view content, std::string* error);
 
-}  // namespace turncal::drivers
+}  // namespace turncal::daemon

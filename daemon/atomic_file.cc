@@ -1,4 +1,4 @@
-#include "drivers/atomic_file.h"
+#include "daemon/atomic_file.h"
 
 #include <fcntl.h>
 #include <fmt/format.h>
@@ -8,7 +8,7 @@
 #include <cstring>
 #include <filesystem>
 
-namespace turncal::drivers {
+namespace turncal::daemon {
 
 bool WriteFileAtomically(const std::string& path, std::string_view content, std::string* error) {
   auto fail = [&](const std::string& what) {
@@ -56,4 +56,4 @@ bool WriteFileAtomically(const std::string& path, std::string_view content, std:
   return true;
 }
 
-}  // namespace turncal::drivers
+}  // namespace turncal::daemon
