@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "core/sequencer.h"
+#include "core/sequencing/sequencer.h"
 #include "drivers/capture/tcap.h"
 #include "drivers/decoder.h"
 

@@ -45,7 +45,7 @@ std::vector<PlanningTarget> DevicePipeline::PlanningTargets(double dwell_s) cons
   std::vector<PlanningTarget> targets;
   for (const ModelPipeline& m : models) {
     // The drift model and the poses' times: a new pose is weighed by what it adds given every
-    // earlier one at the time the table would reach it (core/pose_planner.h).
+    // earlier one at the time the table would reach it (core/planning/pose_planner.h).
     // A new pose's white noise from the device's own noise profile when it has one.
     const NoiseProfile* noise = sequencer->noise();
     const int triad = m.accel() ? kTriadAcc : kTriadMag;

@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
-#include "core/pose_planner.h"
-#include "core/publish_gate.h"
-#include "core/sequencer.h"
+#include "core/analysis/publish_gate.h"
+#include "core/planning/pose_planner.h"
+#include "core/sequencing/sequencer.h"
 #include "daemon/model_pipeline.h"
 
 namespace turncal::daemon {

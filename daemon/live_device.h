@@ -16,7 +16,7 @@
 #include <string>
 #include <thread>
 
-#include "core/sample.h"
+#include "core/sequencing/sample.h"
 #include "drivers/decoder.h"
 #include "drivers/device_spec.h"
 #include "drivers/transport/recording.h"

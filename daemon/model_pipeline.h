@@ -10,12 +10,12 @@
 #include <optional>
 #include <string>
 
-#include "core/calibrator.h"
-#include "core/measurement_model.h"
-#include "core/observability.h"
-#include "core/publish_gate.h"
-#include "core/sample.h"
-#include "core/sensor_class.h"
+#include "core/analysis/observability.h"
+#include "core/analysis/publish_gate.h"
+#include "core/estimation/calibrator.h"
+#include "core/estimation/sensor_class.h"
+#include "core/modeling/measurement_model.h"
+#include "core/sequencing/sample.h"
 
 namespace turncal::daemon {
 

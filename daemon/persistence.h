@@ -17,8 +17,8 @@
 #include <string>
 #include <vector>
 
-#include "core/pose_record.h"
-#include "core/stillness.h"
+#include "core/estimation/pose_record.h"
+#include "core/sequencing/stillness.h"
 
 namespace turncal::daemon {
 

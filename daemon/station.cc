@@ -8,7 +8,7 @@
 #include <limits>
 #include <mutex>
 
-#include "core/pose_planner.h"
+#include "core/planning/pose_planner.h"
 #include "daemon/persistence.h"
 #include "drivers/transport/transport.h"
 #include "protocol/calibration_json.h"

@@ -19,12 +19,12 @@
 #include <string>
 #include <vector>
 
-#include "core/calibrator.h"
-#include "core/observability.h"
-#include "core/pose_planner.h"
-#include "core/publish_gate.h"
-#include "core/sensor_class.h"
-#include "core/sequencer.h"
+#include "core/analysis/observability.h"
+#include "core/analysis/publish_gate.h"
+#include "core/estimation/calibrator.h"
+#include "core/estimation/sensor_class.h"
+#include "core/planning/pose_planner.h"
+#include "core/sequencing/sequencer.h"
 #include "daemon/capture_replay.h"
 #include "daemon/device_pipeline.h"
 #include "daemon/model_pipeline.h"
@@ -54,7 +54,7 @@ struct StationOptions {
   // Negative: the class's (100 s; no warm-up; 60 s).
   double bias_tau_s = -1.0;
   // Identify the drift's strength from the session's poses, with the class's as the prior
-  // (core/drift_identify.h); false: the class's drift as it is.
+  // (core/estimation/drift_identify.h); false: the class's drift as it is.
   bool identify_drift = true;
   double warmup_in_instabilities = -1.0;
   double warmup_tau_s = -1.0;
@@ -68,7 +68,7 @@ struct StationOptions {
   double mag_bias_instability = -1.0;
   double acc_random_walk = -1.0;
   double mag_random_walk = -1.0;
-  // The table's motion and what the next-pose planner minimises (core/pose_planner.h).
+  // The table's motion and what the next-pose planner minimises (core/planning/pose_planner.h).
   TableMotion table;
   PlanObjective plan_objective = PlanObjective::kTime;
   ModelContext context;

@@ -12,7 +12,7 @@
 #include <span>
 #include <string>
 
-#include "core/sample.h"
+#include "core/sequencing/sample.h"
 #include "drivers/device_spec.h"
 
 namespace turncal::drivers {

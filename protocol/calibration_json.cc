@@ -4,8 +4,8 @@
 
 #include <cmath>
 
-#include "core/sensor_class.h"
-#include "core/units.h"
+#include "core/estimation/sensor_class.h"
+#include "core/frames/units.h"
 #include "protocol/json_vec3.h"
 #include "protocol/sequencer_json.h"
 

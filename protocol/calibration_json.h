@@ -21,10 +21,10 @@
 #include <string>
 #include <vector>
 
-#include "core/calibrator.h"
-#include "core/measurement_model.h"
-#include "core/pose_record.h"
-#include "core/publish_gate.h"
+#include "core/analysis/publish_gate.h"
+#include "core/estimation/calibrator.h"
+#include "core/estimation/pose_record.h"
+#include "core/modeling/measurement_model.h"
 
 namespace turncal::protocol {
 

@@ -10,7 +10,7 @@
 #include <string_view>
 
 namespace turncal {
-struct Announcement;  // core/sequencer.h
+struct Announcement;  // core/sequencing/sequencer.h
 }  // namespace turncal
 
 namespace turncal::protocol {

@@ -6,9 +6,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/observability.h"
-#include "core/pose_planner.h"
-#include "core/publish_gate.h"
+#include "core/analysis/observability.h"
+#include "core/analysis/publish_gate.h"
+#include "core/planning/pose_planner.h"
 
 namespace turncal {
 

@@ -8,7 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "core/units.h"
+#include "core/frames/units.h"
 
 namespace turncal {
 

@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "core/table_pose.h"
+#include "core/frames/table_pose.h"
 
 namespace turncal {
 

@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "core/units.h"
+#include "core/frames/units.h"
 #include "protocol/calibration_json.h"
 #include "protocol/json_vec3.h"
 

@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "core/sequencer.h"
+#include "core/sequencing/sequencer.h"
 
 namespace turncal::protocol {
 

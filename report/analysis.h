@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "core/observability.h"
+#include "core/analysis/observability.h"
 #include "protocol/calibration_json.h"
 
 namespace turncal::report {

@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "core/reference.h"
+#include "core/frames/reference.h"
 #include "report/svg.h"
 
 namespace turncal::report {

@@ -16,7 +16,7 @@
 namespace turncal::report {
 
 // A triad's residual in the unit the report shows: mg for accelerometers, mG for magnetometers
-// (the device unit taken as Gauss, as core/parameter.h's ForDisplay does).
+// (the device unit taken as Gauss, as core/modeling/parameter.h's ForDisplay does).
 struct ResidualUnit {
   double per_triad_unit = 1.0;  // display value = triad value * per_triad_unit
   const char* name = "";

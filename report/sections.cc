@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "core/accel_physical.h"
+#include "core/modeling/accel_physical.h"
 #include "report/plots.h"
 #include "report/svg.h"
 
@@ -266,7 +266,7 @@ std::string ObservabilityHtml(const protocol::CalibrationDocument& doc, const Mo
   o += List(d.diversity.findings, "findings");
   o += "<p class=\"small\">Computed at the estimate over the calibration's poses, with the "
        "calibrator's weights; columns scaled by each parameter's nominal size "
-       "(core/observability.h).</p>";
+       "(core/analysis/observability.h).</p>";
   return o;
 }
 

@@ -11,9 +11,9 @@
 #include <span>
 #include <utility>
 
-#include "core/measurement_model.h"
-#include "core/reference.h"
-#include "core/units.h"
+#include "core/frames/reference.h"
+#include "core/frames/units.h"
+#include "core/modeling/measurement_model.h"
 #include "drivers/gx2/gx2_encoder.h"
 #include "drivers/mip/mip_encoder.h"
 #include "drivers/xbus/xbus_encoder.h"

@@ -20,7 +20,7 @@
 #include <random>
 #include <set>
 
-#include "core/units.h"
+#include "core/frames/units.h"
 #include "sim/device.h"
 
 namespace turncal::sim {

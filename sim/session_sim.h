@@ -20,10 +20,10 @@
 #include <random>
 #include <vector>
 
-#include "core/measurement_model.h"
-#include "core/pose_record.h"
-#include "core/sample.h"
-#include "core/table_motion.h"
+#include "core/estimation/pose_record.h"
+#include "core/modeling/measurement_model.h"
+#include "core/planning/table_motion.h"
+#include "core/sequencing/sample.h"
 #include "sim/synthetic.h"
 
 namespace turncal {
@@ -34,7 +34,7 @@ struct SessionSimOptions {
   double start_s = 1.0;
   double move_s = 3.0;
   double settle_s = 1.0;
-  // Moves at the table's rates (core/table_motion.h: each move as long as the coordinated
+  // Moves at the table's rates (core/planning/table_motion.h: each move as long as the coordinated
   // trapezoidal move takes, at least 0.1 s, the shorter way round on continuous axes, then the
   // table's settle time) instead of move_s and settle_s for every move.
   std::optional<TableMotion> table;

@@ -9,9 +9,9 @@
 #include <random>
 #include <vector>
 
-#include "core/calibrator.h"
-#include "core/pose_planner.h"
-#include "core/publish_gate.h"
+#include "core/analysis/publish_gate.h"
+#include "core/estimation/calibrator.h"
+#include "core/planning/pose_planner.h"
 #include "sim/synthetic.h"
 
 namespace turncal {

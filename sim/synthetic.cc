@@ -2,8 +2,8 @@
 
 #include <cmath>
 
-#include "core/mag22_gauge.h"
-#include "core/units.h"
+#include "core/frames/units.h"
+#include "core/modeling/mag22_gauge.h"
 
 namespace turncal {
 

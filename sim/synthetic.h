@@ -7,10 +7,10 @@
 
 #include <random>
 
-#include "core/measurement_model.h"
-#include "core/pose_designs.h"
-#include "core/pose_record.h"
-#include "core/sensor_class.h"
+#include "core/estimation/pose_record.h"
+#include "core/estimation/sensor_class.h"
+#include "core/modeling/measurement_model.h"
+#include "core/planning/pose_designs.h"
 
 namespace turncal {
 

@@ -4,7 +4,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/measurement_model.h"
+#include "core/modeling/measurement_model.h"
 
 namespace turncal::tools {
 

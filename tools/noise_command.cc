@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "core/allan.h"
+#include "core/analysis/allan.h"
 #include "daemon/atomic_file.h"
 #include "daemon/capture_replay.h"
 #include "drivers/capture/tcap.h"

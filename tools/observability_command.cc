@@ -7,10 +7,10 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "core/observability.h"
-#include "core/pose_planner.h"
-#include "core/publish_gate.h"
-#include "core/units.h"
+#include "core/analysis/observability.h"
+#include "core/analysis/publish_gate.h"
+#include "core/frames/units.h"
+#include "core/planning/pose_planner.h"
 #include "protocol/observability_json.h"
 #include "protocol/pose_file.h"
 #include "sim/synthetic.h"

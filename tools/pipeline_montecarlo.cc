@@ -15,7 +15,7 @@
 #include <random>
 #include <thread>
 
-#include "core/pose_planner.h"
+#include "core/planning/pose_planner.h"
 #include "daemon/persistence.h"
 #include "daemon/replay_once.h"
 #include "protocol/calibration_json.h"

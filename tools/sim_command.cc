@@ -16,8 +16,8 @@
 #include <sstream>
 #include <thread>
 
-#include "core/measurement_model.h"
-#include "core/units.h"
+#include "core/frames/units.h"
+#include "core/modeling/measurement_model.h"
 #include "daemon/atomic_file.h"
 #include "drivers/capture/tcap.h"
 #include "protocol/pose_file.h"

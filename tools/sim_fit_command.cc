@@ -6,9 +6,9 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
-#include "core/accel_physical.h"
-#include "core/calibrator.h"
-#include "core/publish_gate.h"
+#include "core/analysis/publish_gate.h"
+#include "core/estimation/calibrator.h"
+#include "core/modeling/accel_physical.h"
 #include "protocol/observability_json.h"
 #include "sim/session_sim.h"
 #include "sim/synthetic.h"

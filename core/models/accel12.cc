@@ -1,7 +1,7 @@
 // accel12: the traditional accelerometer model, a_m = (I+S) T_r^s C_q^r C_p^q f_NED + b
 // (MODELS.md; the table's heading is taken as known, beta = 0).
 
-#include "core/model_adapter.h"
+#include "core/modeling/model_adapter.h"
 #include "core/models/accel_common.h"
 #include "core/models/extended.h"
 

@@ -1,7 +1,7 @@
 // accel13: the seed's accelerometer model (eq. 1-2, with f = -g),
 // a_m = (I+S) T_r^s C_q^r C_p^q C_NED^p f_NED + b, beta the table's heading offset.
 
-#include "core/model_adapter.h"
+#include "core/modeling/model_adapter.h"
 #include "core/models/accel_common.h"
 #include "core/models/extended.h"
 

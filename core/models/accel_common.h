@@ -6,8 +6,8 @@
 #include <string>
 #include <vector>
 
-#include "core/accel_physical.h"
-#include "core/measurement_model.h"
+#include "core/modeling/accel_physical.h"
+#include "core/modeling/measurement_model.h"
 
 namespace turncal::accel {
 

@@ -4,7 +4,7 @@
 
 #include <vector>
 
-#include "core/rotations.h"
+#include "core/frames/rotations.h"
 
 namespace turncal::extended {
 

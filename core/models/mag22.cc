@@ -7,7 +7,7 @@
 
 #include <Eigen/LU>
 
-#include "core/model_adapter.h"
+#include "core/modeling/model_adapter.h"
 #include "core/models/extended.h"
 #include "core/models/mag_common.h"
 

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "core/measurement_model.h"
+#include "core/modeling/measurement_model.h"
 
 namespace turncal::mag {
 

@@ -6,8 +6,8 @@
 
 #include <Eigen/LU>
 
-#include "core/accel_physical.h"
-#include "core/model_adapter.h"
+#include "core/modeling/accel_physical.h"
+#include "core/modeling/model_adapter.h"
 #include "core/models/accel_common.h"
 #include "core/models/extended.h"
 #include "core/models/mag_common.h"

@@ -1,6 +1,6 @@
 #include "drivers/gx2/gx2_decoder.h"
 
-#include "core/reference.h"
+#include "core/frames/reference.h"
 #include "drivers/bytes.h"
 #include "drivers/checksum.h"
 

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "core/reference.h"
+#include "core/frames/reference.h"
 #include "drivers/bytes.h"
 #include "drivers/checksum.h"
 

@@ -4,7 +4,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "core/sample.h"
+#include "core/sequencing/sample.h"
 #include "drivers/gx2/gx2_decoder.h"
 
 namespace turncal::drivers::gx2 {

@@ -17,7 +17,7 @@
 #include <memory>
 #include <optional>
 
-#include "core/reference.h"
+#include "core/frames/reference.h"
 #include "drivers/scanning_decoder.h"
 
 namespace turncal::drivers {

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "core/sample.h"
+#include "core/sequencing/sample.h"
 
 namespace turncal::drivers::mip {
 

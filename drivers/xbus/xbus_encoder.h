@@ -6,7 +6,7 @@
 #include <span>
 #include <vector>
 
-#include "core/sample.h"
+#include "core/sequencing/sample.h"
 #include "drivers/xbus/xbus_decoder.h"
 
 namespace turncal::drivers::xbus {

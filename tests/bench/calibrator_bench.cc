@@ -4,7 +4,7 @@
 
 #include <benchmark/benchmark.h>
 
-#include "core/calibrator.h"
+#include "core/estimation/calibrator.h"
 #include "sim/synthetic.h"
 
 namespace turncal {

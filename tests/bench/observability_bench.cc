@@ -2,8 +2,8 @@
 // every pose (docs/PERFORMANCE.md). Run: build/tests/observability_bench
 #include <benchmark/benchmark.h>
 
-#include "core/observability.h"
-#include "core/pose_planner.h"
+#include "core/analysis/observability.h"
+#include "core/planning/pose_planner.h"
 #include "sim/synthetic.h"
 
 namespace turncal {

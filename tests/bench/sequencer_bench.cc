@@ -5,7 +5,7 @@
 
 #include <random>
 
-#include "core/sequencer.h"
+#include "core/sequencing/sequencer.h"
 
 namespace turncal {
 namespace {

@@ -1,4 +1,4 @@
-#include "core/accel_physical.h"
+#include "core/modeling/accel_physical.h"
 
 #include <gtest/gtest.h>
 

@@ -1,5 +1,5 @@
-// Overlapping Allan deviation and the noise model fitted to it (core/allan.h).
-#include "core/allan.h"
+// Overlapping Allan deviation and the noise model fitted to it (core/analysis/allan.h).
+#include "core/analysis/allan.h"
 
 #include <gtest/gtest.h>
 

@@ -1,14 +1,15 @@
-// The drift kernel (core/bias_drift.h), the GLS whitening (core/gls_whitening.h) and the
-// drift-aware calibrator against sessions whose bias wanders in time.
-#include "core/bias_drift.h"
+// The drift kernel (core/estimation/bias_drift.h), the GLS whitening
+// (core/estimation/gls_whitening.h) and the drift-aware calibrator against sessions whose bias
+// wanders in time.
+#include "core/estimation/bias_drift.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <random>
 
-#include "core/calibrator.h"
-#include "core/gls_whitening.h"
+#include "core/estimation/calibrator.h"
+#include "core/estimation/gls_whitening.h"
 #include "sim/session_sim.h"
 #include "sim/synthetic.h"
 

@@ -1,10 +1,10 @@
-#include "core/calibrator.h"
+#include "core/estimation/calibrator.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-#include "core/mag22_gauge.h"
+#include "core/modeling/mag22_gauge.h"
 #include "sim/synthetic.h"
 
 namespace turncal {

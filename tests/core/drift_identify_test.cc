@@ -1,6 +1,6 @@
-// Identifying the drift's strength from the poses (core/drift_identify.h): restricted likelihood
-// of the residuals with the configured drift as the prior.
-#include "core/drift_identify.h"
+// Identifying the drift's strength from the poses (core/estimation/drift_identify.h): restricted
+// likelihood of the residuals with the configured drift as the prior.
+#include "core/estimation/drift_identify.h"
 
 #include <gtest/gtest.h>
 
@@ -8,7 +8,7 @@
 #include <cmath>
 #include <random>
 
-#include "core/calibrator.h"
+#include "core/estimation/calibrator.h"
 #include "sim/session_sim.h"
 #include "sim/synthetic.h"
 

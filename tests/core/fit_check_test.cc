@@ -1,13 +1,13 @@
-// The two-sided fit check (core/fit_check.h) on constructed innovations and on calibrations
-// whose noise model is wrong in either direction.
-#include "core/fit_check.h"
+// The two-sided fit check (core/estimation/fit_check.h) on constructed innovations and on
+// calibrations whose noise model is wrong in either direction.
+#include "core/estimation/fit_check.h"
 
 #include <gtest/gtest.h>
 
 #include <random>
 
-#include "core/calibrator.h"
-#include "core/publish_gate.h"
+#include "core/analysis/publish_gate.h"
+#include "core/estimation/calibrator.h"
 #include "sim/session_sim.h"
 #include "sim/synthetic.h"
 

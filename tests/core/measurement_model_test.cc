@@ -1,11 +1,11 @@
-#include "core/measurement_model.h"
+#include "core/modeling/measurement_model.h"
 
 #include <ceres/cost_function.h>
 #include <gtest/gtest.h>
 
 #include <random>
 
-#include "core/accel_physical.h"
+#include "core/modeling/accel_physical.h"
 
 namespace turncal {
 namespace {

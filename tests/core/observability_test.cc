@@ -1,4 +1,4 @@
-#include "core/observability.h"
+#include "core/analysis/observability.h"
 
 #include <gtest/gtest.h>
 
@@ -7,8 +7,8 @@
 #include <cmath>
 #include <set>
 
-#include "core/calibrator.h"
-#include "core/mag22_gauge.h"
+#include "core/estimation/calibrator.h"
+#include "core/modeling/mag22_gauge.h"
 #include "sim/synthetic.h"
 
 namespace turncal {

@@ -1,6 +1,7 @@
-// The table's motion (core/table_motion.h), the drift-aware information of a timed pose sequence
-// (core/drift_design.h) and the planner that uses both (core/pose_planner.h).
-#include "core/pose_planner.h"
+// The table's motion (core/planning/table_motion.h), the drift-aware information of a timed pose
+// sequence (core/planning/drift_design.h) and the planner that uses both
+// (core/planning/pose_planner.h).
+#include "core/planning/pose_planner.h"
 
 #include <gtest/gtest.h>
 
@@ -8,10 +9,10 @@
 #include <memory>
 #include <random>
 
-#include "core/calibrator.h"
-#include "core/drift_design.h"
-#include "core/table_motion.h"
-#include "core/units.h"
+#include "core/estimation/calibrator.h"
+#include "core/frames/units.h"
+#include "core/planning/drift_design.h"
+#include "core/planning/table_motion.h"
 #include "sim/synthetic.h"
 
 namespace turncal {

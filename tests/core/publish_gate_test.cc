@@ -1,11 +1,11 @@
-#include "core/publish_gate.h"
+#include "core/analysis/publish_gate.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 
-#include "core/pose_planner.h"
+#include "core/planning/pose_planner.h"
 #include "sim/simulated_session.h"
 #include "sim/synthetic.h"
 

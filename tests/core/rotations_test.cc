@@ -1,4 +1,4 @@
-#include "core/rotations.h"
+#include "core/frames/rotations.h"
 
 #include <gtest/gtest.h>
 

@@ -14,7 +14,7 @@
 #include <new>
 #include <random>
 
-#include "core/sequencer.h"
+#include "core/sequencing/sequencer.h"
 
 namespace {
 std::atomic<long long> g_allocations{0};

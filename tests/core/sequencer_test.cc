@@ -2,7 +2,7 @@
 // accuracy against the simulator's truth, windows clear of motion, early announcements, bit
 // flips, lost samples, wrong announcements, schedule mode.
 
-#include "core/sequencer.h"
+#include "core/sequencing/sequencer.h"
 
 #include <gtest/gtest.h>
 
@@ -15,8 +15,8 @@
 #include <map>
 #include <random>
 
-#include "core/host_clock.h"
-#include "core/triad_accumulator.h"
+#include "core/sequencing/host_clock.h"
+#include "core/sequencing/triad_accumulator.h"
 #include "sim/session_sim.h"
 #include "sim/synthetic.h"
 

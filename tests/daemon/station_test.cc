@@ -13,7 +13,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "core/units.h"
+#include "core/frames/units.h"
 #include "daemon/persistence.h"
 #include "daemon/replay_once.h"
 #include "sim/capture.h"

@@ -28,7 +28,7 @@
 #include <string_view>
 #include <vector>
 
-#include "core/sequencer.h"
+#include "core/sequencing/sequencer.h"
 #include "protocol/messages.h"
 
 namespace {

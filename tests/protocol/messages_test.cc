@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "core/sequencer.h"
+#include "core/sequencing/sequencer.h"
 #include "protocol/sequencer_json.h"
 #include "turncal/version.h"
 

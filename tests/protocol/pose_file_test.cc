@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "core/units.h"
+#include "core/frames/units.h"
 #include "protocol/observability_json.h"
 #include "sim/synthetic.h"
 

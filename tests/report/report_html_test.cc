@@ -19,7 +19,7 @@
 #include <fstream>
 #include <regex>
 
-#include "core/measurement_model.h"
+#include "core/modeling/measurement_model.h"
 #include "daemon/persistence.h"
 #include "daemon/station.h"
 #include "protocol/sequencer_json.h"

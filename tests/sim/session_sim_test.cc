@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "core/calibrator.h"
+#include "core/estimation/calibrator.h"
 
 namespace turncal {
 namespace {

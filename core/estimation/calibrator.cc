@@ -1,0 +1,590 @@
+#include "core/estimation/calibrator.h"
+
+#include <ceres/ceres.h>
+#include <fmt/format.h>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+#include <boost/math/special_functions/gamma.hpp>
+#include <cmath>
+
+#include "core/analysis/observability.h"
+#include "core/estimation/gls_whitening.h"
+#include "core/estimation/linear_start.h"
+#include "core/modeling/mag22_gauge.h"
+
+namespace turncal {
+
+struct Calibrator::Pose {
+  WeightedPose weighted;
+  std::unique_ptr<ceres::CostFunction> cost;  // whitened by the pose's own covariance
+  // With a drift model: the unwhitened residual, the pose's own (white) covariance and its window.
+  std::unique_ptr<ceres::CostFunction> raw;
+  Eigen::Matrix3d white = Eigen::Matrix3d::Identity();
+  TimeWindow window;       // on the sensor's clock: drift and ordering
+  TimeWindow host_window;  // on the host's: when the bias holds, for corrected output
+};
+
+const char* ToString(RobustLoss loss) {
+  switch (loss) {
+    case RobustLoss::kNone:
+      return "none";
+    case RobustLoss::kHuber:
+      return "huber";
+    case RobustLoss::kCauchy:
+      return "cauchy";
+  }
+  return "?";
+}
+
+const char* ToString(Mag22Gauge gauge) {
+  switch (gauge) {
+    case Mag22Gauge::kUnitDetKOrthogonalDeltaB:
+      return "det(K_) = 1, dB orthogonal to R3(beta) B_NED";
+  }
+  return "?";
+}
+
+bool CalibratorOptions::IsValid(std::string* error) const {
+  auto fail = [&](const std::string& message) {
+    if (error) *error = message;
+    return false;
+  };
+  const auto names = ModelNames();
+  if (std::find(names.begin(), names.end(), model) == names.end()) {
+    return fail("unknown model '" + model + "'");
+  }
+  if (!context.IsValid(error)) return false;
+  if (loss != RobustLoss::kNone && !(loss_scale > 0)) return fail("loss_scale must be > 0");
+  if (!(noise_density >= 0) || !(pose_offset_sigma >= 0)) {
+    return fail("noise_density and pose_offset_sigma must be >= 0");
+  }
+  if (!drift.IsValid(error)) return false;
+  if (max_iterations < 1) return fail("max_iterations must be >= 1");
+  if (!(rank_tolerance > 0 && rank_tolerance < 1)) return fail("rank_tolerance must be in (0, 1)");
+  if (!(outlier_threshold > 0)) return fail("outlier_threshold must be > 0");
+  if (!(chi2_inflation_p_value > 0 && chi2_inflation_p_value < 1)) {
+    return fail("chi2_inflation_p_value must be in (0, 1)");
+  }
+  return true;
+}
+
+double Estimate::value(std::string_view name) const {
+  for (std::size_t i = 0; i < parameters.size(); ++i)
+    if (parameters[i].name == name) return theta[static_cast<Eigen::Index>(i)];
+  return std::nan("");
+}
+
+double Estimate::sigma_of(std::string_view name) const {
+  for (std::size_t i = 0; i < parameters.size(); ++i)
+    if (parameters[i].name == name) return sigma[static_cast<Eigen::Index>(i)];
+  return std::nan("");
+}
+
+std::string Estimate::BriefReport() const {
+  if (!ok) return fmt::format("{}: no estimate: {}", model, error);
+  return fmt::format(
+      "{}: {} poses, rank {}/{}, chi2 {:.1f} on {} dof (p = {:.3g}){}{}, {} iterations, {}", model,
+      poses, rank, parameters.size(), chi2, dof, p_value,
+      covariance_scale > 1 ? fmt::format(", covariance x{:.2f}", covariance_scale) : "",
+      gauge.empty() ? "" : ", gauge: " + gauge, iterations, termination);
+}
+
+std::string Estimate::FullReport() const {
+  std::string out = BriefReport() + "\n";
+  if (!ok) return out;
+  for (std::size_t i = 0; i < parameters.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    out += fmt::format("  {:<8} {:>+16.9g} +- {:<12.4g} [{}]\n", parameters[i].name, theta[k],
+                       sigma[k], ToString(parameters[i].unit));
+  }
+  for (std::size_t i = 0; i < residuals.size(); ++i) {
+    if (residuals[i].outlier) {
+      out += fmt::format("  pose {} is an outlier: normalised residual {:.1f}\n", i,
+                         residuals[i].normalized);
+    }
+  }
+  for (const auto& w : warnings) out += "  warning: " + w + "\n";
+  return out;
+}
+
+namespace {
+
+std::unique_ptr<ceres::LossFunction> MakeLoss(RobustLoss loss, double scale) {
+  switch (loss) {
+    case RobustLoss::kNone:
+      return nullptr;
+    case RobustLoss::kHuber:
+      return std::make_unique<ceres::HuberLoss>(scale);
+    case RobustLoss::kCauchy:
+      return std::make_unique<ceres::CauchyLoss>(scale);
+  }
+  return nullptr;
+}
+
+const TriadStats* TriadFor(SensorKind sensor, const PoseRecord& record) {
+  const auto& triad = sensor == SensorKind::kAccelerometer ? record.acc : record.mag;
+  return triad ? &*triad : nullptr;
+}
+
+// Sigma^{-1/2} of the covariance V diag(variances) V^T.
+Eigen::Matrix3d SqrtInformation(const Eigen::Matrix3d& V, const Eigen::Vector3d& variances) {
+  return V * variances.cwiseInverse().cwiseSqrt().asDiagonal() * V.transpose();
+}
+
+}  // namespace
+
+double WhiteFloorFraction(std::int64_t count) {
+  constexpr double kLeast = 0.1;
+  if (count < 2) return kLeast;
+  return std::max(kLeast, 1.0 - 4.0 * std::sqrt(2.0 / static_cast<double>(count)));
+}
+
+namespace {
+
+// Dense Jacobian of all residuals (with the robust loss's reweighting, as the solver sees it).
+Eigen::MatrixXd DenseJacobian(ceres::Problem* problem) {
+  ceres::CRSMatrix crs;
+  problem->Evaluate(ceres::Problem::EvaluateOptions(), nullptr, nullptr, nullptr, &crs);
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
+  for (int r = 0; r < crs.num_rows; ++r)
+    for (int k = crs.rows[r]; k < crs.rows[r + 1]; ++k) J(r, crs.cols[k]) = crs.values[k];
+  return J;
+}
+
+}  // namespace
+
+Calibrator::Calibrator(CalibratorOptions options)
+    : options_(std::move(options)), drift_(options_.drift) {
+  if (options_.IsValid(&model_error_)) {
+    model_ = MakeModel(options_.model, options_.context, &model_error_);
+  }
+  loss_ = MakeLoss(options_.loss, options_.loss_scale);
+}
+
+Calibrator::~Calibrator() = default;
+
+int Calibrator::num_poses() const { return static_cast<int>(poses_.size()); }
+
+std::vector<WeightedPose> Calibrator::weighted_poses() const {
+  std::vector<WeightedPose> out;
+  out.reserve(poses_.size());
+  for (const auto& p : poses_) out.push_back(p.weighted);
+  if (!options_.drift.enabled() || poses_.empty()) return out;
+  // With drift the information is not per pose; each pose is weighed here by its own white
+  // covariance plus the variance of its drift from the latest pose (the marginal), which is what
+  // the observability analysis and the planner use.
+  std::vector<TimeWindow> windows;
+  for (const auto& p : poses_) windows.push_back(p.window);
+  const int ref = TimeOrder(windows).back();
+  Eigen::Matrix<double, Eigen::Dynamic, 3> marginal(num_poses(), 3);
+  for (int axis = 0; axis < 3; ++axis) {
+    marginal.col(axis) = DriftIncrementCovariance(drift_, axis, windows, ref).diagonal();
+  }
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    Eigen::Matrix3d cov = poses_[i].white;
+    cov.diagonal() += marginal.row(static_cast<Eigen::Index>(i)).transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    out[i].sqrt_information = SqrtInformation(eig.eigenvectors(), eig.eigenvalues());
+  }
+  return out;
+}
+
+void Calibrator::planning_poses(std::vector<WeightedPose>* white,
+                                std::vector<TimeWindow>* windows) const {
+  white->clear();
+  windows->clear();
+  for (const auto& p : poses_) {
+    white->push_back(p.weighted);
+    if (!options_.drift.enabled()) continue;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p.white);
+    white->back().sqrt_information = SqrtInformation(eig.eigenvectors(), eig.eigenvalues());
+    windows->push_back(p.window);
+  }
+}
+
+bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
+  auto fail = [&](const std::string& message) {
+    if (error) *error = message;
+    return false;
+  };
+  if (!model_) return fail(model_error_);
+  const TriadStats* triad = TriadFor(model_->sensor(), record);
+  if (triad == nullptr) {
+    return fail(fmt::format("the record has no {} statistics", ToString(model_->sensor())));
+  }
+  const TablePose& p = record.pose;
+  if (!std::isfinite(p.phi_rad) || !std::isfinite(p.gamma_rad) || !std::isfinite(p.psi_rad)) {
+    return fail("the record's table angles are not finite");
+  }
+  if (!triad->mean.allFinite() || !triad->covariance.allFinite() ||
+      (triad->mean_covariance && !triad->mean_covariance->allFinite())) {
+    return fail("the record holds a non-finite mean or covariance");
+  }
+  if (triad->count < 1) return fail("the record has no samples");
+  const TimeWindow window{record.sensor_start_s(), record.sensor_end_s()};
+  if (options_.drift.enabled() &&
+      !(std::isfinite(window.t0_s) && std::isfinite(window.t1_s) && window.t1_s > window.t0_s)) {
+    return fail("the drift model needs the record's time window (t_start_s < t_end_s)");
+  }
+
+  Eigen::Matrix3d sigma =
+      triad->mean_covariance
+          ? *triad->mean_covariance
+          : Eigen::Matrix3d(triad->covariance / static_cast<double>(triad->count));
+  sigma = 0.5 * (sigma + sigma.transpose());
+  // Averaging and drift are timed on the sensor's clock when the record has it (a simulator or
+  // a replay may run the host's clock at another pace).
+  const double duration_s = record.sensor_end_s() - record.sensor_start_s();
+  double floor_var = 0.0;
+  if (options_.noise_density > 0 && duration_s > 0) {
+    floor_var = options_.noise_density * options_.noise_density / (2.0 * duration_s) *
+                WhiteFloorFraction(triad->mean_covariance ? 0 : triad->count);
+  }
+  // Floor the eigenvalues (the mean is never known much better than the white noise allows), then
+  // add the pose-to-pose offset variance.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
+  Eigen::Vector3d lambda = eig.eigenvalues().cwiseMax(floor_var).array() +
+                           options_.pose_offset_sigma * options_.pose_offset_sigma;
+  if (!(lambda.minCoeff() > 0) || lambda.minCoeff() < 1e-12 * lambda.maxCoeff()) {
+    return fail(
+        "the record's covariance is singular and no noise floor is configured "
+        "(set noise_density or pose_offset_sigma)");
+  }
+  Pose pose;
+  WeightedPose& w = pose.weighted;
+  w.pose = p;
+  w.measured = triad->mean;
+  w.sqrt_information = SqrtInformation(eig.eigenvectors(), lambda);
+  pose.cost = model_->MakeResidual(p, w.measured, w.sqrt_information);
+  pose.window = window;
+  pose.host_window = TimeWindow{record.t_start_s, record.t_end_s};
+  if (options_.drift.enabled()) {
+    pose.white = eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
+    pose.raw = model_->MakeResidual(p, w.measured, Eigen::Matrix3d::Identity());
+  }
+  poses_.push_back(std::move(pose));
+  return true;
+}
+
+bool Calibrator::StartFromLinearForm(Eigen::VectorXd* theta, std::string* error) const {
+  std::vector<TablePose> poses;
+  std::vector<Eigen::Vector3d> measured;
+  for (const auto& p : poses_) {
+    poses.push_back(p.weighted.pose);
+    measured.push_back(p.weighted.measured);
+  }
+  LinearStart start;
+  if (!SolveLinearStart(poses, measured, model_->excitation_ned(), &start, error)) return false;
+  return model_->FromLinear(start.G, start.beta, start.b, theta, error);
+}
+
+bool Calibrator::BuildBlocks(std::string* error) {
+  blocks_.clear();
+  gls_blocks_.clear();
+  order_.clear();
+  if (!options_.drift.enabled()) {
+    for (auto& p : poses_) blocks_.push_back(p.cost.get());
+    return true;
+  }
+  std::vector<TimeWindow> windows;
+  std::vector<Eigen::Matrix3d> white;
+  for (const auto& p : poses_) {
+    windows.push_back(p.window);
+    white.push_back(p.white);
+  }
+  GlsWhitening gls;
+  if (!BuildGlsWhitening(windows, white, drift_, &gls, error)) return false;
+  order_ = gls.order;
+  gls_w_ = gls.W;
+  const int n = num_poses();
+  std::vector<const ceres::CostFunction*> raw;
+  for (const auto& p : poses_) raw.push_back(p.raw.get());
+  auto cache = std::make_shared<RawResidualCache>(std::move(raw), model_->num_parameters());
+  for (int k = 0; k < n; ++k) {
+    auto cost = std::make_unique<InnovationCost>(cache, model_->num_parameters());
+    for (int j = 0; j <= k; ++j) {
+      const Eigen::Matrix3d weight = gls.W.block<3, 3>(3 * k, 3 * j);
+      if (weight.isZero(0.0)) continue;
+      cost->Add(gls.order[j], weight);
+    }
+    blocks_.push_back(cost.get());
+    gls_blocks_.push_back(std::move(cost));
+  }
+  return true;
+}
+
+Estimate Calibrator::solve() {
+  Estimate est = SolveOnce();
+  if (!options_.identify_drift || !options_.drift.enabled() || !est.ok || !model_ ||
+      model_->gauge_dimension() > 0) {
+    return est;
+  }
+  const DriftScale scale = IdentifyDrift(est);
+  if (!scale.identified) return est;
+  // The configured drift until the poses reject it; then theirs.
+  const double use = scale.use_scale;
+  if (std::abs(std::log(use / drift_scale_)) > 0.05) {
+    drift_scale_ = use;
+    drift_ = ScaledDrift(options_.drift, drift_scale_);
+    est = SolveOnce();
+  }
+  est.drift_scale = scale;
+  est.drift_scale_used = drift_scale_;
+  return est;
+}
+
+DriftScale Calibrator::IdentifyDrift(const Estimate& est) const {
+  const int n = num_poses(), N = model_->num_parameters();
+  Eigen::MatrixXd J(3 * n, N);
+  Eigen::VectorXd r(3 * n);
+  std::vector<Eigen::Vector3d> white;
+  std::vector<TimeWindow> windows;
+  Jacobian3 Ji;
+  for (int i = 0; i < n; ++i) {
+    const Pose& p = poses_[static_cast<std::size_t>(i)];
+    model_->Predict(est.theta, p.weighted.pose, &Ji);
+    J.middleRows<3>(3 * i) = Ji;
+    r.segment<3>(3 * i) = est.residuals[static_cast<std::size_t>(i)].raw;
+    white.push_back(p.white.diagonal());
+    windows.push_back(p.window);
+  }
+  return IdentifyDriftScale(J, r, white, windows, options_.drift, options_.drift_scale);
+}
+
+Estimate Calibrator::SolveOnce() {
+  Estimate est;
+  est.model = options_.model;
+  est.poses = num_poses();
+  if (!model_) {
+    est.error = model_error_;
+    return est;
+  }
+  est.parameters = model_->parameters();
+  const int N = model_->num_parameters();
+  const int n = num_poses();
+  const bool gauge = model_->gauge_dimension() > 0;
+  const int identifiable = N - model_->gauge_dimension();
+  if (3 * n < identifiable) {
+    est.error = fmt::format("{} poses give {} equations for {} parameters: add at least {} poses",
+                            n, 3 * n, identifiable, (identifiable + 2) / 3 - n);
+    return est;
+  }
+
+  {
+    std::string error;
+    if (!BuildBlocks(&error)) {
+      est.error = error;
+      return est;
+    }
+  }
+
+  ceres::Problem::Options problem_options;
+  problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Solver::Options solver_options;
+  solver_options.minimizer_type = ceres::TRUST_REGION;
+  solver_options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  solver_options.linear_solver_type = ceres::DENSE_QR;
+  solver_options.max_num_iterations = options_.max_iterations;
+  solver_options.function_tolerance = options_.function_tolerance;
+  solver_options.gradient_tolerance = options_.gradient_tolerance;
+  solver_options.parameter_tolerance = options_.parameter_tolerance;
+  solver_options.logging_type = ceres::SILENT;
+  solver_options.num_threads = 1;
+
+  auto run = [&](Eigen::VectorXd* theta, ceres::Solver::Summary* summary) {
+    ceres::Problem problem(problem_options);
+    for (auto* block : blocks_) problem.AddResidualBlock(block, loss_.get(), theta->data());
+    ceres::Solve(solver_options, &problem, summary);
+  };
+
+  Eigen::VectorXd theta;
+  ceres::Solver::Summary summary;
+  bool warm = theta_.size() == N;
+  if (warm) {
+    theta = theta_;
+    run(&theta, &summary);
+    const double cost_per_dof = 2 * summary.final_cost / std::max(1, 3 * n - identifiable);
+    if (!summary.IsSolutionUsable() || !theta.allFinite() ||
+        cost_per_dof > options_.restart_cost_ratio * std::max(last_cost_per_dof_, 1.0)) {
+      est.warnings.push_back(fmt::format(
+          "the warm-started solve ended at cost/dof {:.3g} (was {:.3g}); restarted from the "
+          "linear form",
+          cost_per_dof, last_cost_per_dof_));
+      warm = false;
+    }
+  }
+  if (!warm) {
+    std::string error;
+    if (StartFromLinearForm(&theta, &error)) {
+      est.linear_start = true;
+    } else {
+      est.warnings.push_back("no linear start (" + error + "); started from nominal values");
+      theta = model_->nominal();
+    }
+    run(&theta, &summary);
+  }
+  est.iterations = static_cast<int>(summary.iterations.size());
+  est.termination = ceres::TerminationTypeToString(summary.termination_type);
+  est.solve_time_s = summary.total_time_in_seconds;
+  if (!summary.IsSolutionUsable() || !theta.allFinite()) {
+    est.error = "the solver failed: " + summary.message;
+    theta_.resize(0);
+    return est;
+  }
+  if (summary.termination_type == ceres::NO_CONVERGENCE) {
+    est.warnings.push_back(
+        fmt::format("the solver stopped after {} iterations without converging", est.iterations));
+  }
+  // The heading beta is an angle: its estimate is reported in (-pi, pi] (a solve may end a turn
+  // away, which is the same calibration).
+  for (int j = 0; j < N; ++j) {
+    if (est.parameters[static_cast<std::size_t>(j)].name == "beta") {
+      theta[j] = std::remainder(theta[j], 2 * M_PI);
+    }
+  }
+  if (gauge) {
+    ApplyMag22Gauge(*model_, &theta);
+    est.gauge = ToString(options_.mag22_gauge);
+  }
+
+  // Jacobian at the estimate, as the solver sees it (whitened, robust loss applied).
+  ceres::Problem problem(problem_options);
+  for (auto* block : blocks_) problem.AddResidualBlock(block, loss_.get(), theta.data());
+  const Eigen::MatrixXd J = DenseJacobian(&problem);
+  Eigen::VectorXd scale = J.colwise().norm().transpose();
+  for (int j = 0; j < N; ++j) scale[j] = scale[j] > 0 ? 1.0 / scale[j] : 1.0;
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(J * scale.asDiagonal(), Eigen::ComputeThinV);
+  const Eigen::VectorXd& s = svd.singularValues();
+  est.rank = 0;
+  for (int i = 0; i < s.size(); ++i) est.rank += s[i] > options_.rank_tolerance * s[0];
+  est.condition = s[s.size() - 1] > 0 ? s[0] / s[s.size() - 1] : INFINITY;
+  const int expected_rank = identifiable;
+  if (est.rank < expected_rank) {
+    est.warnings.push_back(
+        fmt::format("rank {} of {}: the poses do not determine every parameter (pose diversity)",
+                    est.rank, expected_rank));
+  }
+
+  // Covariance: Ceres' dense SVD for the models without a gauge; for mag22 the inverse Fisher
+  // information restricted to the gauge's tangent space, B (B^T J^T J B)^-1 B^T.
+  Eigen::MatrixXd cov(N, N);
+  if (gauge) {
+    const Eigen::MatrixXd B = Mag22GaugeTangentBasis(*model_, theta);
+    const Eigen::MatrixXd JB = J * B;
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd_b(JB, Eigen::ComputeThinV);
+    const Eigen::VectorXd sb = svd_b.singularValues();
+    Eigen::VectorXd inv = Eigen::VectorXd::Zero(sb.size());
+    for (int i = 0; i < sb.size(); ++i)
+      if (sb[i] > options_.rank_tolerance * sb[0]) inv[i] = 1.0 / (sb[i] * sb[i]);
+    cov = B * svd_b.matrixV() * inv.asDiagonal() * svd_b.matrixV().transpose() * B.transpose();
+  } else {
+    ceres::Covariance::Options cov_options;
+    cov_options.algorithm_type = ceres::DENSE_SVD;
+    cov_options.null_space_rank = est.rank < N ? N - est.rank : 0;
+    cov_options.num_threads = 1;
+    ceres::Covariance covariance(cov_options);
+    std::vector<std::pair<const double*, const double*>> blocks = {{theta.data(), theta.data()}};
+    if (covariance.Compute(blocks, &problem)) {
+      covariance.GetCovarianceBlock(theta.data(), theta.data(), cov.data());
+    } else {
+      est.warnings.push_back("Ceres could not compute the covariance; using the pseudo-inverse");
+      const Eigen::MatrixXd& V = svd.matrixV();
+      Eigen::VectorXd inv = Eigen::VectorXd::Zero(s.size());
+      for (int i = 0; i < est.rank; ++i) inv[i] = 1.0 / (s[i] * s[i]);
+      cov = scale.asDiagonal() * V * inv.asDiagonal() * V.transpose() * scale.asDiagonal();
+    }
+  }
+
+  // Residuals, chi^2 (without the robust loss: the likelihood of the data as they are).
+  // With drift a pose's whitened residual is its innovation (what the earlier poses did not
+  // predict of it), so chi^2 = r^T C^-1 r and an outlier is judged against its own sigma.
+  est.chi2 = 0;
+  for (const auto& p : poses_) {
+    PoseResidual r;
+    r.raw = p.weighted.measured - model_->Predict(theta, p.weighted.pose);
+    r.whitened = p.weighted.sqrt_information * r.raw;
+    est.residuals.push_back(r);
+  }
+  if (options_.drift.enabled()) {
+    Eigen::VectorXd stacked(3 * n);
+    for (int k = 0; k < n; ++k) {
+      stacked.segment<3>(3 * k) = est.residuals[static_cast<std::size_t>(order_[k])].raw;
+    }
+    const Eigen::VectorXd innovations = gls_w_.triangularView<Eigen::Lower>() * stacked;
+    for (int k = 0; k < n; ++k) {
+      est.residuals[static_cast<std::size_t>(order_[k])].whitened = innovations.segment<3>(3 * k);
+    }
+    const TimeWindow& ref = poses_[static_cast<std::size_t>(order_.back())].host_window;
+    est.bias_window = ref;
+    est.drift = drift_;
+    est.drift_scale_used = drift_scale_;
+    if (!std::isfinite(est.drift.warmup_origin_s)) {
+      // On the host's clock, as the bias window (corrected output's sigma uses both).
+      est.drift.warmup_origin_s = poses_[static_cast<std::size_t>(order_.front())].host_window.t0_s;
+    }
+  }
+  for (auto& r : est.residuals) {
+    r.normalized = std::sqrt(r.whitened.squaredNorm() / 3.0);
+    r.outlier = r.normalized > options_.outlier_threshold;
+    est.chi2 += r.whitened.squaredNorm();
+  }
+  est.dof = 3 * n - est.rank;
+  est.p_value = est.dof > 0 ? boost::math::gamma_q(est.dof / 2.0, est.chi2 / 2.0) : 1.0;
+  {
+    // The two-sided check on the innovations in time order (with drift, order_ is that order).
+    std::vector<int> order = order_;
+    if (order.empty()) {
+      std::vector<TimeWindow> windows;
+      for (const auto& p : poses_) windows.push_back(p.window);
+      order = TimeOrder(windows);
+    }
+    std::vector<Eigen::Vector3d> innovations;
+    for (int i : order) innovations.push_back(est.residuals[static_cast<std::size_t>(i)].whitened);
+    est.fit = CheckFit(innovations, order, est.chi2, est.dof, options_.chi2_inflation_p_value,
+                       options_.outlier_threshold);
+    if (est.fit.verdict != FitVerdict::kOk) {
+      est.warnings.push_back(est.fit.Message(ToString(model_->sensor())));
+    }
+  }
+  const int outliers = static_cast<int>(std::count_if(
+      est.residuals.begin(), est.residuals.end(), [](const PoseResidual& r) { return r.outlier; }));
+  if (outliers > 0) {
+    est.warnings.push_back(fmt::format("{} pose(s) with normalised residual above {}", outliers,
+                                       options_.outlier_threshold));
+  }
+  if (options_.inflate_covariance_by_chi2 && est.dof > 0 &&
+      est.p_value < options_.chi2_inflation_p_value) {
+    est.covariance_scale = est.chi2 / est.dof;
+    cov *= est.covariance_scale;
+    est.warnings.push_back(fmt::format(
+        "chi2/dof = {:.2f} (p = {:.2g}): the noise or the model does not explain the data; "
+        "covariance inflated by that factor",
+        est.covariance_scale, est.p_value));
+  }
+  est.theta = theta;
+  est.covariance = cov;
+  est.sigma = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  if (est.rank < identifiable) {
+    // The pseudo-inverse gives a finite number for a parameter the data do not determine; say
+    // infinity instead (the observability analysis names the directions).
+    ObservabilityOptions analysis_options;
+    analysis_options.rank_tolerance = options_.rank_tolerance;
+    const DataReport data = AnalyzeData(*model_, theta, weighted_poses(), analysis_options);
+    std::string names;
+    for (int j = 0; j < N; ++j) {
+      if (std::isinf(data.sigma[j])) {
+        est.sigma[j] = INFINITY;
+        names += (names.empty() ? "" : " ") + est.parameters[static_cast<std::size_t>(j)].name;
+      }
+    }
+    if (!names.empty()) est.warnings.push_back("not determined by these poses: " + names);
+  }
+  est.ok = true;
+  theta_ = theta;
+  last_cost_per_dof_ = est.dof > 0 ? est.chi2 / est.dof : 0.0;
+  return est;
+}
+
+}  // namespace turncal

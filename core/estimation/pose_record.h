@@ -1,0 +1,57 @@
+#pragma once
+// PoseRecord: the unit the calibrator consumes (DESIGN.md "Data flow"): the commanded table
+// angles and the statistics of each triad over one stationary window.
+
+#include <Eigen/Core>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <string>
+
+#include "core/frames/table_pose.h"
+
+namespace turncal {
+
+struct TriadStats {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  // Sample covariance of the individual samples.
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  // Covariance of the mean when the producer estimated it in a way that survives correlated
+  // noise (batch means over sub-windows). Absent: covariance / count is used.
+  std::optional<Eigen::Matrix3d> mean_covariance;
+  std::int64_t count = 0;
+};
+
+struct PoseRecord {
+  TablePose pose;
+  std::optional<TriadStats> acc;  // specific force, m/s^2
+  std::optional<TriadStats> gyr;  // rad/s
+  std::optional<TriadStats> mag;  // device unit
+  double t_start_s = 0.0;         // window start and end, seconds on the host's clock
+  double t_end_s = 0.0;
+  // The same window on the sensor's own clock (the sequencer's: the device clock kept continuous
+  // across resets), which bias drift evolves in; NaN when not known (then the host's is used).
+  double sensor_t_start_s = std::numeric_limits<double>::quiet_NaN();
+  double sensor_t_end_s = std::numeric_limits<double>::quiet_NaN();
+  std::optional<double> temp_c;
+
+  double duration_s() const { return t_end_s - t_start_s; }
+  bool has_sensor_window() const {
+    return std::isfinite(sensor_t_start_s) && std::isfinite(sensor_t_end_s) &&
+           sensor_t_end_s > sensor_t_start_s;
+  }
+  // The window drift and averaging are timed in: the sensor's when known, else the host's.
+  double sensor_start_s() const { return has_sensor_window() ? sensor_t_start_s : t_start_s; }
+  double sensor_end_s() const { return has_sensor_window() ? sensor_t_end_s : t_end_s; }
+};
+
+// One pose as the estimator weighs it: the measured mean of the model's triad and
+// Sigma^{-1/2}, Sigma the covariance of that mean (floored, with the pose-to-pose offset).
+struct WeightedPose {
+  TablePose pose;
+  Eigen::Vector3d measured = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d sqrt_information = Eigen::Matrix3d::Identity();
+};
+
+}  // namespace turncal

@@ -1,0 +1,93 @@
+#include "core/estimation/sensor_class.h"
+
+#include "core/frames/units.h"
+
+namespace turncal {
+
+namespace {
+constexpr double kMicroG = 1e-6 * 9.80665;
+}  // namespace
+
+SensorClass IndustrialClass() {
+  SensorClass c;
+  c.name = "industrial";
+  c.acc_noise_density = 60 * kMicroG;            // MTi-300, 60 ug/sqrt(Hz)
+  c.acc_bias_instability = 4e-4;                 // between poses over minutes (SENSORS.md)
+  c.acc_turn_on_bias = 2e-3 * 9.80665;           // 2 mg
+  c.acc_scale_sigma = 500e-6;                    // 500 ppm
+  c.misalignment_sigma_rad = 0.05 * kRadPerDeg;  // 0.05 deg
+  c.mag_noise_rms = 0.5e-3;                      // 0.5 mG
+  c.mag_bias_instability = 0.1e-3;
+  c.mag_hard_iron_sigma = 0.05;
+  c.mag_soft_iron_sigma = 0.02;
+  c.rate_hz = 500;
+  c.gyr_noise_density = 0.01 * kRadPerDeg;  // MTi-300: 0.01 deg/s/sqrt(Hz)
+  c.gyr_turn_on_bias = 0.2 * kRadPerDeg;    // 0.05-0.5 deg/s
+  return c;
+}
+
+SensorClass ConsumerClass() {
+  SensorClass c;
+  c.name = "consumer";
+  c.acc_noise_density = 200 * kMicroG;          // 200 ug/sqrt(Hz)
+  c.acc_bias_instability = 0.02;                // SENSORS.md: 0.02 m/s^2
+  c.acc_turn_on_bias = 20e-3 * 9.80665;         // 20 mg
+  c.acc_scale_sigma = 3e-3;                     // 0.3 %
+  c.misalignment_sigma_rad = 0.1 * kRadPerDeg;  // 0.1 deg
+  c.mag_noise_rms = 0.5e-3;
+  c.mag_bias_instability = 0.2e-3;
+  c.mag_hard_iron_sigma = 0.1;
+  c.mag_soft_iron_sigma = 0.03;
+  c.rate_hz = 100;
+  c.gyr_noise_density = 0.05 * kRadPerDeg;  // 0.05-0.1 deg/s/sqrt(Hz)
+  c.gyr_turn_on_bias = 0.7 * kRadPerDeg;    // 0.5-1 deg/s
+  c.acc_quantum = 0.15e-3 * 9.80665;        // 16 bits over +-5 g (SENSORS.md)
+  c.gyr_quantum = 0.0092 * kRadPerDeg;      // 16 bits over +-300 deg/s
+  c.mag_quantum = 2.4 / 65536;              // 16 bits over +-1.2 G
+  return c;
+}
+
+bool SensorClassByName(const std::string& name, SensorClass* out) {
+  if (name == "industrial") {
+    *out = IndustrialClass();
+    return true;
+  }
+  if (name == "consumer") {
+    *out = ConsumerClass();
+    return true;
+  }
+  return false;
+}
+
+CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorClass& sensor) {
+  CalibratorOptions o;
+  o.model = model.name();
+  o.context = model.context();
+  const bool accel = model.sensor() == SensorKind::kAccelerometer;
+  o.pose_offset_sigma = accel ? sensor.acc_bias_instability : sensor.mag_bias_instability;
+  o.noise_density = accel ? sensor.acc_noise_density : 0.0;
+  return o;
+}
+
+CalibratorOptions DriftOptionsForClass(const MeasurementModel& model, const SensorClass& sensor) {
+  CalibratorOptions o = OptionsForClass(model, sensor);
+  o.drift.gm_sigma = Eigen::Vector3d::Constant(o.pose_offset_sigma);
+  o.drift.gm_tau_s = sensor.bias_tau_s;
+  o.drift.warmup_sigma = o.drift.gm_sigma * sensor.warmup_in_instabilities;
+  o.drift.warmup_tau_s = sensor.warmup_tau_s;
+  o.pose_offset_sigma = 0.0;
+  return o;
+}
+
+Eigen::Matrix3d ExpectedPoseSqrtInformation(const MeasurementModel& model,
+                                            const SensorClass& sensor,
+                                            const CalibratorOptions& options, double dwell_s,
+                                            double rate_hz) {
+  const bool accel = model.sensor() == SensorKind::kAccelerometer;
+  const double white = accel ? sensor.acc_noise_density * sensor.acc_noise_density / (2 * dwell_s)
+                             : sensor.mag_noise_rms * sensor.mag_noise_rms / (rate_hz * dwell_s);
+  const double var = white + options.pose_offset_sigma * options.pose_offset_sigma;
+  return Eigen::Matrix3d::Identity() / std::sqrt(var);
+}
+
+}  // namespace turncal

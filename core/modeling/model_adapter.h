@@ -1,0 +1,155 @@
+#pragma once
+// Turns a model definition (a struct in one file of core/models/) into a MeasurementModel.
+//
+// A definition `Def` provides:
+//   static constexpr std::string_view kName;   static constexpr int kNumParams;
+//   static constexpr SensorKind kSensor;
+//   static std::vector<ParameterInfo> Parameters(const ModelContext&);
+//   template <typename T>
+//   static Vec3<T> Predict(const T* theta, const Mat3<T>& C_p_q, const Vec3<T>& v_ned,
+//                          const ModelContext&);
+//   static Eigen::Vector3d Correct(const double* theta, const Eigen::Vector3d& raw,
+//                                  const ModelContext&);
+//   static OutputFrame CorrectedFrame(const ModelContext&);
+//   static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
+//                          const ModelContext&, double* theta, std::string* error);
+//   template <typename T>
+//   static void Extended(const T* theta, const ModelContext&, std::vector<T>* theta_e);
+// and optionally `static constexpr int kGaugeDimension` (0 when absent),
+// and registers itself with TURNCAL_REGISTER_MODEL(file_stem, Def).
+
+#include <ceres/autodiff_cost_function.h>
+#include <ceres/jet.h>
+
+#include <cassert>
+#include <vector>
+
+#include "core/modeling/measurement_model.h"
+
+namespace turncal {
+
+template <class Def>
+class ModelAdapter final : public MeasurementModel {
+ public:
+  static constexpr int N = Def::kNumParams;
+
+  explicit ModelAdapter(const ModelContext& context)
+      : context_(context),
+        name_(Def::kName),
+        parameters_(Def::Parameters(context)),
+        excitation_ned_(Def::kSensor == SensorKind::kAccelerometer
+                            ? SpecificForceNed(context.reference)
+                            : context.reference.B_ned) {
+    assert(static_cast<int>(parameters_.size()) == N);
+  }
+
+  const std::string& name() const override { return name_; }
+  SensorKind sensor() const override { return Def::kSensor; }
+  const std::vector<ParameterInfo>& parameters() const override { return parameters_; }
+  const ModelContext& context() const override { return context_; }
+  Eigen::Vector3d excitation_ned() const override { return excitation_ned_; }
+
+  Eigen::Vector3d Predict(const Eigen::VectorXd& theta, const TablePose& pose) const override {
+    assert(theta.size() == N);
+    return Def::template Predict<double>(theta.data(), pose.C_p_q(), excitation_ned_, context_);
+  }
+
+  Eigen::Vector3d Predict(const Eigen::VectorXd& theta, const TablePose& pose,
+                          Jacobian3* jacobian) const override {
+    assert(theta.size() == N);
+    if (jacobian == nullptr) return Predict(theta, pose);
+    using Jet = ceres::Jet<double, N>;
+    Jet theta_jet[N];
+    for (int i = 0; i < N; ++i) theta_jet[i] = Jet(theta[i], i);
+    const Vec3<Jet> y = Def::template Predict<Jet>(theta_jet, pose.C_p_q().template cast<Jet>(),
+                                                   excitation_ned_.cast<Jet>(), context_);
+    jacobian->resize(3, N);
+    Eigen::Vector3d value;
+    for (int r = 0; r < 3; ++r) {
+      value[r] = y[r].a;
+      jacobian->row(r) = y[r].v.transpose();
+    }
+    return value;
+  }
+
+  std::unique_ptr<ceres::CostFunction> MakeResidual(
+      const TablePose& pose, const Eigen::Vector3d& measured,
+      const Eigen::Matrix3d& sqrt_information) const override {
+    return std::make_unique<ceres::AutoDiffCostFunction<Residual, 3, N>>(
+        new Residual{pose.C_p_q(), measured, sqrt_information, excitation_ned_, &context_});
+  }
+
+  Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
+    assert(theta.size() == N);
+    return Def::Correct(theta.data(), raw, context_);
+  }
+  OutputFrame corrected_frame() const override { return Def::CorrectedFrame(context_); }
+
+  bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
+                  Eigen::VectorXd* theta, std::string* error) const override {
+    theta->resize(N);
+    return Def::FromLinear(G, beta, b, context_, theta->data(), error);
+  }
+
+  Eigen::VectorXd Extended(const Eigen::VectorXd& theta, Eigen::MatrixXd* jacobian) const override {
+    assert(theta.size() == N);
+    using Jet = ceres::Jet<double, N>;
+    Jet theta_jet[N];
+    for (int i = 0; i < N; ++i) theta_jet[i] = Jet(theta[i], i);
+    std::vector<Jet> theta_e;
+    Def::template Extended<Jet>(theta_jet, context_, &theta_e);
+    const auto M = static_cast<Eigen::Index>(theta_e.size());
+    Eigen::VectorXd value(M);
+    if (jacobian) jacobian->resize(M, N);
+    for (Eigen::Index r = 0; r < M; ++r) {
+      value[r] = theta_e[r].a;
+      if (jacobian) jacobian->row(r) = theta_e[r].v.transpose();
+    }
+    return value;
+  }
+
+  int gauge_dimension() const override {
+    if constexpr (requires { Def::kGaugeDimension; }) {
+      return Def::kGaugeDimension;
+    } else {
+      return 0;
+    }
+  }
+
+ private:
+  // The residual functor keeps a pointer to the model's context: a cost function must not outlive
+  // the model that made it.
+  struct Residual {
+    Mat3<double> C_p_q;
+    Eigen::Vector3d measured;
+    Eigen::Matrix3d sqrt_information;
+    Eigen::Vector3d v_ned;
+    const ModelContext* context;
+
+    template <typename T>
+    bool operator()(const T* theta, T* residual) const {
+      const Vec3<T> y = Def::template Predict<T>(theta, C_p_q.cast<T>(), v_ned.cast<T>(), *context);
+      Eigen::Map<Vec3<T>> r(residual);
+      r = sqrt_information.cast<T>() * (y - measured.cast<T>());
+      return true;
+    }
+  };
+
+  ModelContext context_;
+  std::string name_;
+  std::vector<ParameterInfo> parameters_;
+  Eigen::Vector3d excitation_ned_;
+};
+
+}  // namespace turncal
+
+// Registers model definition `Def` from the file core/models/<stem>.cc. The registry
+// (core/model_registry.cc) calls one function per file, generated by CMake from the file names.
+#define TURNCAL_REGISTER_MODEL(stem, Def)                                                    \
+  namespace turncal::model_registry {                                                        \
+  Entry Entry_##stem() {                                                                     \
+    return Entry{std::string(Def::kName), [](const ModelContext& context) {                  \
+                   return std::unique_ptr<MeasurementModel>(new ModelAdapter<Def>(context)); \
+                 }};                                                                         \
+  }                                                                                          \
+  }

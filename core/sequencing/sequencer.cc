@@ -1,0 +1,710 @@
+#include "core/sequencing/sequencer.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace turncal {
+namespace {
+
+constexpr std::uint32_t kBadFlags =
+    kAccSaturated | kGyrSaturated | kMagSaturated | kStatusError | kClipping;
+// Beyond a window, how long a tick lets a stream be silent before it has stopped (CheckTimeout).
+constexpr double kReadStallAllowanceS = 2.0;
+
+std::string PoseText(const TablePose& p) {
+  return fmt::format("phi {:.3f} gamma {:.3f} psi {:.3f} deg", p.phi_rad * 180 / M_PI,
+                     p.gamma_rad * 180 / M_PI, p.psi_rad * 180 / M_PI);
+}
+
+}  // namespace
+
+bool SequencerOptions::IsValid(std::string* error) const {
+  auto fail = [&](const std::string& m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (!(dwell_s > 0 && dwell_s <= 3600) || !(settle_guard_s >= 0 && settle_guard_s <= 60) ||
+      !(still_timeout_s > 0 && still_timeout_s <= 86400)) {
+    return fail(
+        "dwell must be in (0, 3600] s, settle guard in [0, 60] s, still timeout in (0, "
+        "86400] s");
+  }
+  if (!(max_bad_fraction >= 0 && max_bad_fraction < 1)) {
+    return fail("the bad-sample fraction must be in [0, 1)");
+  }
+  if (!(max_lost_fraction >= 0 && max_lost_fraction < 1)) {
+    return fail("the lost-sample fraction must be in [0, 1)");
+  }
+  if (!(pose_check_false_alarm > 0 && pose_check_false_alarm < 1)) {
+    return fail("the pose-check false alarm must be in (0, 1)");
+  }
+  if (!(progress_step > 0 && progress_step <= 1)) return fail("progress step must be in (0, 1]");
+  if (!stillness.IsValid(error) || !noise_meter.IsValid(error)) return false;
+  if (noise && !noise->IsValid(error)) return false;
+  return true;
+}
+
+const char* ToString(SequencerEventKind kind) {
+  switch (kind) {
+    case SequencerEventKind::kNoiseMeasured:
+      return "NOISE_MEASURED";
+    case SequencerEventKind::kNoiseRetry:
+      return "NOISE_RETRY";
+    case SequencerEventKind::kPoseStarted:
+      return "POSE_STARTED";
+    case SequencerEventKind::kCollecting:
+      return "POSE_COLLECTING";
+    case SequencerEventKind::kProgress:
+      return "POSE_PROGRESS";
+    case SequencerEventKind::kCaptured:
+      return "POSE_CAPTURED";
+    case SequencerEventKind::kRejected:
+      return "POSE_REJECTED";
+    case SequencerEventKind::kSegmentSkipped:
+      return "SEGMENT_SKIPPED";
+    case SequencerEventKind::kScheduleEnd:
+      return "SCHEDULE_END";
+  }
+  return "?";
+}
+
+Sequencer::Sequencer(const SequencerOptions& options, Sink sink)
+    : options_(options), sink_(std::move(sink)), meter_(options.noise_meter) {}
+
+void Sequencer::Emit(SequencerEventKind kind, double t_s, std::string reason,
+                     const PoseRecord* record) {
+  if (!sink_) return;
+  SequencerEvent e;
+  e.kind = kind;
+  e.t_s = t_s;
+  e.index = index_;
+  e.pose = pose_;
+  e.collected = counts_.used;
+  e.needed = needed_;
+  e.counts = counts_;
+  e.reason = std::move(reason);
+  if (record) e.record = *record;
+  sink_(e);
+}
+
+void Sequencer::SetDriftScale(int triad, double scale) {
+  if (triad < 0 || triad > 2) return;
+  drift_scale_[static_cast<std::size_t>(triad)] = std::isfinite(scale) && scale > 0 ? scale : 1.0;
+  if (detector_) detector_->SetDriftScale(triad, scale);
+}
+
+void Sequencer::SetIdentifiedDrift(int triad, const IdentifiedDrift& identified) {
+  if (triad < 0 || triad > 2) return;
+  identified_[static_cast<std::size_t>(triad)] = identified;
+  drift_scale_[static_cast<std::size_t>(triad)] = identified.scale;
+  if (detector_) detector_->SetIdentifiedDrift(triad, identified);
+}
+
+void Sequencer::StartDetector(const NoiseProfile& profile, double t_s) {
+  detector_ = std::make_unique<StillnessDetector>(profile, options_.stillness);
+  for (int t = 0; t < 3; ++t) {
+    const auto k = static_cast<std::size_t>(t);
+    if (identified_[k]) {
+      detector_->SetIdentifiedDrift(t, *identified_[k]);
+    } else if (drift_scale_[k] != 1.0) {
+      detector_->SetDriftScale(t, drift_scale_[k]);
+    }
+  }
+  required_run_ = detector_->window() +
+                  static_cast<std::int64_t>(std::ceil(options_.settle_guard_s * profile.rate_hz));
+  if (!options_.noise) {
+    const int keep = index_;
+    index_ = -1;
+    Emit(SequencerEventKind::kNoiseMeasured, t_s,
+         profile.Describe() + "; " + detector_->DescribeLimits());
+    index_ = keep;
+  }
+}
+
+bool Sequencer::Announce(const Announcement& a, std::string* error) {
+  if (scheduled()) {
+    if (error) *error = "the sequencer follows a schedule; announcements are not taken";
+    return false;
+  }
+  const double dwell = a.dwell_s.value_or(options_.dwell_s);
+  if (!(dwell > 0) || dwell > 3600) {
+    if (error) *error = fmt::format("dwell {} s out of range (0, 3600]", dwell);
+    return false;
+  }
+  if (!std::isfinite(a.pose.phi_rad) || !std::isfinite(a.pose.gamma_rad) ||
+      !std::isfinite(a.pose.psi_rad)) {
+    if (error) *error = "pose angles must be finite";
+    return false;
+  }
+  const double t_s = static_cast<double>(a.t_host_ns) * 1e-9;
+  CheckTimeout(a.t_host_ns);
+  if (busy()) {
+    Reject(t_s,
+           fmt::format("superseded: pose {} was announced before this one completed", a.index));
+  }
+  index_ = a.index;
+  pose_ = a.pose;
+  t_announce_ns_ = a.t_host_ns;
+  announced_ = true;
+  dwell_s_ = dwell;
+  counts_ = SampleCounts{};
+  needed_ = 0;
+  state_ = State::kWaiting;
+  Emit(SequencerEventKind::kPoseStarted, t_s, fmt::format("dwell {:.2f} s", dwell_s_));
+  return true;
+}
+
+bool Sequencer::SetSchedule(std::vector<TablePose> poses, std::string* error) {
+  if (poses.empty() || state_ != State::kIdle || scheduled()) {
+    if (error) *error = "a schedule needs poses and an idle sequencer without one";
+    return false;
+  }
+  schedule_ = std::move(poses);
+  next_scheduled_ = 0;
+  NextScheduled(0.0);
+  return true;
+}
+
+void Sequencer::NextScheduled(double t_s) {
+  counts_ = SampleCounts{};
+  needed_ = 0;
+  if (next_scheduled_ >= schedule_.size()) {
+    state_ = State::kScheduleDone;
+    return;
+  }
+  index_ = static_cast<int>(next_scheduled_);
+  pose_ = schedule_[next_scheduled_];
+  t_announce_ns_ = std::numeric_limits<std::int64_t>::min();
+  announced_ = false;
+  dwell_s_ = options_.dwell_s;
+  state_ = State::kWaiting;
+  Emit(SequencerEventKind::kPoseStarted, t_s,
+       fmt::format("scheduled {} of {}, dwell {:.2f} s", index_ + 1, schedule_.size(), dwell_s_));
+}
+
+void Sequencer::Push(const Sample& sample) { Push(ToStillSample(sample)); }
+
+// A device-clock jump this large or larger counts no lost samples (a clock reset, not a gap).
+constexpr double kMaxSteps = 1e7;
+
+std::optional<std::int64_t> Sequencer::StepsAhead(const StillSample& s) const {
+  if (s.counter) {
+    if (!last_counter_) return std::nullopt;
+    // 16 bits wrap: -32768..32767 periods.
+    return static_cast<std::int16_t>(static_cast<std::uint16_t>(*s.counter - *last_counter_));
+  }
+  const NoiseProfile* p = noise();
+  if (!s.t_device_s || !last_device_s_ || !p || !p->device_period_s || !(*p->device_period_s > 0)) {
+    return std::nullopt;
+  }
+  const double k = std::round((*s.t_device_s - *last_device_s_) / *p->device_period_s);
+  if (std::isnan(k)) return std::nullopt;
+  return static_cast<std::int64_t>(std::clamp(k, -kMaxSteps, kMaxSteps));
+}
+
+std::uint32_t Sequencer::CountLost(const StillSample& s) {
+  const std::optional<std::int64_t> steps = StepsAhead(s);
+  if (s.counter) last_counter_ = s.counter;
+  if (s.t_device_s) last_device_s_ = s.t_device_s;
+  return steps && *steps > 1 && *steps < kMaxSteps ? static_cast<std::uint32_t>(*steps - 1) : 0u;
+}
+
+void Sequencer::Push(StillSample s) {
+  // A sample whose counter or device clock breaks the sequence (backwards, or more samples ahead
+  // than half a window: an interruption) waits for its successor. A successor that continues the
+  // old sequence shows the jump was a corrupted counter or time stamp (a bit error the frame's
+  // checksum missed, ~1 in 16 double errors for Xbus's 8-bit sum): that sample is dropped
+  // (counted as flagged), not taken for an interruption. Otherwise the jump was real.
+  const auto plausible = [this](std::optional<std::int64_t> steps) {
+    return !steps ||
+           (*steps >= 1 && *steps - 1 <= static_cast<std::int64_t>(detector_->window() / 2));
+  };
+  if (jumped_) {
+    const StillSample jumped = *jumped_;
+    jumped_.reset();
+    const std::optional<std::int64_t> steps = StepsAhead(s);
+    if (steps && plausible(steps)) {
+      ++pending_flagged_;
+      ++totals_.flagged;
+      if (excluded_) excluded_(jumped, "corrupt counter");
+      // It stood for the sample after the last one (unless `s` is that one): not lost.
+      if (*steps > 1) {
+        if (last_counter_) ++*last_counter_;
+        if (last_device_s_ && noise()->device_period_s)
+          *last_device_s_ += *noise()->device_period_s;
+      }
+    } else {
+      Accept(jumped);
+    }
+  }
+  if (detector_ && !plausible(StepsAhead(s))) {
+    jumped_ = s;
+    return;
+  }
+  Accept(s);
+}
+
+double Sequencer::SensorTime(const StillSample& s) {
+  const double host = s.t_s();
+  double t;
+  if (s.t_device_s && std::isfinite(*s.t_device_s)) {
+    const double device = *s.t_device_s;
+    if (sensor_last_device_s_) {
+      const double d_device = device - *sensor_last_device_s_;
+      const double d_host = std::max(host - sensor_last_host_s_, 0.0);
+      // Backwards, or far ahead of what the host saw pass (a reset or a corrupt time stamp that
+      // was real enough to be accepted): continue from the last sensor time by the host's gap.
+      if (!(d_device >= 0) || d_device > 2 * d_host + 10.0) {
+        sensor_offset_s_ = *sensor_last_s_ + d_host - device;
+      }
+    } else if (sensor_last_s_) {
+      // The first device time after samples without one.
+      sensor_offset_s_ = *sensor_last_s_ + std::max(host - sensor_last_host_s_, 0.0) - device;
+    }
+    t = device + sensor_offset_s_;
+    sensor_last_device_s_ = device;
+  } else {
+    t = sensor_last_s_ ? *sensor_last_s_ + std::max(host - sensor_last_host_s_, 0.0) : host;
+    sensor_last_device_s_.reset();
+  }
+  sensor_last_s_ = t;
+  sensor_last_host_s_ = host;
+  return t;
+}
+
+void Sequencer::Accept(StillSample s) {
+  last_read_ns_ = s.t_host_ns;
+  // From here on a sample's time is when its device sent it, on the host clock (HostClock): a
+  // backlog read at once after an announcement belongs before it.
+  s.t_host_ns = clock_.Map(s.t_host_ns, s.t_device_s);
+  s.t_sensor_s = SensorTime(s);
+  CheckTimeout(s.t_host_ns);
+  const double t_s = s.t_s();
+  const std::uint32_t lost = CountLost(s);
+  const std::optional<std::int64_t> previous_host = last_host_ns_;
+  last_host_ns_ = s.t_host_ns;
+  totals_.lost += lost;
+  // An interruption: many samples lost, or none received for longer than a window. The window
+  // cannot vouch for what happened in between. Checked before anything may drop this sample.
+  if (detector_) {
+    const double host_gap_s =
+        previous_host ? static_cast<double>(s.t_host_ns - *previous_host) * 1e-9 : 0.0;
+    const auto half = static_cast<std::uint32_t>(detector_->window() / 2);
+    if (lost > half || host_gap_s > options_.stillness.window_s) {
+      Interrupt(t_s, lost > half
+                         ? fmt::format("the stream was interrupted ({} samples lost)", lost)
+                         : fmt::format("the stream was interrupted (no sample for {:.2f} s)",
+                                       host_gap_s));
+    } else {
+      pending_lost_ += lost;
+    }
+  }
+  bool finite = true;
+  for (int t = 0; t < 3; ++t) {
+    if (s.has(t) && !s.v[t].allFinite()) finite = false;
+  }
+  if ((s.flags & kBadFlags) || !finite) {
+    ++pending_flagged_;
+    ++totals_.flagged;
+    if (excluded_) excluded_(s, finite ? "flagged" : "non-finite");
+    return;
+  }
+  if (!detector_) {
+    if (options_.noise) {
+      // A configured profile: the triads this device sends (a datasheet class names mag too).
+      NoiseProfile profile = *options_.noise;
+      for (int t = 0; t < 3; ++t) {
+        if (!s.has(t)) profile.sigma[t].reset();
+      }
+      std::string error;
+      if (!profile.IsValid(&error)) {
+        ++pending_flagged_;
+        ++totals_.flagged;
+        if (excluded_) excluded_(s, "incomplete");
+        return;
+      }
+      StartDetector(profile, t_s);
+    } else {
+      switch (meter_.Add(s)) {
+        case NoiseMeter::Status::kCollecting:
+          return;
+        case NoiseMeter::Status::kMeasured:
+          StartDetector(meter_.profile(), t_s);
+          return;
+        case NoiseMeter::Status::kRejected: {
+          last_noise_failure_ = meter_.failure();
+          const int keep = index_;
+          index_ = -1;
+          Emit(SequencerEventKind::kNoiseRetry, t_s, meter_.failure());
+          index_ = keep;
+          meter_.Restart();
+          meter_.Add(s);
+          return;
+        }
+      }
+    }
+  }
+  for (int t = 0; t < 3; ++t) {
+    if (detector_->profile().sigma[t] && !s.has(t)) {
+      ++pending_flagged_;
+      ++totals_.flagged;
+      if (excluded_) excluded_(s, "incomplete");
+      return;
+    }
+  }
+  // Isolated outliers: a sample far from the window's median is held; if the next one is far
+  // too, both are real (the table moves) and go in; otherwise the held one is dropped.
+  if (held_) {
+    if (detector_->IsOutlier(s)) {
+      Feed(*held_);
+      held_.reset();
+      Feed(s);
+    } else {
+      ++pending_outliers_;
+      ++totals_.outliers;
+      if (excluded_) excluded_(*held_, "outlier");
+      held_.reset();
+      Feed(s);
+    }
+  } else if (detector_->IsOutlier(s)) {
+    held_ = s;
+  } else {
+    Feed(s);
+  }
+}
+
+void Sequencer::Interrupt(double t_s, const std::string& why) {
+  detector_->Clear();
+  held_.reset();
+  pending_lost_ = pending_flagged_ = pending_outliers_ = 0;
+  if (state_ == State::kCollecting) {
+    if (scheduled()) {
+      SkipSegment(t_s, why);
+      // The segment may go on after the gap: only real motion ends it, so the rest of this
+      // segment is never taken for the next pose.
+      state_ = State::kSegmentDone;
+    } else {
+      Reject(t_s, why);
+    }
+  }
+  last_motion_ = StillFinding{};
+  last_motion_.kind = StillFinding::kFilling;
+  last_motion_t_s_ = t_s;
+}
+
+void Sequencer::Feed(const StillSample& in) {
+  StillSample s = in;
+  s.lost_before = pending_lost_;
+  s.flagged_before = pending_flagged_;
+  s.outliers_before = pending_outliers_;
+  pending_lost_ = pending_flagged_ = pending_outliers_ = 0;
+  StillSample evicted;
+  bool has_evicted = false;
+  const bool still = detector_->Push(s, &evicted, &has_evicted);
+  const double t_s = s.t_s();
+  if (!still && detector_->finding().kind != StillFinding::kFilling) {
+    last_motion_ = detector_->finding();
+    last_motion_t_s_ = t_s;
+  }
+  const bool moving = !still && detector_->finding().kind != StillFinding::kFilling;
+  switch (state_) {
+    case State::kIdle:
+      break;
+    case State::kScheduleDone:
+      // A further still segment long enough for a pose, after the last pose's segment ended.
+      if (moving) seen_motion_after_schedule_ = true;
+      if (seen_motion_after_schedule_ && still &&
+          detector_->still_run() ==
+              required_run_ + static_cast<std::int64_t>(
+                                  std::ceil(options_.dwell_s * detector_->profile().rate_hz))) {
+        ++extra_segments_;
+      }
+      break;
+    case State::kWaiting:
+      if (still && has_evicted && detector_->still_run() >= required_run_ &&
+          evicted.t_host_ns > t_announce_ns_) {
+        StartCollecting(evicted);
+      }
+      break;
+    case State::kCollecting:
+      if (!still) {
+        const std::string why = fmt::format(
+            "motion during the dwell after {:.2f} of {:.2f} s: {}",
+            static_cast<double>(counts_.used + counts_.bad()) / detector_->profile().rate_hz,
+            dwell_s_, detector_->finding().Describe());
+        if (scheduled()) {
+          SkipSegment(t_s, "still segment shorter than the dwell; " + why);
+        } else {
+          Reject(t_s, why);
+        }
+      } else if (has_evicted) {
+        Commit(evicted);
+        if (counts_.used + counts_.bad() >= needed_) Complete(t_s);
+      }
+      break;
+    case State::kSegmentDone:
+      if (moving) state_ = State::kWaiting;
+      break;
+  }
+}
+
+void Sequencer::StartCollecting(const StillSample& first) {
+  for (auto& a : acc_) a.Reset();
+  for (auto& a : first_half_) a.Reset();
+  temp_sum_ = 0;
+  temp_n_ = 0;
+  counts_ = SampleCounts{};
+  needed_ = std::max<std::int64_t>(
+      2, static_cast<std::int64_t>(std::ceil(dwell_s_ * detector_->profile().rate_hz - 1e-9)));
+  next_progress_ = static_cast<std::int64_t>(std::ceil(options_.progress_step * needed_));
+  t_first_ns_ = first.t_host_ns;
+  t_first_sensor_s_ = first.t_sensor_s;
+  state_ = State::kCollecting;
+  Emit(SequencerEventKind::kCollecting, first.t_s(),
+       fmt::format("still; collecting {} samples", needed_));
+  // What was lost or left out before the first sample belongs to before the window.
+  StillSample head = first;
+  head.lost_before = head.flagged_before = head.outliers_before = 0;
+  Commit(head);
+}
+
+void Sequencer::Commit(const StillSample& s) {
+  ++counts_.used;
+  ++totals_.used;
+  counts_.lost += s.lost_before;
+  counts_.flagged += s.flagged_before;
+  counts_.outliers += s.outliers_before;
+  for (int t = 0; t < 3; ++t) {
+    // Only triads the detector checks: an unchecked one could carry a spike into the record.
+    if (s.has(t) && detector_->profile().sigma[t]) {
+      acc_[t].Add(s.v[t]);
+      if (2 * (counts_.used + counts_.bad()) <= needed_) first_half_[t].Add(s.v[t]);
+    }
+  }
+  if (std::isfinite(s.temp_c)) {
+    temp_sum_ += s.temp_c;
+    ++temp_n_;
+  }
+  t_last_ns_ = s.t_host_ns;
+  t_last_sensor_s_ = s.t_sensor_s;
+  if (counts_.used + counts_.bad() >= next_progress_ && counts_.used + counts_.bad() < needed_) {
+    Emit(SequencerEventKind::kProgress, s.t_s());
+    while (next_progress_ <= counts_.used + counts_.bad()) {
+      next_progress_ += std::max<std::int64_t>(
+          1, static_cast<std::int64_t>(std::ceil(options_.progress_step * needed_)));
+    }
+  }
+}
+
+void Sequencer::Complete(double t_s) {
+  const bool too_bad = counts_.bad_fraction() > options_.max_bad_fraction;
+  if (too_bad || counts_.lost_fraction() > options_.max_lost_fraction) {
+    const std::string why =
+        too_bad ? fmt::format(
+                      "too many bad samples: {} flagged, {} outliers of {} ({:.1f}% > {:.1f}%); "
+                      "{} lost",
+                      counts_.flagged, counts_.outliers, counts_.used + counts_.bad(),
+                      100 * counts_.bad_fraction(), 100 * options_.max_bad_fraction, counts_.lost)
+                : fmt::format(
+                      "too many lost samples: {} lost of {} ({:.1f}% > {:.1f}%; a bad cable, "
+                      "line noise or an overrun?)",
+                      counts_.lost, counts_.used + counts_.bad(), 100 * counts_.lost_fraction(),
+                      100 * options_.max_lost_fraction);
+    if (scheduled()) {
+      SkipSegment(t_s, why);
+    } else {
+      Reject(t_s, why);
+    }
+    return;
+  }
+  // The dwell's two halves must agree: a table creeping too slowly for one window to see
+  // (0.1 deg/s moves gravity's projection by 2e-3 m/s^2 per second) shows between them, beyond
+  // what the white noise and the sensor's own bias wander (options' stillness.bias_drift, at the
+  // scale the station identified) explain.
+  for (int t = 0; t < 3; ++t) {
+    const NoiseProfile& prof = detector_->profile();
+    if (!prof.sigma[t] || acc_[t].count() < 4 || first_half_[t].count() < 2) continue;
+    const auto n = static_cast<double>(acc_[t].count());
+    const auto n1 = static_cast<double>(first_half_[t].count());
+    const Eigen::Vector3d m1 = first_half_[t].mean();
+    const Eigen::Vector3d m2 = (acc_[t].mean() * n - m1 * n1) / (n - n1);
+    for (int a = 0; a < 3; ++a) {
+      const double limit = detector_->HalvesDriftLimit(t, a, n1, n - n1);
+      const double drift = std::abs(m2[a] - m1[a]);
+      if (!(drift <= limit)) {
+        const std::string why = fmt::format(
+            "the {} {} mean drifted {:.3g} {} between the halves of the dwell (still limit "
+            "{:.3g}): the table crept",
+            TriadName(t), "xyz"[a], drift, TriadUnit(t), limit);
+        if (scheduled()) {
+          SkipSegment(t_s, why);
+        } else {
+          Reject(t_s, why);
+        }
+        return;
+      }
+    }
+  }
+  PoseRecord record;
+  record.pose = pose_;
+  if (acc_[kTriadAcc].count() > 0) record.acc = acc_[kTriadAcc].Stats();
+  if (acc_[kTriadGyr].count() > 0) record.gyr = acc_[kTriadGyr].Stats();
+  if (acc_[kTriadMag].count() > 0) record.mag = acc_[kTriadMag].Stats();
+  record.t_start_s = static_cast<double>(t_first_ns_) * 1e-9;
+  // The window covers `used` sample periods.
+  record.t_end_s = static_cast<double>(t_last_ns_) * 1e-9 + 1.0 / detector_->profile().rate_hz;
+  if (std::isfinite(t_first_sensor_s_) && std::isfinite(t_last_sensor_s_) &&
+      t_last_sensor_s_ >= t_first_sensor_s_) {
+    const auto& prof = detector_->profile();
+    record.sensor_t_start_s = t_first_sensor_s_;
+    record.sensor_t_end_s =
+        t_last_sensor_s_ + (prof.device_period_s ? *prof.device_period_s : 1.0 / prof.rate_hz);
+  }
+  if (temp_n_ > 0) record.temp_c = temp_sum_ / static_cast<double>(temp_n_);
+
+  if (predictor_) {
+    for (int t : {kTriadAcc, kTriadMag}) {
+      const auto& stats = t == kTriadAcc ? record.acc : record.mag;
+      if (!stats) continue;
+      const auto prediction = predictor_(pose_, t);
+      if (!prediction) continue;
+      const PoseFit fit = CheckPoseMean(*stats, *prediction, options_.pose_check_false_alarm,
+                                        t == kTriadAcc ? "accelerometer" : "magnetometer");
+      if (fit.fits) continue;
+      if (!scheduled()) {
+        Reject(t_s, fit.reason);
+        return;
+      }
+      // Does it fit a later scheduled pose? Then the schedule's order is wrong.
+      std::string later;
+      for (std::size_t j = next_scheduled_ + 1; j < schedule_.size() && later.empty(); ++j) {
+        const auto pj = predictor_(schedule_[j], t);
+        if (pj && CheckPoseMean(*stats, *pj, options_.pose_check_false_alarm, "").fits) {
+          later = fmt::format("; it fits scheduled pose {} ({}): is the schedule's order wrong?",
+                              j + 1, PoseText(schedule_[j]));
+        }
+      }
+      SkipSegment(t_s, fit.reason + later);
+      return;
+    }
+  }
+  ++captured_;
+  Emit(SequencerEventKind::kCaptured, t_s,
+       fmt::format("{} samples over {:.2f} s", counts_.used, record.duration_s()), &record);
+  if (scheduled()) {
+    ++next_scheduled_;
+    NextScheduled(t_s);
+    if (state_ == State::kWaiting) state_ = State::kSegmentDone;
+  } else {
+    state_ = State::kIdle;
+  }
+}
+
+void Sequencer::Reject(double t_s, std::string reason) {
+  ++rejected_;
+  Emit(SequencerEventKind::kRejected, t_s, std::move(reason));
+  state_ = State::kIdle;
+  needed_ = 0;
+}
+
+void Sequencer::SkipSegment(double t_s, std::string reason) {
+  ++skipped_segments_;
+  Emit(SequencerEventKind::kSegmentSkipped, t_s, std::move(reason));
+  counts_ = SampleCounts{};
+  needed_ = 0;
+  // Wait for the segment to end before looking for the next.
+  state_ = detector_ && detector_->still_run() > 0 ? State::kSegmentDone : State::kWaiting;
+}
+
+void Sequencer::CheckTimeout(std::int64_t now_ns) {
+  // A stream that stops during the dwell: nothing will complete the pose. A gap between samples
+  // is an interruption (Accept, by sending times); this is for a stream that stops for good, so
+  // it goes by when the last sample was read, with an allowance for the daemon's own stalls: a
+  // tick can run after a stall before the bytes that came meanwhile are read (0.6 s stalls in
+  // CI; a replay ticks at every record, elsewhere than the live 50 ms ticks fell).
+  if (state_ == State::kCollecting && last_read_ns_ &&
+      static_cast<double>(now_ns - *last_read_ns_) * 1e-9 >
+          options_.stillness.window_s + kReadStallAllowanceS) {
+    Interrupt(static_cast<double>(now_ns) * 1e-9,
+              fmt::format("the stream stopped during the dwell (nothing read for {:.2f} s)",
+                          static_cast<double>(now_ns - *last_read_ns_) * 1e-9));
+    return;
+  }
+  if (state_ != State::kWaiting || !announced_) return;
+  const double waited = (static_cast<double>(now_ns) - static_cast<double>(t_announce_ns_)) * 1e-9;
+  if (waited <= options_.still_timeout_s) return;
+  std::string why;
+  const double t_announce_s = static_cast<double>(t_announce_ns_) * 1e-9;
+  if (!detector_) {
+    why = fmt::format("the sensor noise is not known yet ({})",
+                      last_noise_failure_.empty() ? "still measuring" : last_noise_failure_);
+  } else if (!last_host_ns_ || *last_host_ns_ < t_announce_ns_) {
+    why = "no samples arrived";
+  } else if (last_motion_t_s_ >= t_announce_s) {
+    why = fmt::format("last not-still window at t = {:.2f} s: {}", last_motion_t_s_,
+                      last_motion_.Describe());
+  } else {
+    why = "the stillness window did not fill";
+  }
+  Reject(static_cast<double>(now_ns) * 1e-9,
+         fmt::format("not still within {:.1f} s of the announcement; {}", options_.still_timeout_s,
+                     why));
+}
+
+void Sequencer::Tick(std::int64_t now_ns) { CheckTimeout(now_ns); }
+
+void Sequencer::Finish(std::int64_t now_ns) {
+  const double t_s = static_cast<double>(now_ns) * 1e-9;
+  if (jumped_) {
+    // No successor to vouch for its jump.
+    ++pending_flagged_;
+    ++totals_.flagged;
+    if (excluded_) excluded_(*jumped_, "corrupt counter");
+    jumped_.reset();
+  }
+  if (held_) {
+    ++pending_outliers_;
+    ++totals_.outliers;
+    if (excluded_) excluded_(*held_, "outlier");
+    held_.reset();
+  }
+  if (!scheduled()) {
+    if (busy()) {
+      Reject(t_s, state_ == State::kCollecting
+                      ? fmt::format("the input ended during the dwell ({} of {} samples)",
+                                    counts_.used + counts_.bad(), needed_)
+                      : "the input ended before the sensor was still");
+    }
+    return;
+  }
+  if (state_ == State::kCollecting) {
+    SkipSegment(t_s, fmt::format("the input ended during the dwell ({} of {} samples)",
+                                 counts_.used + counts_.bad(), needed_));
+  }
+  const auto total = schedule_.size();
+  std::string why;
+  if (next_scheduled_ >= total) {
+    why = fmt::format(
+        "all {} scheduled poses captured; {} still segments skipped, {} further "
+        "still segments after the last pose",
+        total, skipped_segments_, extra_segments_);
+  } else {
+    why = fmt::format(
+        "{} of {} scheduled poses captured ({} still segments skipped): the stream has fewer "
+        "usable still segments than the schedule has poses",
+        next_scheduled_, total, skipped_segments_);
+  }
+  const int keep = index_;
+  const TablePose keep_pose = pose_;
+  index_ = -1;
+  pose_ = TablePose{};
+  Emit(SequencerEventKind::kScheduleEnd, t_s, why);
+  index_ = keep;
+  pose_ = keep_pose;
+  state_ = State::kScheduleDone;
+}
+
+}  // namespace turncal
