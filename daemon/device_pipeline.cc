@@ -19,12 +19,7 @@ SequencerOptions DevicePipeline::SequencerOptionsFor(const StationOptions& optio
   // noise: the class's Gauss-Markov drift, scaled by what the calibrator identifies.
   for (int t : {kTriadAcc, kTriadMag}) {
     BiasDrift& wander = so.stillness.bias_drift[static_cast<std::size_t>(t)];
-    if (wander.enabled()) continue;
-    wander.gm_sigma = Eigen::Vector3d::Constant(t == kTriadAcc ? sensor.acc_bias_instability
-                                                               : sensor.mag_bias_instability);
-    wander.gm_tau_s = sensor.bias_tau_s;
-    wander.rw_density = Eigen::Vector3d::Constant(
-        std::max(0.0, t == kTriadAcc ? options.acc_random_walk : options.mag_random_walk));
+    if (!wander.enabled()) wander = DriftForClass(sensor, t == kTriadAcc);
   }
   return so;
 }
@@ -80,7 +75,7 @@ nlohmann::json DevicePipeline::CalibrationJson(const ModelPipeline& m,
   // The records themselves, with the model's triad only, so that the calibration can be
   // re-evaluated (the report's residuals and convergence) without the journal, which `reset`
   // archives.
-  const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
+  const bool accel = m.accel();
   nlohmann::json records = nlohmann::json::array();
   for (std::size_t i = 0; i < n && i < d.records_used.size(); ++i) {
     PoseRecord r = d.records_used[i];

@@ -41,10 +41,6 @@ ModelPipeline ModelPipeline::Make(const std::string& name, const StationOptions&
   // The class's drift (or the one configured) is the prior; the session's poses identify
   // its strength.
   co.identify_drift = options.drift_model && options.identify_drift;
-  if (options.drift_model) {
-    const double rw = m.accel() ? options.acc_random_walk : options.mag_random_walk;
-    if (rw > 0) co.drift.rw_density = Eigen::Vector3d::Constant(rw);
-  }
   m.calibrator = std::make_unique<Calibrator>(co);
   return m;
 }

@@ -60,6 +60,8 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
   if (options_.mag_noise_rms > 0) sensor_.mag_noise_rms = options_.mag_noise_rms;
   if (options_.mag_bias_instability > 0)
     sensor_.mag_bias_instability = options_.mag_bias_instability;
+  if (options_.acc_random_walk >= 0) sensor_.acc_random_walk = options_.acc_random_walk;
+  if (options_.mag_random_walk >= 0) sensor_.mag_random_walk = options_.mag_random_walk;
   if (!options_.gate_tolerances_set) {
     GateDefaultsForClass(options_.sensor_class, &options_.gate);
   }
@@ -366,7 +368,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   d.records_used.push_back(record);
   for (std::size_t mi = 0; mi < d.models.size(); ++mi) {
     ModelState& m = d.models[mi];
-    const bool accel = m.model->sensor() == SensorKind::kAccelerometer;
+    const bool accel = m.accel();
     if (accel ? !record.acc : !record.mag) continue;
     auto job = std::make_shared<ModelUpdate>();
     job->device_poses = d.records_used.size();

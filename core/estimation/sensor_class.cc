@@ -69,12 +69,20 @@ CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorCla
   return o;
 }
 
+BiasDrift DriftForClass(const SensorClass& sensor, bool accel) {
+  BiasDrift d;
+  d.gm_sigma =
+      Eigen::Vector3d::Constant(accel ? sensor.acc_bias_instability : sensor.mag_bias_instability);
+  d.gm_tau_s = sensor.bias_tau_s;
+  d.rw_density = Eigen::Vector3d::Constant(accel ? sensor.acc_random_walk : sensor.mag_random_walk);
+  d.warmup_sigma = d.gm_sigma * sensor.warmup_in_instabilities;
+  d.warmup_tau_s = sensor.warmup_tau_s;
+  return d;
+}
+
 CalibratorOptions DriftOptionsForClass(const MeasurementModel& model, const SensorClass& sensor) {
   CalibratorOptions o = OptionsForClass(model, sensor);
-  o.drift.gm_sigma = Eigen::Vector3d::Constant(o.pose_offset_sigma);
-  o.drift.gm_tau_s = sensor.bias_tau_s;
-  o.drift.warmup_sigma = o.drift.gm_sigma * sensor.warmup_in_instabilities;
-  o.drift.warmup_tau_s = sensor.warmup_tau_s;
+  o.drift = DriftForClass(sensor, model.sensor() == SensorKind::kAccelerometer);
   o.pose_offset_sigma = 0.0;
   return o;
 }

@@ -32,6 +32,10 @@ struct SensorClass {
   // show makes chi^2 too small, docs/ACCURACY.md); the simulator draws none unless asked.
   double warmup_in_instabilities = 0.0;
   double warmup_tau_s = 60.0;
+  // Bias random walk of each triad, unit per sqrt(s): none for the datasheet classes; a noise
+  // prior measured on the sensor may have one ([station] acc_random_walk, mag_random_walk).
+  double acc_random_walk = 0.0;
+  double mag_random_walk = 0.0;
   // Gyroscope (for the byte-level simulator; not calibrated here), rad/s.
   double gyr_noise_density = 0.0;  // per sqrt(Hz)
   double gyr_turn_on_bias = 0.0;   // 1 sigma
@@ -51,9 +55,13 @@ bool SensorClassByName(const std::string& name, SensorClass* out);
 // white-noise density of the triad the model uses).
 CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorClass& sensor);
 
-// The same with the bias instability as a Gauss-Markov process in time (sigma = the class's bias
-// instability, tau = bias_tau_s) instead of an independent offset per pose: what the station
-// uses, for records that carry their time windows.
+// The class's bias drift of the accelerometer (accel) or the magnetometer: Gauss-Markov sigma =
+// its bias instability with tau = bias_tau_s, its random walk, and the warm-up allowance.
+BiasDrift DriftForClass(const SensorClass& sensor, bool accel);
+
+// The same with the bias instability as a Gauss-Markov process in time (DriftForClass) instead of
+// an independent offset per pose: what the station uses, for records that carry their time
+// windows.
 CalibratorOptions DriftOptionsForClass(const MeasurementModel& model, const SensorClass& sensor);
 
 // The 1/sigma a planned pose's mean will have from white noise (and options' independent

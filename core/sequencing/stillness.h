@@ -189,7 +189,6 @@ class StillnessDetector {
   // Scales a triad's bias wander (a sigma factor: the drift's strength the calibrator identified
   // from the session; 1 = options' bias_drift as given).
   void SetDriftScale(int triad, double scale);
-  double drift_scale(int triad) const { return drift_scale_[static_cast<std::size_t>(triad)]; }
   // Records what a calibrator identified in the profile and scales the allowance by it.
   void SetIdentifiedDrift(int triad, const IdentifiedDrift& identified);
 
