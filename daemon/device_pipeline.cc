@@ -19,7 +19,10 @@ SequencerOptions DevicePipeline::SequencerOptionsFor(const StationOptions& optio
   // noise: the class's Gauss-Markov drift, scaled by what the calibrator identifies.
   for (int t : {kTriadAcc, kTriadMag}) {
     BiasDrift& wander = so.stillness.bias_drift[static_cast<std::size_t>(t)];
-    if (!wander.enabled()) wander = DriftForClass(sensor, t == kTriadAcc);
+    if (!wander.enabled()) {
+      wander = DriftForClass(
+          sensor, t == kTriadAcc ? SensorKind::kAccelerometer : SensorKind::kMagnetometer);
+    }
   }
   return so;
 }

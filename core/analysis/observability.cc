@@ -36,6 +36,12 @@ double ParameterScale(const ParameterInfo& parameter, const MeasurementModel& mo
     case ParameterUnit::kAcceleration:
     case ParameterUnit::kField:
       return model.excitation_ned().norm();
+    // A gyroscope's columns: G's are the rates (a rate table's, ~1 rad/s), the bias's the unit,
+    // B_g's the specific force (~g): scaled so that each is ~1 rad/s.
+    case ParameterUnit::kAngularRate:
+      return 1.0;
+    case ParameterUnit::kGSensitivity:
+      return 1.0 / kStandardGravity_mps2;
   }
   return 1.0;
 }

@@ -19,6 +19,8 @@ bool GateTolerancesForClass(const std::string& sensor_class, GateTolerances* out
     t.acceleration_mps2 = 2e-3 * 9.80665;
     t.gain = 2e-3;
     t.field = 2e-3;
+    t.angular_rate_radps = 100.0 * M_PI / 180 / 3600;
+    t.g_sensitivity = 200.0 * M_PI / 180 / 3600 / 9.80665;
     *out = t;
     return true;
   }
@@ -37,7 +39,8 @@ bool GateOptions::IsValid(std::string* error) const {
     return false;
   };
   const GateTolerances& t = tolerances;
-  for (double v : {t.scale_factor, t.angle_rad, t.acceleration_mps2, t.gain, t.field}) {
+  for (double v : {t.scale_factor, t.angle_rad, t.acceleration_mps2, t.gain, t.field,
+                   t.angular_rate_radps, t.g_sensitivity}) {
     if (!(v > 0) || !std::isfinite(v)) return fail("every tolerance must be finite and > 0");
   }
   for (const auto& [name, v] : parameter_tolerance) {
@@ -80,6 +83,10 @@ double ToleranceFor(const ParameterInfo& parameter, const GateOptions& options) 
       return t.gain;
     case ParameterUnit::kField:
       return t.field;
+    case ParameterUnit::kAngularRate:
+      return t.angular_rate_radps;
+    case ParameterUnit::kGSensitivity:
+      return t.g_sensitivity;
   }
   return t.gain;
 }

@@ -21,10 +21,14 @@ struct GateTolerances {
   double acceleration_mps2 = 1e-3 * 9.80665;  // accelerometer bias: 1 mg
   double gain = 1e-3;                         // magnetometer G entries (and K): 0.1 %
   double field = 1e-3;                        // magnetometer bias: 1 mG (device unit: Gauss)
+  double angular_rate_radps = 10.0 * M_PI / 180 / 3600;  // gyroscope bias: 10 deg/h
+  // gyroscope g-sensitivity: 10 deg/h/g, rad/s per m/s^2
+  double g_sensitivity = 10.0 * M_PI / 180 / 3600 / 9.80665;
 };
 
 // Defaults for a sensor class of SENSORS.md: "industrial" (tactical-grade targets: 100 ppm,
-// 0.01 deg, 1 mg; gain 1e-3, 1 mG) or "consumer" (1000 ppm, 0.1 deg, 2 mg; gain 2e-3, 2 mG).
+// 0.01 deg, 1 mg; gain 1e-3, 1 mG; gyro bias 10 deg/h, g-sensitivity 10 deg/h/g) or "consumer"
+// (1000 ppm, 0.1 deg, 2 mg; gain 2e-3, 2 mG; 100 deg/h, 200 deg/h/g).
 // False when the name is unknown.
 bool GateTolerancesForClass(const std::string& sensor_class, GateTolerances* out);
 

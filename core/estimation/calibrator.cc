@@ -10,6 +10,7 @@
 
 #include "core/analysis/observability.h"
 #include "core/estimation/gls_whitening.h"
+#include "core/estimation/gyro_linear_start.h"
 #include "core/estimation/linear_start.h"
 #include "core/modeling/mag22_gauge.h"
 
@@ -123,7 +124,9 @@ std::unique_ptr<ceres::LossFunction> MakeLoss(RobustLoss loss, double scale) {
 }
 
 const TriadStats* TriadFor(SensorKind sensor, const PoseRecord& record) {
-  const auto& triad = sensor == SensorKind::kAccelerometer ? record.acc : record.mag;
+  const auto& triad = sensor == SensorKind::kAccelerometer ? record.acc
+                      : sensor == SensorKind::kGyroscope   ? record.gyr
+                                                           : record.mag;
   return triad ? &*triad : nullptr;
 }
 
@@ -214,8 +217,15 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
     return fail(fmt::format("the record has no {} statistics", ToString(model_->sensor())));
   }
   const TablePose& p = record.pose;
-  if (!std::isfinite(p.phi_rad) || !std::isfinite(p.gamma_rad) || !std::isfinite(p.psi_rad)) {
-    return fail("the record's table angles are not finite");
+  if (!std::isfinite(p.phi_rad) || !std::isfinite(p.gamma_rad) || !std::isfinite(p.psi_rad) ||
+      !std::isfinite(p.rate_radps)) {
+    return fail("the record's table angles or rate are not finite");
+  }
+  if (p.is_rate() && model_->sensor() != SensorKind::kGyroscope) {
+    return fail(
+        fmt::format("a rate segment is not a stationary pose for the {} (only a gyroscope "
+                    "model uses it)",
+                    ToString(model_->sensor())));
   }
   if (!triad->mean.allFinite() || !triad->covariance.allFinite() ||
       (triad->mean_covariance && !triad->mean_covariance->allFinite())) {
@@ -274,9 +284,33 @@ bool Calibrator::StartFromLinearForm(Eigen::VectorXd* theta, std::string* error)
     poses.push_back(p.weighted.pose);
     measured.push_back(p.weighted.measured);
   }
+  if (model_->sensor() == SensorKind::kGyroscope) return StartGyro(poses, measured, theta, error);
   LinearStart start;
   if (!SolveLinearStart(poses, measured, model_->excitation_ned(), &start, error)) return false;
   return model_->FromLinear(start.G, start.beta, start.b, theta, error);
+}
+
+bool Calibrator::StartGyro(const std::vector<TablePose>& poses,
+                           const std::vector<Eigen::Vector3d>& measured, Eigen::VectorXd* theta,
+                           std::string* error) const {
+  const Eigen::Vector3d f_ned = SpecificForceNed(options_.context.reference);
+  std::vector<Eigen::Vector3d> omega_q, f_q;
+  for (const auto& pose : poses) {
+    const Mat3<double> C = pose.MeanC_p_q();
+    omega_q.push_back(C * model_->excitation_ned() + pose.TableRate_q());
+    f_q.push_back(C * f_ned);
+  }
+  const int first_g = model_->index_of("Bg_xx");
+  GyroLinearStart start;
+  if (!SolveGyroLinearStart(omega_q, f_q, measured, first_g >= 0, options_.context.mounting, &start,
+                            error)) {
+    return false;
+  }
+  if (!model_->FromLinear(start.G, 0.0, start.b, theta, error)) return false;
+  if (first_g >= 0) {
+    for (int k = 0; k < 9; ++k) (*theta)[first_g + k] = start.B(k / 3, k % 3);
+  }
+  return true;
 }
 
 bool Calibrator::BuildBlocks(std::string* error) {

@@ -186,6 +186,8 @@ class Calibrator {
   // The drift scale the poses and `est` (a solve) give, with options_.drift as the prior.
   DriftScale IdentifyDrift(const Estimate& est) const;
   bool StartFromLinearForm(Eigen::VectorXd* theta, std::string* error) const;
+  bool StartGyro(const std::vector<TablePose>& poses, const std::vector<Eigen::Vector3d>& measured,
+                 Eigen::VectorXd* theta, std::string* error) const;
 
   // The residual blocks the solver sees: each pose's own (no drift), or each pose's whitened
   // innovation (drift; rebuilt for every solve, order_ gives the poses' time order).

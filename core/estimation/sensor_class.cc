@@ -21,8 +21,11 @@ SensorClass IndustrialClass() {
   c.mag_hard_iron_sigma = 0.05;
   c.mag_soft_iron_sigma = 0.02;
   c.rate_hz = 500;
-  c.gyr_noise_density = 0.01 * kRadPerDeg;  // MTi-300: 0.01 deg/s/sqrt(Hz)
-  c.gyr_turn_on_bias = 0.2 * kRadPerDeg;    // 0.05-0.5 deg/s
+  c.gyr_noise_density = 0.01 * kRadPerDeg;          // MTi-300: 0.01 deg/s/sqrt(Hz)
+  c.gyr_turn_on_bias = 0.2 * kRadPerDeg;            // 0.05-0.5 deg/s
+  c.gyr_bias_instability = 10 * kRadPerDeg / 3600;  // MTi-300: 10 deg/h
+  c.gyr_scale_sigma = 500e-6;
+  c.gyr_g_sensitivity = 0.003 * kRadPerDeg / 9.80665;  // MTi-300: 0.003 deg/s/g
   return c;
 }
 
@@ -39,11 +42,14 @@ SensorClass ConsumerClass() {
   c.mag_hard_iron_sigma = 0.1;
   c.mag_soft_iron_sigma = 0.03;
   c.rate_hz = 100;
-  c.gyr_noise_density = 0.05 * kRadPerDeg;  // 0.05-0.1 deg/s/sqrt(Hz)
-  c.gyr_turn_on_bias = 0.7 * kRadPerDeg;    // 0.5-1 deg/s
-  c.acc_quantum = 0.15e-3 * 9.80665;        // 16 bits over +-5 g (SENSORS.md)
-  c.gyr_quantum = 0.0092 * kRadPerDeg;      // 16 bits over +-300 deg/s
-  c.mag_quantum = 2.4 / 65536;              // 16 bits over +-1.2 G
+  c.gyr_noise_density = 0.05 * kRadPerDeg;          // 0.05-0.1 deg/s/sqrt(Hz)
+  c.gyr_turn_on_bias = 0.7 * kRadPerDeg;            // 0.5-1 deg/s
+  c.gyr_bias_instability = 50 * kRadPerDeg / 3600;  // ~50 deg/h
+  c.gyr_scale_sigma = 3e-3;
+  c.gyr_g_sensitivity = 0.1 * kRadPerDeg / 9.80665;  // not specified (SENSORS.md); 0.1 deg/s/g
+  c.acc_quantum = 0.15e-3 * 9.80665;                 // 16 bits over +-5 g (SENSORS.md)
+  c.gyr_quantum = 0.0092 * kRadPerDeg;               // 16 bits over +-300 deg/s
+  c.mag_quantum = 2.4 / 65536;                       // 16 bits over +-1.2 G
   return c;
 }
 
@@ -63,18 +69,40 @@ CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorCla
   CalibratorOptions o;
   o.model = model.name();
   o.context = model.context();
-  const bool accel = model.sensor() == SensorKind::kAccelerometer;
-  o.pose_offset_sigma = accel ? sensor.acc_bias_instability : sensor.mag_bias_instability;
-  o.noise_density = accel ? sensor.acc_noise_density : 0.0;
+  switch (model.sensor()) {
+    case SensorKind::kAccelerometer:
+      o.pose_offset_sigma = sensor.acc_bias_instability;
+      o.noise_density = sensor.acc_noise_density;
+      break;
+    case SensorKind::kMagnetometer:
+      o.pose_offset_sigma = sensor.mag_bias_instability;
+      o.noise_density = 0.0;
+      break;
+    case SensorKind::kGyroscope:
+      o.pose_offset_sigma = sensor.gyr_bias_instability;
+      o.noise_density = sensor.gyr_noise_density;
+      break;
+  }
   return o;
 }
 
-BiasDrift DriftForClass(const SensorClass& sensor, bool accel) {
+BiasDrift DriftForClass(const SensorClass& sensor, SensorKind kind) {
   BiasDrift d;
-  d.gm_sigma =
-      Eigen::Vector3d::Constant(accel ? sensor.acc_bias_instability : sensor.mag_bias_instability);
+  double instability = 0.0, random_walk = 0.0;
+  switch (kind) {
+    case SensorKind::kAccelerometer:
+      instability = sensor.acc_bias_instability, random_walk = sensor.acc_random_walk;
+      break;
+    case SensorKind::kMagnetometer:
+      instability = sensor.mag_bias_instability, random_walk = sensor.mag_random_walk;
+      break;
+    case SensorKind::kGyroscope:
+      instability = sensor.gyr_bias_instability, random_walk = sensor.gyr_random_walk;
+      break;
+  }
+  d.gm_sigma = Eigen::Vector3d::Constant(instability);
   d.gm_tau_s = sensor.bias_tau_s;
-  d.rw_density = Eigen::Vector3d::Constant(accel ? sensor.acc_random_walk : sensor.mag_random_walk);
+  d.rw_density = Eigen::Vector3d::Constant(random_walk);
   d.warmup_sigma = d.gm_sigma * sensor.warmup_in_instabilities;
   d.warmup_tau_s = sensor.warmup_tau_s;
   return d;
@@ -82,7 +110,7 @@ BiasDrift DriftForClass(const SensorClass& sensor, bool accel) {
 
 CalibratorOptions DriftOptionsForClass(const MeasurementModel& model, const SensorClass& sensor) {
   CalibratorOptions o = OptionsForClass(model, sensor);
-  o.drift = DriftForClass(sensor, model.sensor() == SensorKind::kAccelerometer);
+  o.drift = DriftForClass(sensor, model.sensor());
   o.pose_offset_sigma = 0.0;
   return o;
 }
@@ -91,9 +119,18 @@ Eigen::Matrix3d ExpectedPoseSqrtInformation(const MeasurementModel& model,
                                             const SensorClass& sensor,
                                             const CalibratorOptions& options, double dwell_s,
                                             double rate_hz) {
-  const bool accel = model.sensor() == SensorKind::kAccelerometer;
-  const double white = accel ? sensor.acc_noise_density * sensor.acc_noise_density / (2 * dwell_s)
-                             : sensor.mag_noise_rms * sensor.mag_noise_rms / (rate_hz * dwell_s);
+  double white = 0.0;
+  switch (model.sensor()) {
+    case SensorKind::kAccelerometer:
+      white = sensor.acc_noise_density * sensor.acc_noise_density / (2 * dwell_s);
+      break;
+    case SensorKind::kMagnetometer:
+      white = sensor.mag_noise_rms * sensor.mag_noise_rms / (rate_hz * dwell_s);
+      break;
+    case SensorKind::kGyroscope:
+      white = sensor.gyr_noise_density * sensor.gyr_noise_density / (2 * dwell_s);
+      break;
+  }
   const double var = white + options.pose_offset_sigma * options.pose_offset_sigma;
   return Eigen::Matrix3d::Identity() / std::sqrt(var);
 }

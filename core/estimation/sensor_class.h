@@ -36,9 +36,13 @@ struct SensorClass {
   // prior measured on the sensor may have one ([station] acc_random_walk, mag_random_walk).
   double acc_random_walk = 0.0;
   double mag_random_walk = 0.0;
-  // Gyroscope (for the byte-level simulator; not calibrated here), rad/s.
-  double gyr_noise_density = 0.0;  // per sqrt(Hz)
-  double gyr_turn_on_bias = 0.0;   // 1 sigma
+  // Gyroscope, rad/s.
+  double gyr_noise_density = 0.0;     // per sqrt(Hz)
+  double gyr_turn_on_bias = 0.0;      // 1 sigma
+  double gyr_bias_instability = 0.0;  // 1 sigma of the Gauss-Markov wander (tau bias_tau_s)
+  double gyr_scale_sigma = 0.0;       // 1 sigma relative (the misalignment: misalignment_sigma_rad)
+  double gyr_g_sensitivity = 0.0;     // 1 sigma of each B_g entry, rad/s per m/s^2
+  double gyr_random_walk = 0.0;       // bias random walk, rad/s/sqrt(s)
   // Quantisation steps of a 16-bit ADC (0 = floats on the wire, no quantisation).
   double acc_quantum = 0.0;  // m/s^2
   double gyr_quantum = 0.0;  // rad/s
@@ -52,12 +56,13 @@ SensorClass ConsumerClass();
 bool SensorClassByName(const std::string& name, SensorClass* out);
 
 // Calibrator options matching the class's noise for `model` (the pose-to-pose offset and the
-// white-noise density of the triad the model uses).
+// white-noise density of the triad the model uses: the accelerometer's and gyroscope's densities;
+// the magnetometer's per-sample noise has no density floor).
 CalibratorOptions OptionsForClass(const MeasurementModel& model, const SensorClass& sensor);
 
-// The class's bias drift of the accelerometer (accel) or the magnetometer: Gauss-Markov sigma =
-// its bias instability with tau = bias_tau_s, its random walk, and the warm-up allowance.
-BiasDrift DriftForClass(const SensorClass& sensor, bool accel);
+// The class's bias drift of one triad: Gauss-Markov sigma = its bias instability with tau =
+// bias_tau_s, its random walk, and the warm-up allowance.
+BiasDrift DriftForClass(const SensorClass& sensor, SensorKind kind);
 
 // The same with the bias instability as a Gauss-Markov process in time (DriftForClass) instead of
 // an independent offset per pose: what the station uses, for records that carry their time

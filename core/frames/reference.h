@@ -16,6 +16,10 @@ struct ReferenceVectors {
   // Earth magnetic field in the local level frame, Gauss (seed eq. 22). Any unit works as long as
   // the magnetometer's G absorbs the ratio to the device's unit.
   Eigen::Vector3d B_ned{0.2523, 0.0217, 0.4004};
+  // The lab's geodetic latitude, degrees north: the Earth's rate in NED (EarthRateNed), which a
+  // gyroscope at rest measures. 45 unless configured ([reference] latitude_deg); the Earth's 15
+  // deg/h split between north and down depends on it.
+  double latitude_deg = 45.0;
 
   // False with a message when a vector is not finite or is (near) zero.
   bool IsValid(std::string* error) const;
@@ -24,5 +28,12 @@ struct ReferenceVectors {
 // The accelerometer's excitation: an accelerometer at rest measures specific force f = -g
 // (MODELS.md "Sign of the accelerometer's excitation"). This is the one place the sign lives.
 inline Eigen::Vector3d SpecificForceNed(const ReferenceVectors& ref) { return -ref.g_ned; }
+
+// The Earth's sidereal rotation rate, rad/s (WGS 84).
+inline constexpr double kEarthRate_radps = 7.292115e-5;
+
+// The Earth's rate in the local level frame NED at the reference's latitude: Omega [cos L, 0,
+// -sin L] (the rate vector points north and up). A gyroscope's excitation at rest.
+Eigen::Vector3d EarthRateNed(const ReferenceVectors& ref);
 
 }  // namespace turncal

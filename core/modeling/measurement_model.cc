@@ -23,7 +23,15 @@ static const std::vector<Entry>& All() {
 }  // namespace model_registry
 
 const char* ToString(SensorKind kind) {
-  return kind == SensorKind::kAccelerometer ? "accelerometer" : "magnetometer";
+  switch (kind) {
+    case SensorKind::kAccelerometer:
+      return "accelerometer";
+    case SensorKind::kMagnetometer:
+      return "magnetometer";
+    case SensorKind::kGyroscope:
+      return "gyroscope";
+  }
+  return "?";
 }
 
 const char* ToString(OutputFrame frame) { return frame == OutputFrame::kCase ? "case" : "table"; }

@@ -24,7 +24,7 @@ class CostFunction;
 
 namespace turncal {
 
-enum class SensorKind { kAccelerometer, kMagnetometer };
+enum class SensorKind { kAccelerometer, kMagnetometer, kGyroscope };
 
 // Frame of corrected live output: the orthogonal case frame r, or the table's inner frame q.
 enum class OutputFrame { kCase, kTable };
@@ -63,7 +63,8 @@ class MeasurementModel {
   Eigen::VectorXd nominal() const;
 
   // The known excitation v in NED: specific force f = -g for accelerometers, B_NED for
-  // magnetometers.
+  // magnetometers, the Earth's rate for gyroscopes (which also see the table's rate and, through
+  // their g-sensitivity, the specific force: TablePose::TableRate_q, SpecificForceNed).
   virtual Eigen::Vector3d excitation_ned() const = 0;
 
   // Expected stationary measurement at `pose`. theta must have num_parameters() entries.
@@ -83,6 +84,10 @@ class MeasurementModel {
   // sensor matrix inverted, giving the specific force or field in corrected_frame().
   virtual Eigen::Vector3d Correct(const Eigen::VectorXd& theta,
                                   const Eigen::Vector3d& raw) const = 0;
+  // The same with the specific force in the table frame q at the sample, which a gyroscope's
+  // g-sensitivity needs (gyro21); the other models ignore it, and Correct() passes zero.
+  virtual Eigen::Vector3d CorrectWithForce(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw,
+                                           const Eigen::Vector3d& f_q) const = 0;
   virtual OutputFrame corrected_frame() const = 0;
 
   // Parameters from the linear form's solution y = G C_p^q R3(beta) v + b (MODELS.md "The linear

@@ -10,6 +10,14 @@
 //                          const ModelContext&);
 //   static Eigen::Vector3d Correct(const double* theta, const Eigen::Vector3d& raw,
 //                                  const ModelContext&);
+// A gyroscope's definition (kSensor == kGyroscope) provides instead
+//   template <typename T>
+//   static Vec3<T> PredictRate(const T* theta, const Vec3<T>& omega_q, const Vec3<T>& f_q,
+//                              const ModelContext&);
+//   static Eigen::Vector3d Correct(const double* theta, const Eigen::Vector3d& raw,
+//                                  const Eigen::Vector3d& f_q, const ModelContext&);
+// and sees, for a pose, omega_q = MeanC_p_q() (Earth's rate in NED) + TableRate_q() and
+// f_q = MeanC_p_q() f_NED (the means over a rate segment's whole revolutions).
 //   static OutputFrame CorrectedFrame(const ModelContext&);
 //   static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
 //                          const ModelContext&, double* theta, std::string* error);
@@ -33,13 +41,14 @@ class ModelAdapter final : public MeasurementModel {
  public:
   static constexpr int N = Def::kNumParams;
 
+  static constexpr bool kGyro = Def::kSensor == SensorKind::kGyroscope;
+
   explicit ModelAdapter(const ModelContext& context)
       : context_(context),
         name_(Def::kName),
         parameters_(Def::Parameters(context)),
-        excitation_ned_(Def::kSensor == SensorKind::kAccelerometer
-                            ? SpecificForceNed(context.reference)
-                            : context.reference.B_ned) {
+        excitation_ned_(Excitation(context)),
+        f_ned_(SpecificForceNed(context.reference)) {
     assert(static_cast<int>(parameters_.size()) == N);
   }
 
@@ -51,7 +60,7 @@ class ModelAdapter final : public MeasurementModel {
 
   Eigen::Vector3d Predict(const Eigen::VectorXd& theta, const TablePose& pose) const override {
     assert(theta.size() == N);
-    return Def::template Predict<double>(theta.data(), pose.C_p_q(), excitation_ned_, context_);
+    return Stimulus::Of(pose, *this).template Predict<double>(theta.data(), context_);
   }
 
   Eigen::Vector3d Predict(const Eigen::VectorXd& theta, const TablePose& pose,
@@ -61,8 +70,7 @@ class ModelAdapter final : public MeasurementModel {
     using Jet = ceres::Jet<double, N>;
     Jet theta_jet[N];
     for (int i = 0; i < N; ++i) theta_jet[i] = Jet(theta[i], i);
-    const Vec3<Jet> y = Def::template Predict<Jet>(theta_jet, pose.C_p_q().template cast<Jet>(),
-                                                   excitation_ned_.cast<Jet>(), context_);
+    const Vec3<Jet> y = Stimulus::Of(pose, *this).template Predict<Jet>(theta_jet, context_);
     jacobian->resize(3, N);
     Eigen::Vector3d value;
     for (int r = 0; r < 3; ++r) {
@@ -76,12 +84,20 @@ class ModelAdapter final : public MeasurementModel {
       const TablePose& pose, const Eigen::Vector3d& measured,
       const Eigen::Matrix3d& sqrt_information) const override {
     return std::make_unique<ceres::AutoDiffCostFunction<Residual, 3, N>>(
-        new Residual{pose.C_p_q(), measured, sqrt_information, excitation_ned_, &context_});
+        new Residual{Stimulus::Of(pose, *this), measured, sqrt_information, &context_});
   }
 
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
+    return CorrectWithForce(theta, raw, Eigen::Vector3d::Zero());
+  }
+  Eigen::Vector3d CorrectWithForce(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw,
+                                   const Eigen::Vector3d& f_q) const override {
     assert(theta.size() == N);
-    return Def::Correct(theta.data(), raw, context_);
+    if constexpr (kGyro) {
+      return Def::Correct(theta.data(), raw, f_q, context_);
+    } else {
+      return Def::Correct(theta.data(), raw, context_);
+    }
   }
   OutputFrame corrected_frame() const override { return Def::CorrectedFrame(context_); }
 
@@ -117,18 +133,58 @@ class ModelAdapter final : public MeasurementModel {
   }
 
  private:
+  static Eigen::Vector3d Excitation(const ModelContext& context) {
+    switch (Def::kSensor) {
+      case SensorKind::kAccelerometer:
+        return SpecificForceNed(context.reference);
+      case SensorKind::kMagnetometer:
+        return context.reference.B_ned;
+      case SensorKind::kGyroscope:
+        return EarthRateNed(context.reference);
+    }
+    return Eigen::Vector3d::Zero();
+  }
+
+  // What a pose excites: C_p^q and v_NED for an accelerometer or magnetometer; the inertial rate
+  // and the specific force in q for a gyroscope.
+  struct Stimulus {
+    Mat3<double> C_p_q;
+    Eigen::Vector3d v_ned;
+    Eigen::Vector3d omega_q, f_q;
+
+    static Stimulus Of(const TablePose& pose, const ModelAdapter& m) {
+      Stimulus s;
+      if constexpr (kGyro) {
+        const Mat3<double> C = pose.MeanC_p_q();
+        s.omega_q = C * m.excitation_ned_ + pose.TableRate_q();
+        s.f_q = C * m.f_ned_;
+      } else {
+        s.C_p_q = pose.C_p_q();
+        s.v_ned = m.excitation_ned_;
+      }
+      return s;
+    }
+    template <typename T>
+    Vec3<T> Predict(const T* theta, const ModelContext& context) const {
+      if constexpr (kGyro) {
+        return Def::template PredictRate<T>(theta, omega_q.cast<T>(), f_q.cast<T>(), context);
+      } else {
+        return Def::template Predict<T>(theta, C_p_q.cast<T>(), v_ned.cast<T>(), context);
+      }
+    }
+  };
+
   // The residual functor keeps a pointer to the model's context: a cost function must not outlive
   // the model that made it.
   struct Residual {
-    Mat3<double> C_p_q;
+    Stimulus stimulus;
     Eigen::Vector3d measured;
     Eigen::Matrix3d sqrt_information;
-    Eigen::Vector3d v_ned;
     const ModelContext* context;
 
     template <typename T>
     bool operator()(const T* theta, T* residual) const {
-      const Vec3<T> y = Def::template Predict<T>(theta, C_p_q.cast<T>(), v_ned.cast<T>(), *context);
+      const Vec3<T> y = stimulus.template Predict<T>(theta, *context);
       Eigen::Map<Vec3<T>> r(residual);
       r = sqrt_information.cast<T>() * (y - measured.cast<T>());
       return true;
@@ -139,12 +195,14 @@ class ModelAdapter final : public MeasurementModel {
   std::string name_;
   std::vector<ParameterInfo> parameters_;
   Eigen::Vector3d excitation_ned_;
+  Eigen::Vector3d f_ned_;  // the specific force, which a gyroscope's g-sensitivity sees
 };
 
 }  // namespace turncal
 
 // Registers model definition `Def` from the file core/models/<stem>.cc. The registry
-// (core/modeling/measurement_model.cc) calls one function per file, generated by CMake from the file names.
+// (core/modeling/measurement_model.cc) calls one function per file, generated by CMake from the
+// file names.
 #define TURNCAL_REGISTER_MODEL(stem, Def)                                                    \
   namespace turncal::model_registry {                                                        \
   Entry Entry_##stem() {                                                                     \

@@ -30,6 +30,10 @@ const char* ToString(ParameterUnit unit) {
       return "field";
     case ParameterUnit::kGain:
       return "1";
+    case ParameterUnit::kAngularRate:
+      return "rad/s";
+    case ParameterUnit::kGSensitivity:
+      return "rad/s/(m/s^2)";
   }
   return "?";
 }
@@ -48,6 +52,10 @@ DisplayQuantity ForDisplay(const ParameterInfo& p, double v, bool is_sigma) {
       return {v * 1e3, "mG"};
     case ParameterUnit::kGain:
       return {v, ""};
+    case ParameterUnit::kAngularRate:
+      return {v * 180 / M_PI * 3600, "deg/h"};
+    case ParameterUnit::kGSensitivity:
+      return {v * 180 / M_PI * 3600 * 9.80665, "deg/h/g"};
   }
   return {v, ""};
 }

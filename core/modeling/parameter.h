@@ -19,6 +19,8 @@ enum class ParameterUnit {
   kAcceleration,  // m/s^2; reports use mg
   kField,         // the magnetometer's unit (Gauss for MicroStrain, arbitrary for Xsens)
   kGain,          // dimensionless matrix entry (G, K)
+  kAngularRate,   // rad/s; reports use deg/h
+  kGSensitivity,  // rad/s per m/s^2 (a gyroscope's response to specific force); reports deg/h/g
 };
 
 struct ParameterInfo {
@@ -33,7 +35,8 @@ const char* ToString(ParameterUnit unit);
 
 // A value in the unit a test engineer reads: ppm for scale factors, degrees for angles (alpha3
 // as its deviation from 90 degrees), mg for accelerations, mG for fields (the magnetometer's unit
-// taken as Gauss). Sigmas are shown without alpha3's offset.
+// taken as Gauss), deg/h for angular rates and deg/h/g for g-sensitivity. Sigmas are shown without
+// alpha3's offset.
 struct DisplayQuantity {
   double value = 0.0;
   const char* unit = "";
