@@ -344,9 +344,14 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
     st.gate_tolerances_set = true;
   }
   if (const toml::table* t = root["reference"].as_table()) {
-    if (!OnlyKeys(*t, {"g_ned", "B_ned"}, "[reference]", source, error) ||
+    if (!OnlyKeys(*t, {"g_ned", "B_ned", "latitude_deg"}, "[reference]", source, error) ||
         !GetVector(*t, "g_ned", &st.context.reference.g_ned, source, error) ||
-        !GetVector(*t, "B_ned", &st.context.reference.B_ned, source, error)) {
+        !GetVector(*t, "B_ned", &st.context.reference.B_ned, source, error) ||
+        !GetNumber(*t, "latitude_deg", &st.context.reference.latitude_deg, source, error)) {
+      return false;
+    }
+    if (std::string why; !st.context.reference.IsValid(&why)) {
+      *error = fmt::format("{}: [reference]: {}", source, why);
       return false;
     }
   }

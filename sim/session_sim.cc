@@ -33,6 +33,29 @@ std::vector<TablePose> DefaultSessionPoses() {
   return poses;
 }
 
+std::vector<TablePose> DefaultRateSegments(double rate_dps, bool two_rates) {
+  std::vector<TablePose> out;
+  std::vector<double> rates{rate_dps, -rate_dps};
+  if (two_rates) rates.insert(rates.end(), {rate_dps / 3, -rate_dps / 3});
+  const struct {
+    TableAxis axis;
+    double gamma_deg;
+  } plan[] = {{TableAxis::kInner, 0},
+              {TableAxis::kMiddle, 0},
+              {TableAxis::kOuter, 0},
+              {TableAxis::kOuter, 90}};
+  for (double r : rates) {
+    for (const auto& p : plan) {
+      TablePose pose;
+      pose.gamma_rad = p.axis == TableAxis::kMiddle ? 0.0 : p.gamma_deg * M_PI / 180;
+      pose.rate_axis = p.axis;
+      pose.rate_radps = r * M_PI / 180;
+      out.push_back(pose);
+    }
+  }
+  return out;
+}
+
 namespace {
 
 // Smooth step 0 -> 1 over [0, 1] with zero rate at both ends: (1 - cos(pi s)) / 2.
@@ -60,11 +83,56 @@ Eigen::Vector3d BodyRate(const Angles& a) {
 
 double Quantise(double v, double q) { return q > 0 ? q * std::round(v / q) : v; }
 
+// The index in (phi, gamma, psi) of a rate segment's rotating axis; -1 for a static pose.
+int SpinIndex(TableAxis axis) {
+  switch (axis) {
+    case TableAxis::kNone:
+      return -1;
+    case TableAxis::kInner:
+      return 0;
+    case TableAxis::kMiddle:
+      return 1;
+    case TableAxis::kOuter:
+      return 2;
+  }
+  return -1;
+}
+
+// A piece of the schedule: resting at `to`, moving from `from` to `to`, or (spin >= 0) turning one
+// axis at a rate: an S-curve spin-up over up_s, the rate with a sinusoidal ripple for hold_s, and
+// an S-curve spin-down over up_s.
+struct Segment {
+  double t0, t1;
+  Eigen::Vector3d from, to;
+  bool moving;
+  int spin = -1;
+  double rate = 0.0, up_s = 0.0, hold_s = 0.0, ripple = 0.0, ripple_hz = 0.0;
+
+  // The rotating axis's angle and rate `since` seconds after t0.
+  std::pair<double, double> AngleRate(double since) const {
+    const double a0 = from[spin];
+    // Integral of SCurve over [0, u]: u/2 - sin(pi u) / (2 pi).
+    const auto ramp = [](double u) { return u / 2 - std::sin(M_PI * u) / (2 * M_PI); };
+    if (since < up_s) {
+      const double u = since / up_s;
+      return {a0 + rate * up_s * ramp(u), rate * SCurve(u)};
+    }
+    const double up_angle = a0 + rate * up_s * ramp(1.0);
+    const double w = 2 * M_PI * ripple_hz;
+    const double tau = std::min(since - up_s, hold_s);
+    const double hold_angle = up_angle + rate * (tau + ripple * (1 - std::cos(w * tau)) / w);
+    if (since - up_s < hold_s) return {hold_angle, rate * (1 + ripple * std::sin(w * tau))};
+    const double u = std::min((since - up_s - hold_s) / up_s, 1.0);
+    return {hold_angle + rate * up_s * (u - ramp(u)), rate * (1 - SCurve(u))};
+  }
+};
+
 }  // namespace
 
 SimulatedSession SimulateSession(const MeasurementModel& accel_model,
                                  const MeasurementModel& mag_model,
-                                 const std::vector<TablePose>& poses, const SessionSimOptions& o) {
+                                 const std::vector<TablePose>& poses, const SessionSimOptions& o,
+                                 const MeasurementModel* gyro_model) {
   SimulatedSession out;
   std::mt19937_64 rng(o.seed);
   std::normal_distribution<double> normal(0.0, 1.0);
@@ -72,13 +140,11 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   out.accel_truth = DrawTruth(accel_model, c, &rng);
   out.mag_truth = DrawTruth(mag_model, c, &rng);
   for (int i = 0; i < 3; ++i) out.gyro_bias_radps[i] = c.gyr_turn_on_bias * normal(rng);
+  if (gyro_model) {
+    out.gyro_truth = DrawTruth(*gyro_model, c, &rng);
+    out.gyro_bias_radps = out.gyro_truth.segment<3>(gyro_model->index_of("bx"));
+  }
 
-  // The schedule: segments of (start, end, from, to, kind).
-  struct Segment {
-    double t0, t1;
-    Eigen::Vector3d from, to;
-    bool moving;
-  };
   std::vector<Segment> segments;
   double t = 0;
   Eigen::Vector3d at = Eigen::Vector3d::Zero();
@@ -86,24 +152,53 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   t += o.start_s;
   const double settle_s = o.table ? o.table->settle_s : o.settle_s;
   for (std::size_t i = 0; i < poses.size(); ++i) {
-    Eigen::Vector3d target = Vec(poses[i]);
+    TablePose goal = poses[i];
+    const int spin = SpinIndex(goal.rate_axis);
+    if (spin >= 0) {
+      // The rotating axis stays where it is while the others move to their angles.
+      (spin == 0 ? goal.phi_rad : spin == 1 ? goal.gamma_rad : goal.psi_rad) = at[spin];
+    }
+    Eigen::Vector3d target = Vec(goal);
     double move_s = o.move_s;
     if (o.table) {
       const TablePose from{at[0], at[1], at[2]};
-      target = at + o.table->Travel(from, poses[i]);
-      move_s = std::max(o.table->MoveSeconds(from, poses[i]), 0.1);
+      target = at + o.table->Travel(from, goal);
+      move_s = std::max(o.table->MoveSeconds(from, goal), 0.1);
     }
     segments.push_back({t, t + move_s, at, target, true});
     t += move_s;
-    segments.push_back({t, t + settle_s + o.dwell_s, target, target, false});
     SessionPoseEvent e;
-    e.t_s = t + settle_s;
     e.index = static_cast<int>(i);
     e.pose = poses[i];
-    e.dwell_end_s = t + settle_s + o.dwell_s;
+    if (spin < 0) {
+      segments.push_back({t, t + settle_s + o.dwell_s, target, target, false});
+      e.t_s = t + settle_s;
+      e.dwell_end_s = t + settle_s + o.dwell_s;
+      out.events.push_back(e);
+      t += settle_s + o.dwell_s;
+      at = target;
+      continue;
+    }
+    segments.push_back({t, t + settle_s, target, target, false});
+    t += settle_s;
+    const double rate = goal.rate_radps;
+    const double turn_s = 2 * M_PI / std::abs(rate);
+    e.revolutions_s = std::max(1.0, std::ceil(o.dwell_s / turn_s)) * turn_s;
+    Segment sp{t, 0.0, target, target, false};
+    sp.spin = spin;
+    sp.rate = rate;
+    sp.up_s = o.spin_s;
+    sp.hold_s = o.rate_settle_s + e.revolutions_s + 1.0;
+    sp.ripple = o.rate_ripple;
+    sp.ripple_hz = o.ripple_hz;
+    sp.t1 = t + 2 * sp.up_s + sp.hold_s;
+    sp.to[spin] = sp.AngleRate(sp.t1 - sp.t0).first;
+    segments.push_back(sp);
+    e.t_s = t + sp.up_s + o.rate_settle_s;
+    e.dwell_end_s = e.t_s + e.revolutions_s;
     out.events.push_back(e);
-    t += settle_s + o.dwell_s;
-    at = target;
+    t = sp.t1;
+    at = sp.to;
   }
   out.duration_s = t;
 
@@ -113,10 +208,17 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   const double white_mag = c.mag_noise_rms;
   const double phi = std::exp(-dt / c.bias_tau_s);
   const double drive = std::sqrt(1.0 - phi * phi);
-  Eigen::Vector3d wander_acc, wander_mag;
+  Eigen::Vector3d wander_acc, wander_mag, wander_gyr = Eigen::Vector3d::Zero();
   for (int i = 0; i < 3; ++i) {
     wander_acc[i] = c.acc_bias_instability * normal(rng);
     wander_mag[i] = c.mag_bias_instability * normal(rng);
+  }
+  Eigen::Vector3d walk_gyr = Eigen::Vector3d::Zero();
+  const double walk_gyr_step = o.gyr_random_walk * std::sqrt(dt);
+  const Eigen::Vector3d earth_ned = EarthRateNed(accel_model.context().reference);
+  const Eigen::Vector3d f_ned = SpecificForceNed(accel_model.context().reference);
+  if (gyro_model) {
+    for (int i = 0; i < 3; ++i) wander_gyr[i] = c.gyr_bias_instability * normal(rng);
   }
   // Random walk and warm-up (drawn only when asked for, so that sessions without them keep the
   // random stream, and the bytes, they had).
@@ -132,6 +234,7 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   out.samples.reserve(n);
   out.acc_drift_sum.assign(1, Eigen::Vector3d::Zero());
   out.mag_drift_sum.assign(1, Eigen::Vector3d::Zero());
+  if (gyro_model) out.gyr_drift_sum.assign(1, Eigen::Vector3d::Zero());
   out.acc_drift_sum.reserve(n + 1);
   out.mag_drift_sum.reserve(n + 1);
   std::size_t seg = 0;
@@ -140,7 +243,12 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     while (seg + 1 < segments.size() && tk >= segments[seg].t1) ++seg;
     const Segment& s = segments[seg];
     Angles a;
-    if (s.moving) {
+    if (s.spin >= 0) {
+      a.value = s.from;
+      const auto [angle, rate] = s.AngleRate(tk - s.t0);
+      a.value[s.spin] = angle;
+      a.rate[s.spin] = rate;
+    } else if (s.moving) {
       const double u = (tk - s.t0) / (s.t1 - s.t0);
       a.value = s.from + (s.to - s.from) * SCurve(u);
       a.rate = (s.to - s.from) * SCurveRate(u) / (s.t1 - s.t0);
@@ -170,13 +278,28 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     const Eigen::Vector3d drift_mag = wander_mag + walk_mag + settle * warm_mag;
     out.acc_drift_sum.push_back(out.acc_drift_sum.back() + drift_acc);
     out.mag_drift_sum.push_back(out.mag_drift_sum.back() + drift_mag);
+    Eigen::Vector3d gyr;
+    if (gyro_model) {
+      for (int i = 0; i < 3; ++i) {
+        wander_gyr[i] = phi * wander_gyr[i] + drive * c.gyr_bias_instability * normal(rng);
+        if (walk_gyr_step > 0) walk_gyr[i] += walk_gyr_step * normal(rng);
+      }
+      const Eigen::Vector3d drift_gyr = wander_gyr + walk_gyr;
+      out.gyr_drift_sum.push_back(out.gyr_drift_sum.back() + drift_gyr);
+      // The instantaneous inertial rate and specific force in q (the table at its centre: no
+      // lever arm).
+      const Mat3<double> C = pose.C_p_q();
+      gyr = gyro_model->PredictRate(out.gyro_truth, C * earth_ned + BodyRate(a), C * f_ned) +
+            drift_gyr;
+    } else {
+      gyr = accel_model.context().mounting * BodyRate(a) + out.gyro_bias_radps;
+    }
     Sample smp;
     smp.t_host_ns = static_cast<std::int64_t>(std::llround(tk * 1e9));
     smp.t_device_s = o.clock_offset_s + tk * (1.0 + o.clock_drift_ppm * 1e-6);
     smp.counter = static_cast<std::uint32_t>(k);
     Eigen::Vector3d acc = accel_model.Predict(out.accel_truth, pose) + drift_acc;
     Eigen::Vector3d mag = mag_model.Predict(out.mag_truth, pose) + drift_mag;
-    Eigen::Vector3d gyr = accel_model.context().mounting * BodyRate(a) + out.gyro_bias_radps;
     for (int i = 0; i < 3; ++i) {
       acc[i] = Quantise(acc[i] + white_acc * normal(rng), c.acc_quantum);
       gyr[i] = Quantise(gyr[i] + white_gyr * normal(rng), c.gyr_quantum);
@@ -207,6 +330,7 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     const double count = static_cast<double>(b - a);
     e.acc_wander_mean = (out.acc_drift_sum[b] - out.acc_drift_sum[a]) / count;
     e.mag_wander_mean = (out.mag_drift_sum[b] - out.mag_drift_sum[a]) / count;
+    if (gyro_model) e.gyr_wander_mean = (out.gyr_drift_sum[b] - out.gyr_drift_sum[a]) / count;
   }
   return out;
 }
@@ -244,6 +368,10 @@ Eigen::Vector3d SimulatedSession::MagDriftMean(double t0_s, double t1_s) const {
   return WindowMean(samples, mag_drift_sum, t0_s, t1_s);
 }
 
+Eigen::Vector3d SimulatedSession::GyrDriftMean(double t0_s, double t1_s) const {
+  return WindowMean(samples, gyr_drift_sum, t0_s, t1_s);
+}
+
 Eigen::Vector3d SimulatedSession::LastPoseAccBiasOffset() const {
   return events.empty() ? Eigen::Vector3d::Zero() : events.back().acc_wander_mean;
 }
@@ -264,14 +392,15 @@ namespace turncal {
 
 PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& event,
                        SensorKind sensor) {
-  const bool accel = sensor == SensorKind::kAccelerometer;
   TriadStats stats;
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   Eigen::Matrix3d sum2 = Eigen::Matrix3d::Zero();
   for (const auto& s : session.samples) {
     const double t = static_cast<double>(s.t_host_ns) * 1e-9;
     if (t < event.t_s || t >= event.dwell_end_s) continue;
-    const auto& v = accel ? s.acc_mps2 : s.mag;
+    const auto& v = sensor == SensorKind::kAccelerometer ? s.acc_mps2
+                    : sensor == SensorKind::kGyroscope   ? s.gyr_radps
+                                                         : s.mag;
     if (!v) continue;
     sum += *v;
     sum2 += *v * v->transpose();
@@ -285,7 +414,9 @@ PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& 
     const double n = static_cast<double>(stats.count);
     stats.mean = sum / n;
     stats.covariance = (sum2 - n * stats.mean * stats.mean.transpose()) / (n - 1);
-    (accel ? r.acc : r.mag) = stats;
+    (sensor == SensorKind::kAccelerometer ? r.acc
+     : sensor == SensorKind::kGyroscope   ? r.gyr
+                                          : r.mag) = stats;
   }
   return r;
 }

@@ -50,6 +50,16 @@ struct SessionSimOptions {
   double clock_drift_ppm = 20.0;
   double clock_offset_s = 10.0;
   double settle_amplitude_rad = 2e-4;  // of the decaying oscillation after a move
+  // Rate segments (a pose with TablePose::rate_axis set): the table spins up in spin_s with an
+  // S-curve, holds the rate with a ripple of rate_ripple (relative, at ripple_hz) for
+  // rate_settle_s and then at least dwell_s of whole revolutions (at least one) and one second
+  // more, and spins down in spin_s; the announcement is at the end of rate_settle_s.
+  double spin_s = 1.5;
+  double rate_settle_s = 0.5;
+  double rate_ripple = 1e-4;
+  double ripple_hz = 2.0;
+  // Gyro bias random walk, rad/s/sqrt(s) (0: none; only with a gyro model).
+  double gyr_random_walk = 0.0;
   std::uint64_t seed = 1;
 
   bool IsValid(std::string* error) const;
@@ -65,6 +75,10 @@ struct SessionPoseEvent {
   // turn-on bias in the truth).
   Eigen::Vector3d acc_wander_mean = Eigen::Vector3d::Zero();
   Eigen::Vector3d mag_wander_mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyr_wander_mean = Eigen::Vector3d::Zero();
+  // A rate segment: the seconds of its whole revolutions (the announcement's dwell); the hold
+  // lasts one second more.
+  double revolutions_s = 0.0;
 };
 
 struct SimulatedSession {
@@ -73,6 +87,9 @@ struct SimulatedSession {
   Eigen::VectorXd accel_truth;
   Eigen::VectorXd mag_truth;
   Eigen::Vector3d gyro_bias_radps = Eigen::Vector3d::Zero();
+  // With a gyro model: its truth (gyro_bias_radps is then its bias), and the Earth's rate and the
+  // table's rate in its output.
+  Eigen::VectorXd gyro_truth;
   double duration_s = 0.0;
 
   // The wander averaged over all the dwells (the bias a calibration that treats every pose's
@@ -88,25 +105,37 @@ struct SimulatedSession {
   // bias_window (zero when no sample falls inside).
   Eigen::Vector3d AccDriftMean(double t0_s, double t1_s) const;
   Eigen::Vector3d MagDriftMean(double t0_s, double t1_s) const;
+  Eigen::Vector3d GyrDriftMean(double t0_s, double t1_s) const;
 
   // Prefix sums of the bias departure per sample (size samples + 1), for the window means.
-  std::vector<Eigen::Vector3d> acc_drift_sum, mag_drift_sum;
+  std::vector<Eigen::Vector3d> acc_drift_sum, mag_drift_sum, gyr_drift_sum;
 };
 
-// The session for `poses` with the truths drawn from the class (DrawTruth) from the seed.
+// The session for `poses` with the truths drawn from the class (DrawTruth) from the seed. With a
+// gyro model (gyro12, gyro21) its truth is drawn after the others, the gyro sees the Earth's rate
+// (the table's heading taken as north) and, through B_g, the specific force, and its bias wanders
+// like the other triads'; without one, the gyro is the table's rate plus a turn-on bias (the
+// random stream, and so the bytes, of sessions without a gyro model are unchanged).
 SimulatedSession SimulateSession(const MeasurementModel& accel_model,
                                  const MeasurementModel& mag_model,
                                  const std::vector<TablePose>& poses,
-                                 const SessionSimOptions& options);
+                                 const SessionSimOptions& options,
+                                 const MeasurementModel* gyro_model = nullptr);
 
 // The statistics of the samples inside one pose's dwell (the ideal cut, with the simulator's
 // known times; the sequencer finds windows itself): mean, sample covariance and count of the
-// accelerometer or magnetometer triad.
+// accelerometer, magnetometer or gyroscope triad (a rate segment: its whole revolutions).
 PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& event,
                        SensorKind sensor);
 
 // The default plan: the 26 cube directions, then 10 rotations about intermediate axes (down along
 // directions between the cube's, psi varied), 36 poses in all.
 std::vector<TablePose> DefaultSessionPoses();
+
+// The default rate segments for a gyroscope (issue 21): +-rate_dps about the inner axis, the middle
+// axis (inner at 0), and the outer axis (inner and middle at 0, then the middle at 90 deg, which
+// turns the outer axis onto q's x), so that q's three axes each see both signs; with
+// `two_rates` the same again at a third of the rate, which exposes a rate-dependent scale.
+std::vector<TablePose> DefaultRateSegments(double rate_dps = 100.0, bool two_rates = true);
 
 }  // namespace turncal

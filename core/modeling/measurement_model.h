@@ -73,6 +73,11 @@ class MeasurementModel {
   virtual Eigen::Vector3d Predict(const Eigen::VectorXd& theta, const TablePose& pose,
                                   Jacobian3* jacobian) const = 0;
 
+  // A gyroscope's output for any inertial rate omega_q and specific force f_q in the table's inner
+  // frame (the simulator's instantaneous truth while the table moves); NaN for other sensors.
+  virtual Eigen::Vector3d PredictRate(const Eigen::VectorXd& theta, const Eigen::Vector3d& omega_q,
+                                      const Eigen::Vector3d& f_q) const = 0;
+
   // A Ceres residual r = sqrt_information * (Predict(theta, pose) - measured) over a single
   // parameter block of num_parameters() doubles. The caller owns the result (ceres::Problem
   // takes it over by default).

@@ -30,6 +30,7 @@
 #include <ceres/jet.h>
 
 #include <cassert>
+#include <limits>
 #include <vector>
 
 #include "core/modeling/measurement_model.h"
@@ -78,6 +79,16 @@ class ModelAdapter final : public MeasurementModel {
       jacobian->row(r) = y[r].v.transpose();
     }
     return value;
+  }
+
+  Eigen::Vector3d PredictRate(const Eigen::VectorXd& theta, const Eigen::Vector3d& omega_q,
+                              const Eigen::Vector3d& f_q) const override {
+    assert(theta.size() == N);
+    if constexpr (kGyro) {
+      return Def::template PredictRate<double>(theta.data(), omega_q, f_q, context_);
+    } else {
+      return Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+    }
   }
 
   std::unique_ptr<ceres::CostFunction> MakeResidual(
