@@ -45,7 +45,9 @@ void Sequencer::Complete(double t_s) {
   // (0.1 deg/s moves gravity's projection by 2e-3 m/s^2 per second) shows between them, beyond
   // what the white noise and the sensor's own bias wander (options' stillness.bias_drift, at the
   // scale the station identified) explain.
-  for (int t = 0; t < 3; ++t) {
+  // (A rate segment's steadiness was checked window by window, with the table's ripple allowed:
+  // core/sequencing/rate_steady.h.)
+  for (int t = 0; t < 3 && !rate_mode_; ++t) {
     const NoiseProfile& prof = detector_->profile();
     if (!prof.sigma[t] || acc_[t].count() < 4 || first_half_[t].count() < 2) continue;
     const auto n = static_cast<double>(acc_[t].count());

@@ -37,7 +37,9 @@ bool SequencerOptions::IsValid(std::string* error) const {
     return fail("the pose-check false alarm must be in (0, 1)");
   }
   if (!(progress_step > 0 && progress_step <= 1)) return fail("progress step must be in (0, 1]");
-  if (!stillness.IsValid(error) || !noise_meter.IsValid(error)) return false;
+  if (!stillness.IsValid(error) || !noise_meter.IsValid(error) || !rate_steady.IsValid(error)) {
+    return false;
+  }
   if (noise && !noise->IsValid(error)) return false;
   return true;
 }
@@ -134,11 +136,20 @@ bool Sequencer::Announce(const Announcement& a, std::string* error) {
     if (error) *error = "pose angles must be finite";
     return false;
   }
+  if (a.pose.is_rate() && !(std::abs(a.pose.rate_radps) >= 0.1 * M_PI / 180 &&
+                            std::abs(a.pose.rate_radps) <= 2000 * M_PI / 180)) {
+    if (error) *error = "a rate segment's rate must be 0.1 to 2000 deg/s in magnitude";
+    return false;
+  }
   const double t_s = static_cast<double>(a.t_host_ns) * 1e-9;
   CheckTimeout(a.t_host_ns);
   if (busy()) {
-    Reject(t_s,
-           fmt::format("superseded: pose {} was announced before this one completed", a.index));
+    std::string why =
+        fmt::format("superseded: pose {} was announced before this one completed", a.index);
+    if (rate_mode_ && rate_ && !rate_->finding().empty()) {
+      why += "; the rate was not steady: " + rate_->finding();
+    }
+    Reject(t_s, why);
   }
   index_ = a.index;
   pose_ = a.pose;
@@ -148,6 +159,16 @@ bool Sequencer::Announce(const Announcement& a, std::string* error) {
   counts_ = SampleCounts{};
   needed_ = 0;
   state_ = State::kWaiting;
+  rate_mode_ = a.pose.is_rate();
+  rate_.reset();
+  if (rate_mode_) {
+    const double turn_s = 2 * M_PI / std::abs(a.pose.rate_radps);
+    Emit(SequencerEventKind::kPoseStarted, t_s,
+         fmt::format("rate {:.3f} deg/s about the {} axis; {:.0f} revolutions of {:.2f} s",
+                     a.pose.rate_radps * 180 / M_PI, ToString(a.pose.rate_axis),
+                     std::max(1.0, std::ceil(dwell_s_ / turn_s - 1e-9)), turn_s));
+    return true;
+  }
   Emit(SequencerEventKind::kPoseStarted, t_s, fmt::format("dwell {:.2f} s", dwell_s_));
   return true;
 }
@@ -156,6 +177,12 @@ bool Sequencer::SetSchedule(std::vector<TablePose> poses, std::string* error) {
   if (poses.empty() || state_ != State::kIdle || scheduled()) {
     if (error) *error = "a schedule needs poses and an idle sequencer without one";
     return false;
+  }
+  for (const auto& p : poses) {
+    if (p.is_rate()) {
+      if (error) *error = "a schedule holds static poses only; rate segments are announced";
+      return false;
+    }
   }
   schedule_ = std::move(poses);
   next_scheduled_ = 0;
@@ -351,9 +378,15 @@ void Sequencer::Accept(StillSample s) {
     }
   }
   // Isolated outliers: a sample far from the window's median is held; if the next one is far
-  // too, both are real (the table moves) and go in; otherwise the held one is dropped.
+  // too, both are real (the table moves) and go in; otherwise the held one is dropped. In a rate
+  // segment the gyro alone decides (the other triads turn with the table).
+  const bool by_rate =
+      rate_mode_ && rate_ && (state_ == State::kWaiting || state_ == State::kCollecting);
+  const auto is_outlier = [&](const StillSample& x) {
+    return by_rate ? rate_->IsOutlier(x) : detector_->IsOutlier(x);
+  };
   if (held_) {
-    if (detector_->IsOutlier(s)) {
+    if (is_outlier(s)) {
       Feed(*held_);
       held_.reset();
       Feed(s);
@@ -364,7 +397,7 @@ void Sequencer::Accept(StillSample s) {
       held_.reset();
       Feed(s);
     }
-  } else if (detector_->IsOutlier(s)) {
+  } else if (is_outlier(s)) {
     held_ = s;
   } else {
     Feed(s);
@@ -405,6 +438,10 @@ void Sequencer::Feed(const StillSample& in) {
     last_motion_t_s_ = t_s;
   }
   const bool moving = !still && detector_->finding().kind != StillFinding::kFilling;
+  if (rate_mode_ && (state_ == State::kWaiting || state_ == State::kCollecting)) {
+    FeedRate(s);
+    return;
+  }
   switch (state_) {
     case State::kIdle:
       break;
@@ -446,6 +483,38 @@ void Sequencer::Feed(const StillSample& in) {
   }
 }
 
+void Sequencer::FeedRate(const StillSample& s) {
+  const NoiseProfile& profile = detector_->profile();
+  if (!profile.sigma[kTriadGyr]) {
+    Reject(s.t_s(), "a rate segment needs the gyro, and this device sends none");
+    return;
+  }
+  if (!rate_) {
+    rate_ = std::make_unique<RateSteadiness>(detector_->window(), *profile.sigma[kTriadGyr],
+                                             pose_.rate_radps, options_.rate_steady);
+  }
+  StillSample evicted;
+  bool has_evicted = false;
+  const bool steady = rate_->Push(s, &evicted, &has_evicted);
+  if (state_ == State::kWaiting) {
+    if (steady && has_evicted && rate_->steady_run() >= required_run_ - detector_->window() &&
+        evicted.t_host_ns > t_announce_ns_) {
+      StartCollecting(evicted);
+    }
+    return;
+  }
+  if (!steady) {
+    Reject(s.t_s(), fmt::format("the rate was not steady after {:.2f} of {:.2f} s: {}",
+                                static_cast<double>(counts_.used + counts_.bad()) / profile.rate_hz,
+                                static_cast<double>(needed_) / profile.rate_hz, rate_->finding()));
+    return;
+  }
+  if (has_evicted) {
+    Commit(evicted);
+    if (counts_.used + counts_.bad() >= needed_) Complete(s.t_s());
+  }
+}
+
 void Sequencer::StartCollecting(const StillSample& first) {
   for (auto& a : acc_) a.Reset();
   for (auto& a : first_half_) a.Reset();
@@ -454,6 +523,14 @@ void Sequencer::StartCollecting(const StillSample& first) {
   counts_ = SampleCounts{};
   needed_ = std::max<std::int64_t>(
       2, static_cast<std::int64_t>(std::ceil(dwell_s_ * detector_->profile().rate_hz - 1e-9)));
+  if (rate_mode_) {
+    // Whole revolutions at the announced rate, at least the dwell: the rotating components of
+    // gravity and the Earth's rate then average out (TablePose::MeanC_p_q).
+    const double turn_s = 2 * M_PI / std::abs(pose_.rate_radps);
+    const double turns = std::max(1.0, std::ceil(dwell_s_ / turn_s - 1e-9));
+    needed_ =
+        std::max<std::int64_t>(2, std::llround(turns * turn_s * detector_->profile().rate_hz));
+  }
   next_progress_ = static_cast<std::int64_t>(std::ceil(options_.progress_step * needed_));
   t_first_ns_ = first.t_host_ns;
   t_first_sensor_s_ = first.t_sensor_s;
@@ -473,7 +550,9 @@ void Sequencer::Commit(const StillSample& s) {
   counts_.flagged += s.flagged_before;
   counts_.outliers += s.outliers_before;
   for (int t = 0; t < 3; ++t) {
-    // Only triads the detector checks: an unchecked one could carry a spike into the record.
+    // Only triads the detector checks: an unchecked one could carry a spike into the record. A
+    // rate segment's record holds the gyro only (the others are not stationary).
+    if (rate_mode_ && t != kTriadGyr) continue;
     if (s.has(t) && detector_->profile().sigma[t]) {
       acc_[t].Add(s.v[t]);
       if (2 * (counts_.used + counts_.bad()) <= needed_) first_half_[t].Add(s.v[t]);
@@ -518,6 +597,8 @@ void Sequencer::CheckTimeout(std::int64_t now_ns) {
                       last_noise_failure_.empty() ? "still measuring" : last_noise_failure_);
   } else if (!last_host_ns_ || *last_host_ns_ < t_announce_ns_) {
     why = "no samples arrived";
+  } else if (rate_mode_ && rate_ && !rate_->finding().empty()) {
+    why = "the rate was not steady: " + rate_->finding();
   } else if (last_motion_t_s_ >= t_announce_s) {
     why = fmt::format("last not-still window at t = {:.2f} s: {}", last_motion_t_s_,
                       last_motion_.Describe());
@@ -525,8 +606,8 @@ void Sequencer::CheckTimeout(std::int64_t now_ns) {
     why = "the stillness window did not fill";
   }
   Reject(static_cast<double>(now_ns) * 1e-9,
-         fmt::format("not still within {:.1f} s of the announcement; {}", options_.still_timeout_s,
-                     why));
+         fmt::format("not {} within {:.1f} s of the announcement; {}",
+                     rate_mode_ ? "at a steady rate" : "still", options_.still_timeout_s, why));
 }
 
 void Sequencer::Tick(std::int64_t now_ns) { CheckTimeout(now_ns); }

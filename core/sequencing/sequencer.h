@@ -8,6 +8,11 @@
 //              the sensor to be still (up to still_timeout_s), collects dwell_s of samples that
 //              arrived after the announcement, and answers CAPTURED or REJECTED with a reason.
 //              Replayed capture events take the same path.
+//   rate       Announce() with a rate segment (TablePose::rate_axis): the table turns about one
+//              axis at a constant rate. The gyro alone decides (core/sequencing/rate_steady.h):
+//              once its rate is steady, the sequencer collects whole revolutions at the announced
+//              rate, at least dwell_s, of the gyro triad only, and rejects the segment if the
+//              rate is not steady throughout.
 //   schedule   SetSchedule(): poses in order, assigned to the still segments of the stream;
 //              a segment shorter than the dwell, or whose mean does not fit the next pose, is
 //              skipped with a reason; the end says whether the count fitted.
@@ -41,6 +46,7 @@
 #include "core/estimation/pose_record.h"
 #include "core/sequencing/host_clock.h"
 #include "core/sequencing/pose_check.h"
+#include "core/sequencing/rate_steady.h"
 #include "core/sequencing/sample.h"
 #include "core/sequencing/stillness.h"
 #include "core/sequencing/triad_accumulator.h"
@@ -56,6 +62,8 @@ struct SequencerOptions {
   double pose_check_false_alarm = 1e-6;
   double progress_step = 0.1;  // a progress event every this fraction of the dwell
   StillnessOptions stillness;
+  // Rate segments (an announced pose with a rate axis): the steadiness of the gyro's rate.
+  RateSteadyOptions rate_steady;
   NoiseMeterOptions noise_meter;
   std::optional<NoiseProfile> noise;  // configured; measured at start-up when absent
   bool IsValid(std::string* error) const;
@@ -153,6 +161,7 @@ class Sequencer {
             const PoseRecord* record = nullptr);
   void StartDetector(const NoiseProfile& profile, double t_s);
   void Feed(const StillSample& s);
+  void FeedRate(const StillSample& s);
   void StartCollecting(const StillSample& first);
   void Commit(const StillSample& s);
   void Complete(double t_s);
@@ -187,6 +196,8 @@ class Sequencer {
   std::int64_t t_announce_ns_ = 0;
   bool announced_ = false;  // announced mode (t_announce_ns_ meaningful, timeouts apply)
   bool seen_motion_after_schedule_ = false;
+  bool rate_mode_ = false;  // the current pose is a rate segment
+  std::unique_ptr<RateSteadiness> rate_;
   double dwell_s_ = 0.0;
   std::int64_t needed_ = 0;
   SampleCounts counts_;
