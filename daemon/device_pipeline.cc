@@ -28,7 +28,7 @@ SequencerOptions DevicePipeline::SequencerOptionsFor(const StationOptions& optio
 }
 
 bool DevicePipeline::RecordIdentifiedDrift(const ModelPipeline& m) {
-  const int triad = m.accel() ? kTriadAcc : kTriadMag;
+  const int triad = m.triad();
   const NoiseProfile* before = sequencer->noise();
   const auto& stored = before ? before->identified_drift[static_cast<std::size_t>(triad)]
                               : std::optional<IdentifiedDrift>();
@@ -45,8 +45,11 @@ std::vector<PlanningTarget> DevicePipeline::PlanningTargets(double dwell_s) cons
     // The drift model and the poses' times: a new pose is weighed by what it adds given every
     // earlier one at the time the table would reach it (core/planning/pose_planner.h).
     // A new pose's white noise from the device's own noise profile when it has one.
+    // The planner places static poses for the accelerometer and magnetometer models; a
+    // gyroscope's rate segments are the controller's plan (docs/protocol.md "Rate segments").
+    if (m.triad() == kTriadGyr) continue;
     const NoiseProfile* noise = sequencer->noise();
-    const int triad = m.accel() ? kTriadAcc : kTriadMag;
+    const int triad = m.triad();
     std::lock_guard lock(*m.calibrator_mutex);  // a solve in progress finishes first
     targets.push_back(TargetFromCalibrator(
         *m.calibrator, m.estimate.ok ? m.estimate.theta : m.model->nominal(), dwell_s, gate,
@@ -73,17 +76,22 @@ nlohmann::json DevicePipeline::CalibrationJson(const ModelPipeline& m,
     covariance.push_back(row);
   }
   const std::size_t n = std::min(m.estimate_poses, d.poses_used.size());
+  // The poses and records that hold the model's triad (an accelerometer's leave out rate segments).
   nlohmann::json pose_list = nlohmann::json::array();
-  for (std::size_t i = 0; i < n; ++i) pose_list.push_back(ToJson(d.poses_used[i]));
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i < d.records_used.size() && !m.TriadOf(d.records_used[i])) continue;
+    pose_list.push_back(ToJson(d.poses_used[i]));
+  }
   // The records themselves, with the model's triad only, so that the calibration can be
   // re-evaluated (the report's residuals and convergence) without the journal, which `reset`
   // archives.
-  const bool accel = m.accel();
   nlohmann::json records = nlohmann::json::array();
   for (std::size_t i = 0; i < n && i < d.records_used.size(); ++i) {
     PoseRecord r = d.records_used[i];
-    r.gyr.reset();
-    (accel ? r.mag : r.acc).reset();
+    if (!m.TriadOf(r)) continue;
+    if (m.triad() != kTriadAcc) r.acc.reset();
+    if (m.triad() != kTriadGyr) r.gyr.reset();
+    if (m.triad() != kTriadMag) r.mag.reset();
     records.push_back(protocol::ToJson(r));
   }
   nlohmann::json calibrator = protocol::CalibratorJson(m.calibrator->options(), sensor_class);

@@ -158,8 +158,36 @@ std::optional<Eigen::Vector3d> CorrectionSigma(const MeasurementModel& model,
 
 }  // namespace
 
-Eigen::Vector3d ModelPipeline::Correct(const Eigen::Vector3d& raw, double t_s,
-                                       std::optional<Eigen::Vector3d>* sigma) const {
+int ModelPipeline::triad() const {
+  switch (model->sensor()) {
+    case SensorKind::kAccelerometer:
+      return kTriadAcc;
+    case SensorKind::kGyroscope:
+      return kTriadGyr;
+    case SensorKind::kMagnetometer:
+      return kTriadMag;
+  }
+  return kTriadAcc;
+}
+
+const TriadStats* ModelPipeline::TriadOf(const PoseRecord& record) const {
+  const auto& t = triad() == kTriadAcc   ? record.acc
+                  : triad() == kTriadGyr ? record.gyr
+                                         : record.mag;
+  return t ? &*t : nullptr;
+}
+
+Eigen::Vector3d ModelPipeline::Correct(const Eigen::Vector3d& raw_in, double t_s,
+                                       std::optional<Eigen::Vector3d>* sigma,
+                                       const Eigen::Vector3d* f_q) const {
+  // The g-sensitivity's share comes off the raw rate first; the rest of the correction is the
+  // model's affine map (Correct with no force).
+  Eigen::Vector3d raw = raw_in;
+  if (const int g = model->index_of("Bg_xx"); g >= 0 && f_q) {
+    Eigen::Matrix3d B;
+    for (int k = 0; k < 9; ++k) B(k / 3, k % 3) = applied_theta[g + k];
+    raw -= B * *f_q;
+  }
   const Eigen::Vector3d value = applied_affine ? Eigen::Vector3d(applied_A * raw + applied_c)
                                                : model->Correct(applied_theta, raw);
   if (sigma) {

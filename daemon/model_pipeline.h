@@ -71,6 +71,10 @@ struct ModelPipeline {
                             const SensorClass& sensor);
 
   bool accel() const { return model->sensor() == SensorKind::kAccelerometer; }
+  // The triad the model calibrates (kTriadAcc, kTriadGyr or kTriadMag).
+  int triad() const;
+  // The record's statistics of that triad (nullptr when it has none).
+  const TriadStats* TriadOf(const PoseRecord& record) const;
   // Applies a calibration to live samples.
   void Apply(int version, const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance,
              const std::optional<TimeWindow>& bias_window, const BiasDrift& drift);
@@ -80,8 +84,11 @@ struct ModelPipeline {
   void AddAndSolve(const PoseRecord& record, const GateOptions& gate, ModelUpdate* job);
   // The applied calibration's correction of one raw triad sample, and with `sigma` its 1 sigma
   // (the covariance plus the bias's wander since the calibration, at host time t_s).
+  // A gyroscope model's g-sensitivity needs the specific force in the table frame, `f_q` (the
+  // station passes the raw accelerometer turned by the nominal mounting; gyro12 ignores it).
   Eigen::Vector3d Correct(const Eigen::Vector3d& raw, double t_s,
-                          std::optional<Eigen::Vector3d>* sigma) const;
+                          std::optional<Eigen::Vector3d>* sigma,
+                          const Eigen::Vector3d* f_q = nullptr) const;
 
   // Every gated parameter's sigma against its tolerance (ESTIMATE's precision).
   nlohmann::json PrecisionJson(const GateOptions& gate) const;

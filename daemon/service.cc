@@ -442,7 +442,8 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
       last = sample.t_host_ns;
     }
     if (w.corrected) {
-      if (!tried || (w.uncertainty && !c.acc_sigma && !c.mag_sigma && have_correction)) {
+      if (!tried ||
+          (w.uncertainty && !c.acc_sigma && !c.mag_sigma && !c.gyr_sigma && have_correction)) {
         have_correction = station_->Correct(static_cast<int>(device), sample, &c, w.uncertainty);
         tried = true;
       }
@@ -470,7 +471,16 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
           }
           if (w.uncertainty && c.acc_sigma) AppendTriad(&text, "acc_sigma", *c.acc_sigma);
           if (w.uncertainty && c.mag_sigma) AppendTriad(&text, "mag_sigma", *c.mag_sigma);
-          if (sample.gyr_radps) AppendTriad(&text, "gyr", *sample.gyr_radps);  // not calibrated
+          // The gyro corrected by its model when one applies, else as the device sent it.
+          if (c.gyr_radps) {
+            AppendTriad(&text, "gyr", *c.gyr_radps);
+            text += ",\"gyr_frame\":\"";
+            text += c.gyr_frame;
+            text += '"';
+            if (w.uncertainty && c.gyr_sigma) AppendTriad(&text, "gyr_sigma", *c.gyr_sigma);
+          } else if (sample.gyr_radps) {
+            AppendTriad(&text, "gyr", *sample.gyr_radps);
+          }
           text += ",\"versions\":{";
           for (std::size_t k = 0; k < c.versions.size(); ++k) {
             if (k) text += ',';

@@ -12,6 +12,7 @@
 #include "daemon/service.h"
 #include "drivers/transport/transport.h"
 #include "protocol/messages.h"
+#include "protocol/pose_json.h"
 #include "protocol/sequencer_json.h"
 #include "turncal/version.h"
 
@@ -98,7 +99,7 @@ void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
     }
     if (device.empty() && !options_.devices.empty()) device = options_.devices.front().name;
     reply(station_->NextPose(device));
-  } else if (cmd == "pose") {
+  } else if (cmd == "pose" || cmd == "rate") {
     HandlePose(client, request, id);
   } else if (cmd == "watch") {
     HandleWatch(client, request, id);
@@ -162,12 +163,14 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
   next_pose_index_ = std::max(next_pose_index_, a.index + 1);
   if (recorder_) {
     // The pose as a capture event, with the devices it went to (a replay announces it to those).
-    nlohmann::json event = {{"event", "pose"},
-                            {"index", a.index},
-                            {"phi_deg", request["phi_deg"]},
-                            {"gamma_deg", request["gamma_deg"]},
-                            {"psi_deg", request["psi_deg"]},
-                            {"devices", names}};
+    nlohmann::json event = protocol::ToJson(a.pose);
+    event["event"] = a.pose.is_rate() ? "rate" : "pose";
+    event["index"] = a.index;
+    event["devices"] = names;
+    if (!a.pose.is_rate()) {
+      // As the controller sent them (the replay's angles are then bit-identical to live).
+      for (const char* key : {"phi_deg", "gamma_deg", "psi_deg"}) event[key] = request[key];
+    }
     if (a.dwell_s) event["dwell_s"] = *a.dwell_s;
     // Recorded at the announcement's own time: the replay's sequencer then starts the pose's
     // window at the same sample as live (it takes only samples received after the command).

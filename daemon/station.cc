@@ -133,14 +133,29 @@ bool Station::Correct(int device, const Sample& sample, Corrected* out, bool wit
   *out = Corrected{};
   for (const ModelState& m : devices_[static_cast<std::size_t>(device)]->models) {
     if (m.applied_version <= 0) continue;
-    const bool accel = m.accel();
-    const std::optional<Eigen::Vector3d>& raw = accel ? sample.acc_mps2 : sample.mag;
+    const int triad = m.triad();
+    const std::optional<Eigen::Vector3d>& raw = triad == kTriadAcc   ? sample.acc_mps2
+                                                : triad == kTriadGyr ? sample.gyr_radps
+                                                                     : sample.mag;
     if (!raw) continue;
-    std::optional<Eigen::Vector3d>& target = accel ? out->acc_mps2 : out->mag;
+    std::optional<Eigen::Vector3d>& target = triad == kTriadAcc   ? out->acc_mps2
+                                             : triad == kTriadGyr ? out->gyr_radps
+                                                                  : out->mag;
     if (target) continue;  // the first model of a sensor in the configured order wins
+    std::optional<Eigen::Vector3d>& sigma = triad == kTriadAcc   ? out->acc_sigma
+                                            : triad == kTriadGyr ? out->gyr_sigma
+                                                                 : out->mag_sigma;
+    // A gyro's g-sensitivity sees the specific force in the table frame: the raw accelerometer
+    // turned back by the nominal mounting (its own errors, ~1e-3, are far below what B_g needs).
+    std::optional<Eigen::Vector3d> f_q;
+    if (triad == kTriadGyr && sample.acc_mps2) {
+      f_q = m.model->context().mounting.transpose() * *sample.acc_mps2;
+    }
     target = m.Correct(*raw, static_cast<double>(sample.t_host_ns) * 1e-9,
-                       with_sigma ? &(accel ? out->acc_sigma : out->mag_sigma) : nullptr);
-    (accel ? out->acc_frame : out->mag_frame) = ToString(m.model->corrected_frame());
+                       with_sigma ? &sigma : nullptr, f_q ? &*f_q : nullptr);
+    (triad == kTriadAcc   ? out->acc_frame
+     : triad == kTriadGyr ? out->gyr_frame
+                          : out->mag_frame) = ToString(m.model->corrected_frame());
     out->versions.emplace_back(m.model->name(), m.applied_version);
   }
   return !out->versions.empty();
@@ -368,8 +383,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   d.records_used.push_back(record);
   for (std::size_t mi = 0; mi < d.models.size(); ++mi) {
     ModelState& m = d.models[mi];
-    const bool accel = m.accel();
-    if (accel ? !record.acc : !record.mag) continue;
+    if (!m.TriadOf(record)) continue;  // e.g. a rate segment holds the gyro only
     auto job = std::make_shared<ModelUpdate>();
     job->device_poses = d.records_used.size();
     // The calibrator is only touched under its lock (the worker solves; NextPose reads).

@@ -112,12 +112,13 @@ class Station : public ReplayTarget {
   // "Correction of live samples"): false when the device has none. Each triad is corrected by
   // its model's applied calibration; `versions` receives MODEL:version of those used.
   struct Corrected {
-    std::optional<Eigen::Vector3d> acc_mps2, mag;
+    std::optional<Eigen::Vector3d> acc_mps2, mag, gyr_radps;
     // With `with_sigma`: the 1 sigma of each output axis from the calibration's covariance
     // (J Sigma J^T, J = d correction / d theta by central differences; noise not included).
-    std::optional<Eigen::Vector3d> acc_sigma, mag_sigma;
+    std::optional<Eigen::Vector3d> acc_sigma, mag_sigma, gyr_sigma;
     const char* acc_frame = nullptr;  // "case" or "table"
     const char* mag_frame = nullptr;
+    const char* gyr_frame = nullptr;
     std::vector<std::pair<std::string, int>> versions;
   };
   bool Correct(int device, const Sample& sample, Corrected* out, bool with_sigma = false) const;

@@ -7,6 +7,7 @@
 #include "core/estimation/sensor_class.h"
 #include "core/frames/units.h"
 #include "protocol/json_vec3.h"
+#include "protocol/pose_json.h"
 #include "protocol/sequencer_json.h"
 
 namespace turncal::protocol {
@@ -328,15 +329,11 @@ bool ParseCalibrationDocument(const nlohmann::json& j, CalibrationDocument* out,
   if (provenance.contains("poses")) {
     if (!provenance["poses"].is_array()) return bad("provenance.poses is not a list");
     for (const auto& p : provenance["poses"]) {
-      double a[3];
-      const char* const keys[] = {"phi_deg", "gamma_deg", "psi_deg"};
-      for (int i = 0; i < 3; ++i) {
-        if (!p.is_object() || !p.contains(keys[i]) || !p[keys[i]].is_number()) {
-          return bad("provenance.poses holds a pose without angles");
-        }
-        a[i] = p[keys[i]].get<double>() * kRadPerDeg;
+      TablePose pose;
+      if (!ParseTablePose(p, &pose, nullptr)) {
+        return bad("provenance.poses holds a pose without angles");
       }
-      d.poses.push_back(TablePose{a[0], a[1], a[2]});
+      d.poses.push_back(pose);
     }
   }
   if (provenance.contains("records")) {

@@ -41,7 +41,7 @@ bool StringArgument(const nlohmann::json& request, const char* key, std::string*
 }  // namespace
 
 bool IsMutatingCommand(const std::string& cmd) {
-  return cmd == "pose" || cmd == "reset" || cmd == "publish";
+  return cmd == "pose" || cmd == "rate" || cmd == "reset" || cmd == "publish";
 }
 
 bool RequestFramer::Push(std::string_view bytes, const LineHandler& on_line,
@@ -138,8 +138,8 @@ bool ParseCommand(const nlohmann::json& request, std::string* cmd, std::string* 
     return false;
   }
   *cmd = request["cmd"].get<std::string>();
-  for (const char* known : {"status", "devices", "pose", "watch", "result", "next_pose", "reset",
-                            "publish", "version"}) {
+  for (const char* known : {"status", "devices", "pose", "rate", "watch", "result", "next_pose",
+                            "reset", "publish", "version"}) {
     if (*cmd == known) return true;
   }
   *error = fmt::format("unknown command '{}' (commands: {})", *cmd, kCommands);
@@ -203,7 +203,7 @@ bool ParsePoseRequest(const nlohmann::json& request, std::int64_t t_host_ns, Ann
   }
   bool is_pose = false;
   if (!ParsePoseCommand(request, t_host_ns, out, &is_pose, error)) {
-    if (!is_pose) *error = "pose: not a pose request";
+    if (!is_pose) *error = "pose: not a pose or rate request";
     return false;
   }
   if (!StringArgument(request, "device", device)) {

@@ -16,11 +16,11 @@ struct Announcement;  // core/sequencing/sequencer.h
 namespace turncal::protocol {
 
 inline constexpr int kProtoMajor = 1;
-inline constexpr int kProtoMinor = 0;
+inline constexpr int kProtoMinor = 1;  // 1.1: the "rate" command (issue 21)
 // Longest request line the server reads; longer lines are answered with ERROR and dropped.
 inline constexpr std::size_t kMaxRequestBytes = 64 * 1024;
 
-// The greeting sent on connect: {"class":"VERSION","release":...,"proto_major":1,"proto_minor":0}.
+// The greeting sent on connect: {"class":"VERSION","release":...,"proto_major":1,"proto_minor":1}.
 nlohmann::json VersionMessage();
 
 // {"class":"ERROR","message":...}.
@@ -33,8 +33,8 @@ nlohmann::json ErrorMessage(const std::string& message);
 
 // The commands, as an ERROR lists them.
 inline constexpr const char* kCommands =
-    "status, devices, pose, watch, result, next_pose, reset, publish, version";
-// pose, reset and publish change the session: only control peers may send them.
+    "status, devices, pose, rate, watch, result, next_pose, reset, publish, version";
+// pose, rate, reset and publish change the session: only control peers may send them.
 bool IsMutatingCommand(const std::string& cmd);
 
 // Splits a client's bytes into request lines: '\n' ends a line, a trailing '\r' is removed. A

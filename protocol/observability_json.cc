@@ -98,12 +98,6 @@ nlohmann::json ToJson(const GateResult& g) {
   return {{"pass", g.pass}, {"reasons", g.reasons}, {"missing", g.missing}, {"notes", g.notes}};
 }
 
-nlohmann::json ToJson(const TablePose& p) {
-  return {{"phi_deg", p.phi_rad * kDegPerRad},
-          {"gamma_deg", p.gamma_rad * kDegPerRad},
-          {"psi_deg", p.psi_rad * kDegPerRad}};
-}
-
 nlohmann::json ToJson(const NextPoseAdvice& a) {
   nlohmann::json j = {{"class", "NEXT_POSE"}, {"ok", a.ok}};
   if (!a.ok) {

@@ -6,18 +6,22 @@
 
 #include <nlohmann/json.hpp>
 
+#include "protocol/pose_json.h"
+
 #include "core/analysis/observability.h"
 #include "core/analysis/publish_gate.h"
 #include "core/planning/pose_planner.h"
 
 namespace turncal {
 
+// The pose as protocol/pose_json.h writes it (rate segments included).
+inline nlohmann::json ToJson(const TablePose& pose) { return protocol::ToJson(pose); }
+
 nlohmann::json ToJson(const NamedDirection& direction, const MeasurementModel& model);
 nlohmann::json ToJson(const StructuralReport& report, const MeasurementModel& model);
 nlohmann::json ToJson(const PoseDiversity& diversity);
 nlohmann::json ToJson(const DataReport& report, const MeasurementModel& model);
 nlohmann::json ToJson(const GateResult& gate);
-nlohmann::json ToJson(const TablePose& pose);
 nlohmann::json ToJson(const NextPoseAdvice& advice);
 
 }  // namespace turncal

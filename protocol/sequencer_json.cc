@@ -7,6 +7,7 @@
 #include "core/frames/units.h"
 #include "protocol/calibration_json.h"
 #include "protocol/json_vec3.h"
+#include "protocol/pose_json.h"
 
 namespace turncal::protocol {
 namespace {
@@ -24,34 +25,45 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
   *is_pose = false;
   if (!j.is_object()) return false;
   const auto kind = j.find(j.contains("event") ? "event" : "cmd");
-  if (kind == j.end() || !kind->is_string() || kind->get<std::string>() != "pose") return false;
+  if (kind == j.end() || !kind->is_string()) return false;
+  const std::string name = kind->get<std::string>();
+  if (name != "pose" && name != "rate") return false;
   *is_pose = true;
+  const bool rate = name == "rate";
   Announcement a;
   a.t_host_ns = t_host_ns;
-  double angles[3];
-  const char* const keys[] = {"phi_deg", "gamma_deg", "psi_deg"};
-  for (int i = 0; i < 3; ++i) {
-    const auto it = j.find(keys[i]);
-    if (it == j.end() || !it->is_number() || !std::isfinite(it->get<double>())) {
-      if (error) *error = fmt::format("pose: '{}' must be a finite number (degrees)", keys[i]);
+  std::string why;
+  nlohmann::json pose = j;
+  if (rate) {
+    // A controller's command names the axis "axis"; a capture's event writes "rate_axis".
+    if (j.contains("axis")) pose["rate_axis"] = j["axis"];
+    if (!pose.contains("rate_axis") || !pose.contains("rate_dps")) {
+      if (error) {
+        *error = "rate: needs 'axis' (\"outer\", \"middle\" or \"inner\") and 'rate_dps'";
+      }
       return false;
     }
-    angles[i] = it->get<double>() * kRadPerDeg;
+  } else if (j.contains("rate_axis") || j.contains("rate_dps")) {
+    if (error) *error = "pose: a rate segment is the \"rate\" command";
+    return false;
   }
-  a.pose = TablePose{angles[0], angles[1], angles[2]};
+  if (!ParseTablePose(pose, &a.pose, &why, /*rotating_angle_optional=*/true)) {
+    if (error) *error = name + ": " + why;
+    return false;
+  }
   if (const auto it = j.find("index"); it != j.end()) {
     const bool in_range = (it->is_number_unsigned() && it->get<std::uint64_t>() <= 2147483647u) ||
                           (it->is_number_integer() && !it->is_number_unsigned() &&
                            it->get<std::int64_t>() >= 0 && it->get<std::int64_t>() <= 2147483647);
     if (!in_range) {
-      if (error) *error = "pose: 'index' must be an integer in [0, 2147483647]";
+      if (error) *error = name + ": 'index' must be an integer in [0, 2147483647]";
       return false;
     }
     a.index = static_cast<int>(it->get<std::int64_t>());
   }
   if (const auto it = j.find("dwell_s"); it != j.end()) {
     if (!it->is_number() || !(it->get<double>() > 0) || !(it->get<double>() <= 3600)) {
-      if (error) *error = "pose: 'dwell_s' must be a number in (0, 3600] (seconds)";
+      if (error) *error = name + ": 'dwell_s' must be a number in (0, 3600] (seconds)";
       return false;
     }
     a.dwell_s = it->get<double>();
@@ -61,12 +73,7 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
 }
 
 nlohmann::json ToJson(const PoseRecord& r) {
-  nlohmann::json j = {{"pose",
-                       {{"phi_deg", r.pose.phi_rad / kRadPerDeg},
-                        {"gamma_deg", r.pose.gamma_rad / kRadPerDeg},
-                        {"psi_deg", r.pose.psi_rad / kRadPerDeg}}},
-                      {"t_start", r.t_start_s},
-                      {"t_end", r.t_end_s}};
+  nlohmann::json j = {{"pose", ToJson(r.pose)}, {"t_start", r.t_start_s}, {"t_end", r.t_end_s}};
   if (r.acc) j["acc"] = Triad(*r.acc);
   if (r.gyr) j["gyr"] = Triad(*r.gyr);
   if (r.mag) j["mag"] = Triad(*r.mag);
@@ -105,16 +112,10 @@ bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* erro
   };
   if (!j.is_object()) return fail("not an object");
   PoseRecord r;
-  const auto& p = j.value("pose", nlohmann::json());
-  const char* const keys[] = {"phi_deg", "gamma_deg", "psi_deg"};
-  double a[3];
-  for (int i = 0; i < 3; ++i) {
-    if (!p.is_object() || !p.contains(keys[i]) || !p[keys[i]].is_number()) {
-      return fail("pose angles missing");
-    }
-    a[i] = p[keys[i]].get<double>() * kRadPerDeg;
+  if (std::string why; !ParseTablePose(j.value("pose", nlohmann::json()), &r.pose, &why)) {
+    if (error) *error = "pose record: " + why;
+    return false;
   }
-  r.pose = TablePose{a[0], a[1], a[2]};
   if (!j.contains("t_start") || !j.contains("t_end") || !j["t_start"].is_number() ||
       !j["t_end"].is_number()) {
     return fail("window times missing");
@@ -221,9 +222,7 @@ nlohmann::json ToJson(const SequencerEvent& e) {
   nlohmann::json j = {{"class", ToString(e.kind)}, {"t", e.t_s}};
   if (e.index >= 0) {
     j["index"] = e.index;
-    j["pose"] = {{"phi_deg", e.pose.phi_rad / kRadPerDeg},
-                 {"gamma_deg", e.pose.gamma_rad / kRadPerDeg},
-                 {"psi_deg", e.pose.psi_rad / kRadPerDeg}};
+    j["pose"] = ToJson(e.pose);
   }
   if (e.needed > 0) {
     j["collected"] = e.collected;

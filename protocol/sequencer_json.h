@@ -5,6 +5,10 @@
 // Pose command/event: {"event":"pose"|"cmd":"pose", "phi_deg":..., "gamma_deg":...,
 // "psi_deg":..., optional "index", "dwell_s" (the dwell to collect), "hold_s" (how long the table
 // holds; informational)}.
+// Rate command/event (issue 21): {"cmd":"rate", "axis":"outer"|"middle"|"inner", "rate_dps":R,
+// and the other two axes' angles (the rotating one's is optional), optional "index", "dwell_s"
+// (at least this long, in whole revolutions)}; a capture records it as {"event":"rate",
+// "rate_axis":..., "rate_dps":..., the three angles, ...}.
 
 #include <nlohmann/json.hpp>
 #include <string>

@@ -17,6 +17,7 @@
 #include "drivers/gx2/gx2_encoder.h"
 #include "drivers/mip/mip_encoder.h"
 #include "drivers/xbus/xbus_encoder.h"
+#include "protocol/pose_json.h"
 
 namespace turncal::sim {
 
@@ -145,9 +146,10 @@ std::unique_ptr<MeasurementModel> CheckedModel(const std::string& name, SensorKi
     return nullptr;
   }
   if (model->sensor() != kind) {
-    *error =
-        fmt::format("'{}' is not {} model", name,
-                    kind == SensorKind::kAccelerometer ? "an accelerometer" : "a magnetometer");
+    *error = fmt::format("'{}' is not {} model", name,
+                         kind == SensorKind::kAccelerometer ? "an accelerometer"
+                         : kind == SensorKind::kGyroscope   ? "a gyroscope"
+                                                            : "a magnetometer");
     return nullptr;
   }
   return model;
@@ -162,6 +164,17 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
   if (!accel) return false;
   auto mag = CheckedModel(options.mag_model, SensorKind::kMagnetometer, error);
   if (!mag) return false;
+  std::unique_ptr<MeasurementModel> gyro;
+  if (!options.gyro_model.empty()) {
+    gyro = CheckedModel(options.gyro_model, SensorKind::kGyroscope, error);
+    if (!gyro) return false;
+  }
+  for (const auto& p : options.poses) {
+    if (p.is_rate() && !gyro) {
+      *error = "rate segments need a gyroscope model (--model gyro12 or gyro21)";
+      return false;
+    }
+  }
 
   const ProtocolDefaults d = Defaults(protocol);
   SessionSimOptions o = options.session;
@@ -186,11 +199,12 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
 
   SimCapture& c = *out;
   c = SimCapture{};
-  c.session = SimulateSession(*accel, *mag, options.poses, o);
+  c.session = SimulateSession(*accel, *mag, options.poses, o, gyro.get());
   c.session_options = o;
   c.baud = baud;
   c.accel_model = options.accel_model;
   c.mag_model = options.mag_model;
+  c.gyro_model = options.gyro_model;
   const SimulatedSession& session = c.session;
 
   drivers::CaptureDevice device{"imu", protocol, baud, std::nullopt, std::nullopt};
@@ -201,11 +215,12 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
   c.header.devices.push_back(device);
   c.header.created = "simulated";
   c.header.note = fmt::format(
-      "turncal sim --protocol {} --model {} --model {} --class {} --seed {} --rate {} --dwell {} "
+      "turncal sim --protocol {} --model {} --model {}{} --class {} --seed {} --rate {} --dwell {} "
       "(acc noise {} m/s^2/sqrt(Hz), acc bias instability {} m/s^2, gyr noise {} rad/s/sqrt(Hz), "
       "mag noise {} G, mag bias instability {} G, quantisation {}{})",
-      protocol_name, options.accel_model, options.mag_model, o.sensor.name, o.seed, o.rate_hz,
-      o.dwell_s, o.sensor.acc_noise_density, o.sensor.acc_bias_instability,
+      protocol_name, options.accel_model, options.mag_model,
+      options.gyro_model.empty() ? "" : " --model " + options.gyro_model, o.sensor.name, o.seed,
+      o.rate_hz, o.dwell_s, o.sensor.acc_noise_density, o.sensor.acc_bias_instability,
       o.sensor.gyr_noise_density, o.sensor.mag_noise_rms, o.sensor.mag_bias_instability,
       o.sensor.acc_quantum > 0 ? "16-bit" : "none", options.faults ? ", faults" : "");
 
@@ -263,14 +278,23 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
       const std::int64_t te = event_ns(e);
       const double early = e.index == faults.early_pose_index ? faults.early_s : 0.0;
       flush(te);
-      const std::string event = nlohmann::json{
-          {"event", "pose"},
-          {"index", e.index},
-          {"phi_deg", e.pose.phi_rad * kDegPerRad},
-          {"gamma_deg", e.pose.gamma_rad * kDegPerRad},
-          {"psi_deg", e.pose.psi_rad * kDegPerRad},
-          {"hold_s",
-           o.dwell_s + early}}.dump();
+      std::string event;
+      if (e.pose.is_rate()) {
+        nlohmann::json j = protocol::ToJson(e.pose);
+        j["event"] = "rate";
+        j["index"] = e.index;
+        j["dwell_s"] = o.dwell_s;
+        j["hold_s"] = e.dwell_end_s - e.t_s + 2.0;
+        event = j.dump();
+      } else {
+        event = nlohmann::json{{"event", "pose"},
+                               {"index", e.index},
+                               {"phi_deg", e.pose.phi_rad * kDegPerRad},
+                               {"gamma_deg", e.pose.gamma_rad * kDegPerRad},
+                               {"psi_deg", e.pose.psi_rad * kDegPerRad},
+                               {"hold_s", o.dwell_s + early}}
+                    .dump();
+      }
       append(drivers::RecordType::kEvent, te, Bytes(event.begin(), event.end()));
     }
   };

@@ -7,8 +7,10 @@
 // Pose events are JSON 'E' records
 //   {"event":"pose","index":i,"phi_deg":…,"gamma_deg":…,"psi_deg":…,"hold_s":…}
 // where hold_s is how long the table holds the pose after the announcement (the dwell, plus the
-// early amount for an announcement made early). Pure computation: the same options give the same
-// bytes.
+// early amount for an announcement made early); a rate segment's is
+//   {"event":"rate","index":i,"rate_axis":…,"rate_dps":…,"phi_deg":…,…,"dwell_s":…,"hold_s":…}
+// with dwell_s the session's dwell (the sequencer collects whole revolutions of at least that).
+// Pure computation: the same options give the same bytes.
 
 #include <cstddef>
 #include <cstdint>
@@ -32,6 +34,9 @@ struct SimCaptureOptions {
   drivers::Protocol protocol = drivers::Protocol::kMip;
   std::string accel_model = "accel13";  // an accelerometer model (MakeModel)
   std::string mag_model = "mag13";      // a magnetometer model; not mag-physical
+  // A gyroscope model (gyro12, gyro21) whose truth the gyro follows; empty: the gyro is the
+  // table's rate plus a turn-on bias (SimulateSession). Rate segments among the poses need one.
+  std::string gyro_model;
   std::vector<TablePose> poses = DefaultSessionPoses();
   // Noise class, dwell, seed, ... session.rate_hz <= 0 (the default here): the protocol's
   // default, mip 500 Hz, gx2 / xbus / xbus-legacy 100 Hz.
@@ -67,6 +72,7 @@ struct SimCapture {
   std::int64_t offset_ns = 0;
   std::string accel_model;
   std::string mag_model;
+  std::string gyro_model;  // empty: none
   SimFaultReport faults;
 };
 

@@ -188,7 +188,7 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     sp.spin = spin;
     sp.rate = rate;
     sp.up_s = o.spin_s;
-    sp.hold_s = o.rate_settle_s + e.revolutions_s + 1.0;
+    sp.hold_s = o.rate_settle_s + e.revolutions_s + 2.0;
     sp.ripple = o.rate_ripple;
     sp.ripple_hz = o.ripple_hz;
     sp.t1 = t + 2 * sp.up_s + sp.hold_s;

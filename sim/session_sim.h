@@ -52,8 +52,9 @@ struct SessionSimOptions {
   double settle_amplitude_rad = 2e-4;  // of the decaying oscillation after a move
   // Rate segments (a pose with TablePose::rate_axis set): the table spins up in spin_s with an
   // S-curve, holds the rate with a ripple of rate_ripple (relative, at ripple_hz) for
-  // rate_settle_s and then at least dwell_s of whole revolutions (at least one) and one second
-  // more, and spins down in spin_s; the announcement is at the end of rate_settle_s.
+  // rate_settle_s and then at least dwell_s of whole revolutions (at least one) and two seconds
+  // more (the sequencer's look-ahead, with room for a live run's delays), and spins down in
+  // spin_s; the announcement is at the end of rate_settle_s.
   double spin_s = 1.5;
   double rate_settle_s = 0.5;
   double rate_ripple = 1e-4;
@@ -77,7 +78,7 @@ struct SessionPoseEvent {
   Eigen::Vector3d mag_wander_mean = Eigen::Vector3d::Zero();
   Eigen::Vector3d gyr_wander_mean = Eigen::Vector3d::Zero();
   // A rate segment: the seconds of its whole revolutions (the announcement's dwell); the hold
-  // lasts one second more.
+  // lasts two seconds more.
   double revolutions_s = 0.0;
 };
 

@@ -132,7 +132,10 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                          : "unknown class '" + args.sensor_class + "'");
     return 2;
   }
-  const bool accel = model->sensor() == SensorKind::kAccelerometer;
+  const SensorKind kind = model->sensor();
+  const bool accel = kind == SensorKind::kAccelerometer;
+  const bool gyro = kind == SensorKind::kGyroscope;
+  const int bias = model->index_of("bx");
   std::optional<TableMotion> table;
   if (args.table_rate_dps > 0) {
     table.emplace();
@@ -141,12 +144,30 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
     table->settle_s = SessionSimOptions{}.settle_s;
   }
   std::vector<TablePose> plan = DefaultSessionPoses();
+  if (gyro && args.plan == "planner") {
+    fmt::print(stderr,
+               "turncal montecarlo: the planner plans static poses for accelerometer and "
+               "magnetometer models; a gyro model takes --plan default or shuffled\n");
+    return 2;
+  }
   if (args.plan == "planner") {
     plan = PlannerSequence(sensor, args, table, sim::SimDefaultRateHz(*protocol), &error);
     if (plan.empty()) {
       fmt::print(stderr, "turncal montecarlo: {}\n", error);
       return 1;
     }
+  }
+  if (gyro) {
+    // Rate segments after the first static poses, or alone.
+    const std::vector<TablePose> rates = DefaultRateSegments();
+    std::vector<TablePose> mixed;
+    const std::vector<TablePose> statics =
+        args.gyro_sources == "rates" ? std::vector<TablePose>{} : plan;
+    for (std::size_t i = 0; i < std::max(statics.size(), rates.size()); ++i) {
+      if (i < statics.size()) mixed.push_back(statics[i]);
+      if (i < rates.size()) mixed.push_back(rates[i]);
+    }
+    plan = mixed;
   }
   const int N = model->num_parameters();
   const auto dir = std::filesystem::temp_directory_path() /
@@ -164,7 +185,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       out.seed = seed;
       sim::SimCaptureOptions o;
       o.protocol = *protocol;
-      (accel ? o.accel_model : o.mag_model) = args.model;
+      (accel ? o.accel_model : gyro ? o.gyro_model : o.mag_model) = args.model;
       o.poses = plan;
       if (args.plan == "shuffled") {
         std::mt19937_64 rng(seed ^ 0x5eed);
@@ -173,6 +194,8 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       o.session.sensor = sensor;
       o.session.sensor.acc_bias_instability *= args.drift_scale;
       o.session.sensor.mag_bias_instability *= args.drift_scale;
+      o.session.sensor.gyr_bias_instability *= args.drift_scale;
+      o.session.gyr_random_walk = args.random_walk * sensor.gyr_bias_instability / 10.0;
       o.session.dwell_s = args.dwell_s;
       o.session.table = table;
       o.session.seed = seed;
@@ -247,17 +270,20 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       }
       // The bias truth: the turn-on bias plus the drift averaged over the calibration's own bias
       // window (the sequencer's window at the latest pose; host time = capture time).
-      Eigen::VectorXd truth = accel ? capture.session.accel_truth : capture.session.mag_truth;
+      Eigen::VectorXd truth = accel  ? capture.session.accel_truth
+                              : gyro ? capture.session.gyro_truth
+                                     : capture.session.mag_truth;
       TimeWindow window;
       if (protocol::ParseTimeWindow(m["bias_window"], &window)) {
-        truth.tail<3>() +=
-            accel ? capture.session.AccDriftMean(window.t0_s - offset_s, window.t1_s - offset_s)
-                  : capture.session.MagDriftMean(window.t0_s - offset_s, window.t1_s - offset_s);
-      } else if (args.independent) {
+        const double t0 = window.t0_s - offset_s, t1 = window.t1_s - offset_s;
+        truth.segment<3>(bias) += accel  ? capture.session.AccDriftMean(t0, t1)
+                                  : gyro ? capture.session.GyrDriftMean(t0, t1)
+                                         : capture.session.MagDriftMean(t0, t1);
+      } else if (args.independent && !gyro) {
         // The model before issue 19 has no bias window: its bias is, near enough, the drift's
         // mean over the dwells.
-        truth.tail<3>() += accel ? capture.session.EffectiveAccBiasOffset()
-                                 : capture.session.EffectiveMagBiasOffset();
+        truth.segment<3>(bias) += accel ? capture.session.EffectiveAccBiasOffset()
+                                        : capture.session.EffectiveMagBiasOffset();
       } else {
         out.error = "the result has no bias window";
         continue;
@@ -369,6 +395,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                       {"class", args.sensor_class},
                                       {"protocol", args.protocol},
                                       {"plan", args.plan},
+                                      {"gyro_sources", gyro ? args.gyro_sources : ""},
                                       {"planner_objective", args.planner_objective},
                                       {"planner_drift", args.planner_drift},
                                       {"table_rate_dps", args.table_rate_dps},

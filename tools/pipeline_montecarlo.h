@@ -21,6 +21,10 @@ struct PipelineMonteCarloArgs {
   // poses in a new random order every run; planner: the D-optimal planner's sequence to the gate
   // from nominal values (as `turncal plan` prints it).
   std::string plan = "default";
+  // A gyroscope model's sources (issue 21): "mixed" (the plan's static poses with the default
+  // rate segments after the first of them, sim/session_sim.h DefaultRateSegments) or "rates"
+  // (the rate segments alone).
+  std::string gyro_sources = "mixed";
   int runs = 200;
   std::uint64_t seed = 1;
   int jobs = 2;

@@ -21,6 +21,7 @@
 #include "daemon/atomic_file.h"
 #include "drivers/capture/tcap.h"
 #include "protocol/pose_file.h"
+#include "protocol/pose_json.h"
 #include "sim/capture.h"
 #include "sim/live.h"
 #include "sim/session_sim.h"
@@ -138,6 +139,16 @@ nlohmann::json TruthJson(const MeasurementModel& m, const Eigen::VectorXd& theta
   return j;
 }
 
+std::vector<TablePose> WithRateSegments(const std::vector<TablePose>& poses,
+                                        const std::vector<TablePose>& rates) {
+  std::vector<TablePose> out;
+  for (std::size_t i = 0; i < std::max(poses.size(), rates.size()); ++i) {
+    if (i < poses.size()) out.push_back(poses[i]);
+    if (i < rates.size()) out.push_back(rates[i]);
+  }
+  return out;
+}
+
 nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TablePose>& poses,
                         const SimCommandArgs& args) {
   std::string error;
@@ -147,6 +158,10 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
   nlohmann::json pose_list = nlohmann::json::array();
   auto triad = [](const Eigen::Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
   for (const auto& p : poses) {
+    if (p.is_rate()) {
+      pose_list.push_back(protocol::ToJson(p));
+      continue;
+    }
     // What a perfect correction outputs at this pose (noise-free, without the bias wander): the
     // true model's correction of its own prediction, in the models' output frames.
     const Eigen::Vector3d acc =
@@ -165,6 +180,18 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
   accel_truth.tail<3>() += session.LastPoseAccBiasOffset();
   mag_truth.tail<3>() += session.LastPoseMagBiasOffset();
   const SessionSimOptions& so = capture.session_options;
+  nlohmann::json models = {{capture.accel_model, TruthJson(*accel, accel_truth)},
+                           {capture.mag_model, TruthJson(*mag, mag_truth)}};
+  nlohmann::json turn_on = {{capture.accel_model, triad(session.accel_truth.tail<3>())},
+                            {capture.mag_model, triad(session.mag_truth.tail<3>())}};
+  if (!capture.gyro_model.empty()) {
+    auto gyro = MakeModel(capture.gyro_model, ModelContext{}, &error);
+    Eigen::VectorXd gyro_truth = session.gyro_truth;
+    const int b = gyro->index_of("bx");
+    if (!session.events.empty()) gyro_truth.segment<3>(b) += session.events.back().gyr_wander_mean;
+    models[capture.gyro_model] = TruthJson(*gyro, gyro_truth);
+    turn_on[capture.gyro_model] = triad(session.gyro_truth.segment<3>(b));
+  }
   return {
       {"acc_bias_instability", so.sensor.acc_bias_instability},
       {"mag_bias_instability", so.sensor.mag_bias_instability},
@@ -175,12 +202,10 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
       {"mag_warmup", so.mag_warmup},
       {"warmup_tau_s", so.warmup_tau_s},
       {"bias_truth", "at_last_pose"},
-      {"models",
-       {{capture.accel_model, TruthJson(*accel, accel_truth)},
-        {capture.mag_model, TruthJson(*mag, mag_truth)}}},
-      {"turn_on_bias",
-       {{capture.accel_model, triad(session.accel_truth.tail<3>())},
-        {capture.mag_model, triad(session.mag_truth.tail<3>())}}},
+      {"models", models},
+      {"turn_on_bias", turn_on},
+      {"gyr_bias_instability", so.sensor.gyr_bias_instability},
+      {"latitude_deg", ReferenceVectors{}.latitude_deg},
       {"gyro_bias_radps",
        {session.gyro_bias_radps.x(), session.gyro_bias_radps.y(), session.gyro_bias_radps.z()}},
       {"class", args.sensor_class},
@@ -311,7 +336,14 @@ int RunSim(const SimCommandArgs& args) {
       fmt::print(stderr, "turncal sim: mag-physical is for the observability demonstration only\n");
       return 2;
     }
-    (model->sensor() == SensorKind::kAccelerometer ? options.accel_model : options.mag_model) = m;
+    (model->sensor() == SensorKind::kAccelerometer ? options.accel_model
+     : model->sensor() == SensorKind::kGyroscope   ? options.gyro_model
+                                                   : options.mag_model) = m;
+  }
+  if (!options.gyro_model.empty() && args.poses_file.empty()) {
+    // What a gyro model needs besides the static poses: rate segments, one after each of the
+    // first poses (the default plan's, DefaultRateSegments).
+    options.poses = WithRateSegments(options.poses, DefaultRateSegments());
   }
 
   if (!args.poses_file.empty()) {

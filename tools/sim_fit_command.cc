@@ -324,6 +324,11 @@ void AddSimFitCommands(CLI::App* app) {
                  "gate)")
       ->check(CLI::IsMember({"default", "shuffled", "planner"}))
       ->capture_default_str();
+  mc->add_option("--gyro-sources", pipe->gyro_sources,
+                 "with --pipeline and a gyro model: mixed (the plan's static poses and the "
+                 "default rate segments) | rates (the rate segments alone)")
+      ->check(CLI::IsMember({"mixed", "rates"}))
+      ->capture_default_str();
   mc->add_option("--table-rate", pipe->table_rate_dps,
                  "with --pipeline: the simulated table moves at this rate, deg/s, and the planner "
                  "plans for it (default: every move takes 3 s)")

@@ -17,7 +17,7 @@ TEST(Messages, VersionGreetingCarriesProtocolVersion) {
   const auto v = VersionMessage();
   EXPECT_EQ(v["class"], "VERSION");
   EXPECT_EQ(v["proto_major"], 1);
-  EXPECT_EQ(v["proto_minor"], 0);
+  EXPECT_EQ(v["proto_minor"], 1);
   EXPECT_EQ(v["release"], kVersion);
   // JSON Lines: one object on one line.
   EXPECT_EQ(v.dump().find('\n'), std::string::npos);
