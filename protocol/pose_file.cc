@@ -5,10 +5,12 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "core/frames/units.h"
+#include "protocol/pose_json.h"
 
 namespace turncal {
 
@@ -58,6 +60,15 @@ bool ParseJson(const std::string& text, std::vector<TablePose>* poses, std::stri
       ok = false;
     }
     TablePose pose;
+    if (ok && e.is_object() && (e.contains("rate_axis") || e.contains("rate_dps"))) {
+      std::string why;
+      if (!protocol::ParseTablePose(e, &pose, &why)) {
+        *error = fmt::format("pose {} (counting from 0): {}", i, why);
+        return false;
+      }
+      poses->push_back(pose);
+      continue;
+    }
     if (!ok || !FromDegrees(a[0], a[1], a[2], &pose)) {
       *error = fmt::format(
           "pose {} (counting from 0): need [phi, gamma, psi] or {{\"phi_deg\", \"gamma_deg\", "
@@ -79,10 +90,11 @@ bool ParseCsv(const std::string& text, std::vector<TablePose>* poses, std::strin
     ++number;
     const auto start = line.find_first_not_of(" \t\r");
     if (start == std::string::npos || line[start] == '#') continue;
-    const bool header =
-        first_content && std::any_of(line.begin(), line.end(), [](char c) {
-          return std::isalpha(static_cast<unsigned char>(c)) && c != 'e' && c != 'E';
-        });
+    // A header: a first line whose first field is not a number.
+    std::string first_field = line.substr(start, line.find_first_of(",; \t\r", start) - start);
+    char* end = nullptr;
+    std::strtod(first_field.c_str(), &end);
+    const bool header = first_content && (first_field.empty() || *end != '\0');
     first_content = false;
     if (header) continue;
     std::string cleaned = line;
@@ -90,13 +102,25 @@ bool ParseCsv(const std::string& text, std::vector<TablePose>* poses, std::strin
     std::replace(cleaned.begin(), cleaned.end(), ';', ' ');
     std::istringstream fields(cleaned);
     double a[3];
-    std::string extra;
+    std::string axis, extra;
+    double rate_dps = 0;
     TablePose pose;
-    if (!(fields >> a[0] >> a[1] >> a[2]) || (fields >> extra) ||
-        !FromDegrees(a[0], a[1], a[2], &pose)) {
+    if (!(fields >> a[0] >> a[1] >> a[2]) || !FromDegrees(a[0], a[1], a[2], &pose)) {
       *error = fmt::format("line {}: need three finite numbers phi, gamma, psi in degrees: '{}'",
                            number, line);
       return false;
+    }
+    // A rate segment: two more fields, the turning axis and its rate in deg/s.
+    if (fields >> axis) {
+      if (!TableAxisFromString(axis, &pose.rate_axis) || !(fields >> rate_dps) ||
+          !std::isfinite(rate_dps) || rate_dps == 0 || (fields >> extra)) {
+        *error = fmt::format(
+            "line {}: after phi, gamma, psi only a rate segment's axis (outer, middle, inner) and "
+            "rate (deg/s, non-zero): '{}'",
+            number, line);
+        return false;
+      }
+      pose.rate_radps = rate_dps * kRadPerDeg;
     }
     poses->push_back(pose);
   }

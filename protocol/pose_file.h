@@ -5,8 +5,10 @@
 // JSON: an array of [phi, gamma, psi] or of objects {"phi_deg":..,"gamma_deg":..,"psi_deg":..}
 // (keys "phi", "gamma", "psi" are accepted too), or an object {"poses": <such an array>}.
 // CSV: one pose a line, "phi,gamma,psi" (commas, semicolons or blanks between the numbers);
-// blank lines and lines starting with '#' are skipped, and a first line holding letters is a
-// header.
+// blank lines and lines starting with '#' are skipped, and a first line whose first field is not
+// a number is a header.
+// A rate segment (issue 21): JSON objects with "rate_axis" and "rate_dps" (protocol/pose_json.h),
+// CSV lines "phi,gamma,psi,AXIS,RATE_DPS" (AXIS outer, middle or inner).
 
 #include <string>
 #include <vector>

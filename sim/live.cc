@@ -21,6 +21,7 @@
 #include <set>
 
 #include "core/frames/units.h"
+#include "protocol/pose_json.h"
 #include "sim/device.h"
 
 namespace turncal::sim {
@@ -588,11 +589,21 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     if (due && (flushed || Clock::now() - due_since >= std::chrono::milliseconds(500))) {
       due_since = Clock::time_point::max();
       const TablePose& pose = events[p].pose;
-      const nlohmann::json request = {{"cmd", "pose"},
-                                      {"index", p},
-                                      {"phi_deg", pose.phi_rad * kDegPerRad},
-                                      {"gamma_deg", pose.gamma_rad * kDegPerRad},
-                                      {"psi_deg", pose.psi_rad * kDegPerRad}};
+      nlohmann::json request = {{"cmd", "pose"},
+                                {"index", p},
+                                {"phi_deg", pose.phi_rad * kDegPerRad},
+                                {"gamma_deg", pose.gamma_rad * kDegPerRad},
+                                {"psi_deg", pose.psi_rad * kDegPerRad}};
+      if (pose.is_rate()) {
+        // A rate segment: the table turns about one axis (docs/protocol.md "rate"); whole
+        // revolutions of at least the session's dwell, as the simulator holds the rate.
+        request = protocol::ToJson(pose);
+        request["cmd"] = "rate";
+        request["axis"] = request["rate_axis"];
+        request.erase("rate_axis");
+        request["index"] = p;
+        request["dwell_s"] = devices[0].capture->session_options.dwell_s;
+      }
       bool sent = true;
       outstanding = 0;
       if (retry_devices.empty()) {
@@ -613,11 +624,10 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
         waiting.clear();
         rejected_by.clear();
         skipped_by.clear();
-        Say({{"event", "pose"},
-             {"index", p},
-             {"phi_deg", pose.phi_rad * kDegPerRad},
-             {"gamma_deg", pose.gamma_rad * kDegPerRad},
-             {"psi_deg", pose.psi_rad * kDegPerRad}});
+        nlohmann::json said = protocol::ToJson(pose);
+        said["event"] = pose.is_rate() ? "rate" : "pose";
+        said["index"] = p;
+        Say(said);
       }
     }
     if (done) break;

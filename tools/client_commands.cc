@@ -320,6 +320,8 @@ int RunWatch(const WatchArgs& a) {
 struct PoseArgs {
   Common common;
   double phi = 0, gamma = 0, psi = 0;
+  std::string axis;  // a rate segment (turncal rate): outer | middle | inner
+  double rate_dps = 0;
   std::string device;
   double dwell = 0;
   int index = -1;
@@ -329,13 +331,19 @@ struct PoseArgs {
 int RunPose(const PoseArgs& a) {
   ClientConnection conn;
   std::string error;
-  if (!conn.Connect(a.common.socket, &error)) return Fail("pose", error);
+  const bool rate = !a.axis.empty();
+  const char* what = rate ? "rate" : "pose";
+  if (!conn.Connect(a.common.socket, &error)) return Fail(what, error);
   nlohmann::json request = {
-      {"cmd", "pose"}, {"phi_deg", a.phi}, {"gamma_deg", a.gamma}, {"psi_deg", a.psi}};
+      {"cmd", what}, {"phi_deg", a.phi}, {"gamma_deg", a.gamma}, {"psi_deg", a.psi}};
+  if (rate) {
+    request["axis"] = a.axis;
+    request["rate_dps"] = a.rate_dps;
+  }
   if (!a.device.empty()) request["device"] = a.device;
   if (a.dwell > 0) request["dwell_s"] = a.dwell;
   if (a.index >= 0) request["index"] = a.index;
-  if (!conn.Send(request, &error)) return Fail("pose", error);
+  if (!conn.Send(request, &error)) return Fail(what, error);
   const bool tty = !a.common.json && ::isatty(STDERR_FILENO);
   std::set<std::string> waiting;
   int index = -1;
@@ -344,11 +352,11 @@ int RunPose(const PoseArgs& a) {
       std::chrono::steady_clock::now() + std::chrono::duration<double>(a.timeout_s);
   while (index < 0 || !waiting.empty()) {
     if (std::chrono::steady_clock::now() > deadline) {
-      return Fail("pose", fmt::format("no answer within {} s (--timeout)", a.timeout_s));
+      return Fail(what, fmt::format("no answer within {} s (--timeout)", a.timeout_s));
     }
     auto line = conn.ReadLine(std::chrono::milliseconds(200), &error);
     if (!line) {
-      if (!error.empty()) return Fail("pose", error);
+      if (!error.empty()) return Fail(what, error);
       continue;
     }
     nlohmann::json e = nlohmann::json::parse(*line, nullptr, false);
@@ -356,13 +364,13 @@ int RunPose(const PoseArgs& a) {
     const std::string kind = e.value("class", "");
     if (a.common.json) fmt::print("{}\n", *line);
     if (kind == "ERROR" && !e.contains("device")) {
-      return a.common.json ? 2 : Fail("pose", e.value("message", ""));
+      return a.common.json ? 2 : Fail(what, e.value("message", ""));
     }
     if (kind == "POSE_ACCEPTED") {
       index = e.value("index", -1);
       for (const auto& d : e["devices"]) waiting.insert(d.get<std::string>());
       for (const auto& [d, state] : e["skipped"].items()) {
-        fmt::print(stderr, "turncal pose: {} skipped ({})\n", d, state.get<std::string>());
+        fmt::print(stderr, "turncal {}: {} skipped ({})\n", what, d, state.get<std::string>());
       }
       continue;
     }
@@ -501,6 +509,30 @@ void AddClientCommands(CLI::App* app) {
   p->add_option("--timeout", pose->timeout_s, "give up after this many seconds")
       ->capture_default_str();
   p->callback([pose] { throw CLI::RuntimeError(RunPose(*pose)); });
+
+  auto spin = std::make_shared<PoseArgs>();
+  auto* rt = app->add_subcommand(
+      "rate",
+      "announce a rate segment: the table turns about AXIS at RATE deg/s, the other axes at "
+      "--phi/--gamma/--psi; wait until the gyro's whole revolutions are captured or rejected "
+      "(docs/protocol.md \"rate\")");
+  AddCommon(rt, &spin->common);
+  rt->add_option("axis", spin->axis, "outer | middle | inner")
+      ->required()
+      ->check(CLI::IsMember({"outer", "middle", "inner"}));
+  rt->add_option("rate", spin->rate_dps, "deg/s, signed")->required();
+  rt->add_option("--phi", spin->phi, "inner axis angle, degrees")->capture_default_str();
+  rt->add_option("--gamma", spin->gamma, "middle axis angle, degrees")->capture_default_str();
+  rt->add_option("--psi", spin->psi, "outer axis angle, degrees")->capture_default_str();
+  rt->add_option("--device", spin->device, "only this device (default: every streaming device)");
+  rt->add_option("--dwell", spin->dwell,
+                 "least seconds to average, rounded up to whole revolutions (default: the "
+                 "daemon's dwell)")
+      ->check(CLI::PositiveNumber);
+  rt->add_option("--index", spin->index, "the segment's index (default: the next)");
+  rt->add_option("--timeout", spin->timeout_s, "give up after this many seconds")
+      ->capture_default_str();
+  rt->callback([spin] { throw CLI::RuntimeError(RunPose(*spin)); });
 
   struct ResetArgs {
     Common common;

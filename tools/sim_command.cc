@@ -6,6 +6,7 @@
 #include <termios.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -340,11 +341,6 @@ int RunSim(const SimCommandArgs& args) {
      : model->sensor() == SensorKind::kGyroscope   ? options.gyro_model
                                                    : options.mag_model) = m;
   }
-  if (!options.gyro_model.empty() && args.poses_file.empty()) {
-    // What a gyro model needs besides the static poses: rate segments, one after each of the
-    // first poses (the default plan's, DefaultRateSegments).
-    options.poses = WithRateSegments(options.poses, DefaultRateSegments());
-  }
 
   if (!args.poses_file.empty()) {
     std::ifstream in(args.poses_file, std::ios::binary);
@@ -354,6 +350,13 @@ int RunSim(const SimCommandArgs& args) {
       fmt::print(stderr, "turncal sim: {}: {}\n", args.poses_file, in ? error : "cannot open");
       return 2;
     }
+  }
+  const bool has_rates = std::any_of(options.poses.begin(), options.poses.end(),
+                                     [](const TablePose& p) { return p.is_rate(); });
+  if (!options.gyro_model.empty() && !has_rates) {
+    // What a gyro model needs besides the static poses: rate segments, one after each of the
+    // first poses (DefaultRateSegments), unless the poses hold their own.
+    options.poses = WithRateSegments(options.poses, DefaultRateSegments());
   }
   SessionSimOptions& o = options.session;
   SensorClassByName(args.sensor_class, &o.sensor);
@@ -436,8 +439,11 @@ void AddSimCommand(CLI::App* app) {
                   "mip | gx2 | xbus | xbus-legacy (with --controller, one per --live, in order)")
       ->required();
   cmd->add_option("--model", args->models,
-                  "accelerometer and/or magnetometer model (accel12|accel13, mag13|mag22); "
-                  "default accel13 and mag13")
+                  "accelerometer, magnetometer and/or gyroscope model (accel12|accel13, "
+                  "mag13|mag22, gyro12|gyro21); default accel13 and mag13 and no gyro model (the "
+                  "gyro then reads the table's rate plus a bias). With a gyro model the session "
+                  "holds rate segments: the --poses file's (CSV phi,gamma,psi,AXIS,RATE) or the "
+                  "default ones after the first static poses")
       ->capture_default_str();
   cmd->add_option("--poses", args->poses_file,
                   "pose plan: JSON or CSV of phi, gamma, psi in degrees (default: 26 cube "

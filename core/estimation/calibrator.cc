@@ -478,6 +478,19 @@ Estimate Calibrator::SolveOnce() {
       theta[j] = std::remainder(theta[j], 2 * M_PI);
     }
   }
+  // So are the non-orthogonality angles, with one more symmetry: T_r^s's third row is the same
+  // for (alpha1, alpha2) and (alpha1 + pi, pi - alpha2). The estimate is reported on the branch
+  // with cos(alpha2) > 0, both in (-pi, pi] (a gyro's early solves, its scale barely determined,
+  // ended on the other branch and later ones warm-started there).
+  if (const int a1 = model_->index_of("alpha1"), a2 = model_->index_of("alpha2");
+      a1 >= 0 && a2 >= 0) {
+    if (std::cos(theta[a2]) < 0) {
+      theta[a1] += M_PI;
+      theta[a2] = M_PI - theta[a2];
+    }
+    theta[a1] = std::remainder(theta[a1], 2 * M_PI);
+    theta[a2] = std::remainder(theta[a2], 2 * M_PI);
+  }
   if (gauge) {
     ApplyMag22Gauge(*model_, &theta);
     est.gauge = ToString(options_.mag22_gauge);
