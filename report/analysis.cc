@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
@@ -10,8 +11,44 @@ namespace turncal::report {
 namespace {
 
 const TriadStats* TriadOf(const MeasurementModel& model, const PoseRecord& record) {
-  const auto& triad = model.sensor() == SensorKind::kAccelerometer ? record.acc : record.mag;
+  const auto& triad = model.sensor() == SensorKind::kAccelerometer ? record.acc
+                      : model.sensor() == SensorKind::kGyroscope   ? record.gyr
+                                                                   : record.mag;
   return triad ? &*triad : nullptr;
+}
+
+// 1 sigma of every parameter from the weighted poses' Fisher information at theta; infinite for
+// a parameter the information leaves undetermined (a null direction of the column-scaled
+// information touching it by more than 1e-3).
+Eigen::VectorXd FisherSigma(const MeasurementModel& model, const Eigen::VectorXd& theta,
+                            const std::vector<WeightedPose>& poses) {
+  const int n = model.num_parameters();
+  const Eigen::VectorXd scale = ParameterScales(model);
+  Eigen::MatrixXd info = Eigen::MatrixXd::Zero(n, n);
+  for (const WeightedPose& w : poses) {
+    Jacobian3 J;
+    model.Predict(theta, w.pose, &J);
+    const Eigen::MatrixXd Jw = w.sqrt_information * J * scale.asDiagonal();
+    info += Jw.transpose() * Jw;
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(info);
+  const Eigen::VectorXd lambda = eig.eigenvalues();
+  const double top = lambda.maxCoeff();
+  Eigen::VectorXd var = Eigen::VectorXd::Zero(n);
+  Eigen::VectorXd undetermined = Eigen::VectorXd::Zero(n);
+  for (int k = 0; k < n; ++k) {
+    const Eigen::VectorXd v = eig.eigenvectors().col(k);
+    if (!(top > 0) || lambda[k] <= 1e-12 * top) {
+      undetermined = undetermined.cwiseMax(v.cwiseAbs());
+    } else {
+      var += v.cwiseAbs2() / lambda[k];
+    }
+  }
+  Eigen::VectorXd sigma(n);
+  for (int j = 0; j < n; ++j) {
+    sigma[j] = undetermined[j] > 1e-3 ? INFINITY : std::sqrt(var[j]) * scale[j];
+  }
+  return sigma;
 }
 
 Eigen::Vector3d Rms(const std::vector<Eigen::Vector3d>& v) {
@@ -30,6 +67,15 @@ std::vector<Eigen::Vector3d> ReferenceDirections(const protocol::CalibrationDocu
   const int beta_index = model.index_of("beta");
   const double beta_rad = beta_index >= 0 ? doc.theta[beta_index] : 0.0;
   std::vector<Eigen::Vector3d> out;
+  if (model.sensor() == SensorKind::kGyroscope) {
+    // The inertial rate's direction: a rate segment's turning axis, a static pose's Earth rate.
+    for (const TablePose& pose : doc.poses) {
+      const Eigen::Vector3d w =
+          pose.MeanC_p_q() * EarthRateNed(doc.context.reference) + pose.TableRate_q();
+      out.push_back((doc.context.mounting * w).normalized());
+    }
+    return out;
+  }
   for (const TablePose& pose : doc.poses) {
     const Eigen::Vector3d v_sensor =
         doc.context.mounting * pose.C_p_q() * C_ned_p(beta_rad) * v_ned;
@@ -105,9 +151,20 @@ ModelAnalysis AnalyzeCalibration(const protocol::CalibrationDocument& doc) {
           worst);
     }
   }
-  a.observability =
-      AnalyzeData(model, doc.theta, calibrator.weighted_poses(), ObservabilityOptions{});
+  const std::vector<WeightedPose> weighted = calibrator.weighted_poses();
+  a.observability = AnalyzeData(model, doc.theta, weighted, ObservabilityOptions{});
   a.observability_done = true;
+  if (model.sensor() == SensorKind::kGyroscope) {
+    std::vector<WeightedPose> still, rate;
+    for (const WeightedPose& w : weighted) (w.pose.is_rate() ? rate : still).push_back(w);
+    if (!still.empty() && !rate.empty()) {
+      SourceSigmas& src = a.sources;
+      src.sigma_all = FisherSigma(model, doc.theta, weighted);
+      src.source = {"static poses", "rate segments"};
+      src.records = {static_cast<int>(still.size()), static_cast<int>(rate.size())};
+      src.sigma = {FisherSigma(model, doc.theta, still), FisherSigma(model, doc.theta, rate)};
+    }
+  }
   return a;
 }
 

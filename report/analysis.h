@@ -38,6 +38,17 @@ struct Convergence {
   std::string note;  // when the re-solve is not possible or differs
 };
 
+// What each source of information determines (issue 21): every parameter's 1 sigma from the
+// records of one source alone (static poses, rate segments), by the Fisher information at the
+// estimate with each record weighed as the observability analysis weighs it; infinite where that
+// source alone leaves the parameter undetermined.
+struct SourceSigmas {
+  std::vector<std::string> source;     // "static poses", "rate segments"
+  std::vector<int> records;            // per source
+  std::vector<Eigen::VectorXd> sigma;  // per source, in the model's order
+  Eigen::VectorXd sigma_all;           // every record together, the same way
+};
+
 struct ModelAnalysis {
   bool has_records = false;       // false: only the coverage (from the table angles) is computed
   std::string no_records_reason;  // why, when !has_records
@@ -49,6 +60,8 @@ struct ModelAnalysis {
   Convergence convergence;
   bool observability_done = false;
   DataReport observability;  // at the estimate over the document's records
+  // For a gyroscope model whose records hold more than one kind (empty source list otherwise).
+  SourceSigmas sources;
 };
 
 // Everything above for one calibration document.

@@ -92,9 +92,10 @@ std::string ModelSection(const protocol::CalibrationDocument& d) {
   {
     // The noise model the calibration was made with (docs/ACCURACY.md "Drift").
     const BiasDrift& drift = d.calibrator.drift;
-    const bool accel = model.sensor() == SensorKind::kAccelerometer;
-    const double unit = accel ? 1e3 / 9.80665 : 1e3;  // mg or mGauss (devices reporting Gauss)
-    const char* unit_name = accel ? "mg" : "mG";
+    // mg, deg/h, or mGauss (devices reporting Gauss).
+    const ResidualUnit triad_unit = ResidualUnitFor(model);
+    const double unit = triad_unit.per_triad_unit;
+    const char* unit_name = triad_unit.name;
     std::string text;
     if (drift.enabled()) {
       text = fmt::format(
@@ -129,9 +130,12 @@ std::string ModelSection(const protocol::CalibrationDocument& d) {
           "&#963; are not honest in an ordered plan)",
           d.calibrator.pose_offset_sigma * unit, unit_name);
     }
-    if (accel && d.calibrator.noise_density > 0) {
+    if (model.sensor() == SensorKind::kAccelerometer && d.calibrator.noise_density > 0) {
       text += fmt::format("; white-noise floor {:.3g} &#181;g/&#8730;Hz",
                           d.calibrator.noise_density * 1e6 / 9.80665);
+    } else if (model.sensor() == SensorKind::kGyroscope && d.calibrator.noise_density > 0) {
+      text += fmt::format("; white-noise floor {:.3g} deg/s/&#8730;Hz",
+                          d.calibrator.noise_density * 180 / M_PI);
     }
     o += "<p class=\"meta\"><strong>Noise model:</strong> " + text + ".</p>";
   }
@@ -151,6 +155,7 @@ std::string ModelSection(const protocol::CalibrationDocument& d) {
   o += "<h3>Gate</h3>" + GateHtml(d);
   o += "<h3>Parameters</h3>" + ParameterTableHtml(d);
   o += "<h3>Sensor matrix</h3>" + PhysicalFormHtml(d);
+  if (!a.sources.source.empty()) o += "<h3>What each source determines</h3>" + SourcesHtml(d, a);
   o += "<h3>Residuals</h3>" + ResidualSummaryHtml(d, a) + ResidualsSvg(d, a);
   o += "<h3>Pose coverage</h3>" + CoverageSvg(d, a);
   o += "<h3>Convergence</h3>" + ConvergenceSvg(d, a);
@@ -164,6 +169,57 @@ std::string ModelSection(const protocol::CalibrationDocument& d) {
                                            : fmt::format("{:.2g}", a.convergence.resolve_max_z));
   }
   o += "<h3>Observability</h3>" + ObservabilityHtml(d, a);
+  return o + "</section>\n";
+}
+
+// The angle between the gyro and accelerometer triads: both models' C(eps) M are rotations from
+// the table frame, so C_gyro C_acc^T turns one triad into the other. Its 1 sigma by central
+// differences over both eps (two independent calibrations).
+std::string TriadAngleHtml(const std::vector<protocol::CalibrationDocument>& docs) {
+  const protocol::CalibrationDocument *acc = nullptr, *gyro = nullptr;
+  for (const auto& d : docs) {
+    const SensorKind kind = d.measurement_model->sensor();
+    if (kind == SensorKind::kAccelerometer && !acc && d.measurement_model->index_of("eps_x") >= 0)
+      acc = &d;
+    if (kind == SensorKind::kGyroscope && !gyro) gyro = &d;
+  }
+  if (!acc || !gyro) return "";
+  auto eps = [](const protocol::CalibrationDocument& d) -> Eigen::Vector3d {
+    return d.theta.segment<3>(d.measurement_model->index_of("eps_x"));
+  };
+  auto angle = [&](const Eigen::Vector3d& ea, const Eigen::Vector3d& eg) {
+    const Mat3<double> R =
+        C_eps(eg.x(), eg.y(), eg.z()) * C_eps(ea.x(), ea.y(), ea.z()).transpose();
+    return std::acos(std::clamp((R.trace() - 1) / 2, -1.0, 1.0));
+  };
+  const Eigen::Vector3d ea = eps(*acc), eg = eps(*gyro);
+  const double value = angle(ea, eg);
+  double var = 0.0;
+  bool with_sigma = true;
+  for (const auto* d : {acc, gyro}) {
+    const int k0 = d->measurement_model->index_of("eps_x");
+    if (d->covariance.rows() < k0 + 3 || !d->covariance.block(k0, k0, 3, 3).allFinite()) {
+      with_sigma = false;
+      break;
+    }
+    Eigen::RowVector3d J;
+    for (int k = 0; k < 3; ++k) {
+      const double h = 1e-7;
+      Eigen::Vector3d up = d == acc ? ea : eg, down = up;
+      up[k] += h;
+      down[k] -= h;
+      J[k] =
+          (d == acc ? angle(up, eg) - angle(down, eg) : angle(ea, up) - angle(ea, down)) / (2 * h);
+    }
+    var += (J * d->covariance.block(k0, k0, 3, 3) * J.transpose())(0, 0);
+  }
+  std::string o = "<section class=\"triads\"><h2>Gyroscope and accelerometer triads</h2>";
+  o += fmt::format(
+      R"(<p id="triad-angle" data-value="{}">The angle between the gyro triad ({}) and the )"
+      R"(accelerometer triad ({}): {:.4f}&#176;{}, from their rotations from the table frame )"
+      R"((eps of each).</p>)",
+      fmt::format("{:.17g}", value), Escape(gyro->model), Escape(acc->model), value * 180 / M_PI,
+      with_sigma ? fmt::format(" &#177; {:.4f}&#176;", std::sqrt(var) * 180 / M_PI) : "");
   return o + "</section>\n";
 }
 
@@ -213,6 +269,7 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   o += SummaryHtml(docs);
   o += "</header>\n";
   for (const auto& d : docs) o += ModelSection(d);
+  o += TriadAngleHtml(docs);
   o += "</body>\n</html>\n";
   *html = std::move(o);
   return true;

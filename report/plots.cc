@@ -25,9 +25,7 @@ std::string Missing(const std::string& id, const std::string& title, const std::
   return o + svg::Close();
 }
 
-std::string SensorWord(const MeasurementModel& model) {
-  return model.sensor() == SensorKind::kAccelerometer ? "accelerometer" : "magnetometer";
-}
+std::string SensorWord(const MeasurementModel& model) { return ToString(model.sensor()); }
 
 // The range of finite positive values, out to whole decades (including 1 when asked).
 bool DecadeRange(const std::vector<double>& values, bool with_one, double* lo, double* hi) {
@@ -53,6 +51,7 @@ bool DecadeRange(const std::vector<double>& values, bool with_one, double* lo, d
 
 ResidualUnit ResidualUnitFor(const MeasurementModel& model) {
   if (model.sensor() == SensorKind::kAccelerometer) return {1e3 / kStandardGravity_mps2, "mg"};
+  if (model.sensor() == SensorKind::kGyroscope) return {180 / M_PI * 3600, "deg/h"};
   return {1e3, "mG"};
 }
 
@@ -146,8 +145,11 @@ std::string ResidualsSvg(const protocol::CalibrationDocument& doc, const ModelAn
 
 std::string CoverageSvg(const protocol::CalibrationDocument& doc, const ModelAnalysis& a) {
   const std::string id = "coverage-" + doc.model;
-  const bool accel = doc.measurement_model->sensor() == SensorKind::kAccelerometer;
-  const std::string vector_name = accel ? "gravity g" : "the Earth field B";
+  const SensorKind kind = doc.measurement_model->sensor();
+  const std::string vector_name = kind == SensorKind::kAccelerometer ? "gravity g"
+                                  : kind == SensorKind::kGyroscope
+                                      ? "the inertial rate (rate segments' axes, the Earth's rate)"
+                                      : "the Earth field B";
   const std::string title =
       fmt::format("{} pose coverage: {} in the sensor frame", doc.model, vector_name);
   if (a.reference_dir_sensor.empty()) {

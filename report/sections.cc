@@ -153,6 +153,29 @@ std::string PhysicalFormHtml(const protocol::CalibrationDocument& doc) {
                     with_sigma ? &sigma : nullptr);
     return o;
   }
+  if (model.sensor() == SensorKind::kGyroscope) {
+    Mat3<double> sigma;
+    const bool with_sigma = AccelGSigma(doc, &sigma);
+    o += "<p>The gyroscope's G<sub>&#969;</sub> = (I+S) T<sub>r</sub><sup>s</sup> "
+         "C<sub>q</sub><sup>r</sup> maps the inertial rate in the table frame to the reading "
+         "(scale factors in ppm, misalignment in degrees above; bias in deg/h), with 1&#963; "
+         "propagated from the covariance:</p>";
+    o += MatrixHtml("G (gyroscope)", AccelG(doc.theta, doc.context.mounting),
+                    with_sigma ? &sigma : nullptr);
+    if (const int b = model.index_of("Bg_xx"); b >= 0) {
+      Mat3<double> B, Bs;
+      constexpr double kDegHourPerG = 180 / M_PI * 3600 * 9.80665;
+      for (int e = 0; e < 9; ++e) {
+        B(e / 3, e % 3) = doc.theta[b + e] * kDegHourPerG;
+        Bs(e / 3, e % 3) = doc.sigma.size() > b + e ? doc.sigma[b + e] * kDegHourPerG : NAN;
+      }
+      o += MatrixHtml(
+          "B_g, deg/h/g (output axis i's response to the specific force along q's "
+          "axis j)",
+          B, &Bs);
+    }
+    return o;
+  }
   const int g11 = model.index_of("g11");
   if (g11 < 0) {
     // mag-physical: its 22 parameters are the physical breakdown, of which a turntable sees only
@@ -216,7 +239,42 @@ std::string ResidualSummaryHtml(const protocol::CalibrationDocument& doc, const 
       "triad's own unit ({}).</p>",
       r.after.size(), ToString(doc.measurement_model->sensor()),
       doc.measurement_model->sensor() == SensorKind::kAccelerometer ? "m/s&#178;"
+      : doc.measurement_model->sensor() == SensorKind::kGyroscope   ? "rad/s"
                                                                     : "the device's unit");
+  return o;
+}
+
+std::string SourcesHtml(const protocol::CalibrationDocument& doc, const ModelAnalysis& a) {
+  const SourceSigmas& src = a.sources;
+  const MeasurementModel& model = *doc.measurement_model;
+  std::string o = fmt::format(
+      R"(<table class="sources" id="sources-{}"><thead><tr><th>parameter</th>)", Escape(doc.model));
+  for (std::size_t k = 0; k < src.source.size(); ++k) {
+    o += fmt::format("<th>1&#963; from {} alone ({})</th>", Escape(src.source[k]), src.records[k]);
+  }
+  o += "<th>1&#963; from all</th><th>determined by</th></tr></thead><tbody>";
+  for (int j = 0; j < model.num_parameters(); ++j) {
+    const ParameterInfo& p = model.parameters()[static_cast<std::size_t>(j)];
+    o += fmt::format(R"(<tr id="source-{}-{}"><td>{}</td>)", Escape(doc.model), Escape(p.name),
+                     Escape(p.name));
+    std::vector<std::string> by;
+    for (std::size_t k = 0; k < src.source.size(); ++k) {
+      const double s = src.sigma[k][j];
+      o += fmt::format(R"(<td class="num" data-sigma="{}">{}</td>)", Exact(s),
+                       Escape(FormatSigma(p, s)));
+      // A source determines a parameter alone when its sigma is within 3x of the combined one.
+      if (std::isfinite(s) && s <= 3 * src.sigma_all[j]) by.push_back(src.source[k]);
+    }
+    std::string verdict = by.empty() ? "both together" : by.front();
+    if (by.size() > 1) verdict = "either (" + by[0] + " or " + by[1] + ")";
+    o += fmt::format(R"(<td class="num">{}</td><td>{}</td></tr>)",
+                     Escape(FormatSigma(p, src.sigma_all[j])), Escape(verdict));
+  }
+  o += "</tbody></table>";
+  o += "<p class=\"small\">Each source's records alone, weighed as the observability analysis "
+       "weighs them, by the Fisher information at the estimate; inf: that source alone cannot "
+       "determine the parameter. \"Determined by\" names a source whose sigma alone is within 3"
+       "&#215; of the combined one; \"both together\" means neither comes near alone.</p>";
   return o;
 }
 

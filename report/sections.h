@@ -18,6 +18,9 @@ std::string ParameterTableHtml(const protocol::CalibrationDocument& doc);
 std::string PhysicalFormHtml(const protocol::CalibrationDocument& doc);
 std::string ResidualSummaryHtml(const protocol::CalibrationDocument& doc,
                                 const ModelAnalysis& analysis);
+// A gyroscope's parameters by source: 1 sigma from the static poses alone, from the rate
+// segments alone, and from both (ModelAnalysis::sources).
+std::string SourcesHtml(const protocol::CalibrationDocument& doc, const ModelAnalysis& analysis);
 std::string ObservabilityHtml(const protocol::CalibrationDocument& doc,
                               const ModelAnalysis& analysis);
 

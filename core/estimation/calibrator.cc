@@ -12,6 +12,7 @@
 #include "core/estimation/gls_whitening.h"
 #include "core/estimation/gyro_linear_start.h"
 #include "core/estimation/linear_start.h"
+#include "core/modeling/accel_physical.h"
 #include "core/modeling/mag22_gauge.h"
 
 namespace turncal {
@@ -478,18 +479,27 @@ Estimate Calibrator::SolveOnce() {
       theta[j] = std::remainder(theta[j], 2 * M_PI);
     }
   }
-  // So are the non-orthogonality angles, with one more symmetry: T_r^s's third row is the same
-  // for (alpha1, alpha2) and (alpha1 + pi, pi - alpha2). The estimate is reported on the branch
-  // with cos(alpha2) > 0, both in (-pi, pi] (a gyro's early solves, its scale barely determined,
-  // ended on the other branch and later ones warm-started there).
-  if (const int a1 = model_->index_of("alpha1"), a2 = model_->index_of("alpha2");
-      a1 >= 0 && a2 >= 0) {
-    if (std::cos(theta[a2]) < 0) {
-      theta[a1] += M_PI;
-      theta[a2] = M_PI - theta[a2];
+  // The physical parameters (S, alpha, eps) of a sensor matrix G = (I+S) T_r^s C(eps) M have
+  // exact symmetries: (alpha1, alpha2) and (alpha1 + pi, pi - alpha2) give the same T_r^s, and
+  // eps_x + pi with 1 + Sy and 1 + Sz negated the same G. The estimate is reported on the branch
+  // the LQ decomposition of its G gives (1 + S > 0, cos alpha2 > 0, angles in (-pi, pi]):
+  // a gyro's early solves, with its scale factors barely determined by the Earth's rate alone,
+  // ended on other branches and later ones warm-started there (alpha1 off by pi in 5 of 200
+  // pipeline Monte Carlo runs; Sy = -2 after 26 static poses).
+  if (const int iS = model_->index_of("Sx"), iA = model_->index_of("alpha1"),
+      iE = model_->index_of("eps_x");
+      iS >= 0 && iA >= 0 && iE >= 0) {
+    AccelPhysical p;
+    p.S = theta.segment<3>(iS);
+    p.alpha = theta.segment<3>(iA);
+    p.eps = theta.segment<3>(iE);
+    const Mat3<double> G = AccelGFromPhysical(p, options_.context.mounting);
+    AccelPhysical canonical;
+    if (AccelPhysicalFromG(G, options_.context.mounting, &canonical, nullptr)) {
+      theta.segment<3>(iS) = canonical.S;
+      theta.segment<3>(iA) = canonical.alpha;
+      theta.segment<3>(iE) = canonical.eps;
     }
-    theta[a1] = std::remainder(theta[a1], 2 * M_PI);
-    theta[a2] = std::remainder(theta[a2], 2 * M_PI);
   }
   if (gauge) {
     ApplyMag22Gauge(*model_, &theta);

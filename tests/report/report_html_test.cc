@@ -24,6 +24,7 @@
 #include "daemon/station.h"
 #include "protocol/sequencer_json.h"
 #include "sim/capture.h"
+#include "sim/session_sim.h"
 #include "sim/synthetic.h"
 
 namespace turncal {
@@ -32,18 +33,23 @@ namespace {
 struct Session {
   std::string dir;
   std::vector<nlohmann::json> calibrations;  // one per model
+  Eigen::VectorXd accel_truth, gyro_truth;
 };
 
 // A simulated session replayed through the station into a state directory; models whose gate
 // did not pass are published by operator override, so every model has a calibration.
 Session RunSession(const std::string& stem, drivers::Protocol protocol,
-                   const std::string& accel_model, const std::string& mag_model,
-                   std::uint64_t seed) {
+                   const std::string& accel_model, const std::string& mag_model, std::uint64_t seed,
+                   const std::string& gyro_model = "") {
   sim::SimCaptureOptions o;
   o.protocol = protocol;
   o.accel_model = accel_model;
   o.mag_model = mag_model;
+  o.gyro_model = gyro_model;
   o.poses = CubePoses26();
+  if (!gyro_model.empty()) {
+    for (const auto& r : DefaultRateSegments()) o.poses.push_back(r);
+  }
   o.session.seed = seed;
   sim::SimCapture c;
   std::string error;
@@ -58,9 +64,12 @@ Session RunSession(const std::string& stem, drivers::Protocol protocol,
     for (const auto& r : c.records) writer->Append(r.type, r.device, r.t_ns, r.payload, &error);
     EXPECT_TRUE(writer->Close(&error)) << error;
   }
+  s.accel_truth = c.session.accel_truth;
+  s.gyro_truth = c.session.gyro_truth;
   daemon::StationOptions so;
   so.state_dir = s.dir;
   so.models = {accel_model, mag_model};
+  if (!gyro_model.empty()) so.models.push_back(gyro_model);
   daemon::Station station({"imu"}, so, nullptr);
   drivers::CaptureReader reader;
   EXPECT_TRUE(reader.Open(path, &error)) << error;
@@ -286,6 +295,40 @@ TEST_F(CalibrationReport, WithoutRecordsThePlotsSayWhatIsMissing) {
   }
   EXPECT_NE(html.find("carries no pose measurements"), std::string::npos);
   EXPECT_NE(html.find("class=\"pose-directions\""), std::string::npos);
+}
+
+// Issue 21: a gyroscope's report shows G_w, which source determined which parameter, and the
+// angle between the gyro and accelerometer triads.
+TEST(GyroReport, SaysWhichSourceDeterminedWhatAndTheTriadAngle) {
+  const Session s = RunSession("gyro", drivers::Protocol::kMip, "accel13", "mag13", 9, "gyro12");
+  std::string html, error;
+  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, ""}, &html, &error)) << error;
+  std::filesystem::remove_all(s.dir);
+  EXPECT_NE(html.find("G (gyroscope)"), std::string::npos);
+  ASSERT_NE(html.find("id=\"sources-gyro12\""), std::string::npos);
+  // The scale factors come from the rate segments: the static poses alone see the Earth's rate
+  // only and leave them hundreds of times less certain; the bias is determined by either.
+  const auto row = [&](const std::string& p) {
+    const std::size_t at = html.find("id=\"source-gyro12-" + p + "\"");
+    return at == std::string::npos ? std::string() : html.substr(at, html.find("</tr>", at) - at);
+  };
+  EXPECT_NE(row("Sx").find("<td>rate segments</td>"), std::string::npos) << row("Sx");
+  EXPECT_NE(row("eps_z").find("<td>rate segments</td>"), std::string::npos) << row("eps_z");
+  EXPECT_NE(row("bx").find("either"), std::string::npos) << row("bx");
+  // The triad angle within 4 sigma of the truth's.
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(
+      html, m, std::regex("id=\"triad-angle\" data-value=\"([^\"]+)\".*?&#177; ([0-9.]+)&#176;")));
+  const double angle = std::stod(m[1].str()), sigma = std::stod(m[2].str()) * M_PI / 180;
+  std::string e;
+  auto acc = MakeModel("accel13", ModelContext{}, &e);
+  auto gyro = MakeModel("gyro12", ModelContext{}, &e);
+  const Eigen::Vector3d ea = s.accel_truth.segment<3>(acc->index_of("eps_x"));
+  const Eigen::Vector3d eg = s.gyro_truth.segment<3>(gyro->index_of("eps_x"));
+  const Mat3<double> R = C_eps(eg.x(), eg.y(), eg.z()) * C_eps(ea.x(), ea.y(), ea.z()).transpose();
+  const double truth = std::acos(std::clamp((R.trace() - 1) / 2, -1.0, 1.0));
+  EXPECT_GT(sigma, 0.0);
+  EXPECT_LT(std::abs(angle - truth), 4 * sigma) << angle << " truth " << truth;
 }
 
 TEST_F(CalibrationReport, MalformedInputGivesAnErrorNotACrash) {
