@@ -32,13 +32,16 @@ trap cleanup EXIT
 
 # The first pose is (0, 0, 0), where the table rests at the start: the daemon measures the noise
 # there (it needs the first second of the stream still). Every pose differs, so the table command
-# can tell them apart.
+# can tell them apart. The fifth is a rate segment (issue 21: the controller announces it with
+# {"cmd":"rate"}; the simulated gyro follows a gyro12 truth; the daemon's accel13 and mag13 leave
+# its record alone).
 cat > "$dir/poses.csv" << 'EOF'
-phi,gamma,psi
+phi,gamma,psi,axis,rate_dps
 0,0,0
 90,0,45
 0,90,90
 -90,45,180
+0,0,0,outer,90
 180,-45,270
 45,35.26438968,0
 EOF
@@ -67,7 +70,7 @@ pids+=($!)
 for _ in $(seq 600); do [[ -S "$dir/t.sock" ]] && break; sleep 0.05; done
 [[ -S "$dir/t.sock" ]] || { cat "$dir/turncald.log"; echo "FAIL: turncald did not listen"; exit 1; }
 
-"$turncal" sim --protocol xbus --seed 3 --dwell 8 --poses "$dir/poses.csv" --live "$dir/sim" \
+"$turncal" sim --protocol xbus --model gyro12 --seed 3 --dwell 8 --poses "$dir/poses.csv" --live "$dir/sim" \
   --live-speed 2 > "$dir/events.jsonl" 2> "$dir/sim.err" &
 pids+=($!)
 

@@ -5,7 +5,9 @@ For each pose it moves the table (move_table), announces the pose on turncald's 
 ({"cmd":"pose"}), shows the collection progress (POSE_PROGRESS) and waits until every device
 named in POSE_ACCEPTED answered with POSE_CAPTURED or POSE_REJECTED. A rejected pose is announced
 again to the devices that rejected it, up to --retries times, without moving the table. The poses come from a CSV file
-(phi,gamma,psi in degrees, one header line) or, with --plan, from the daemon's own advice
+(phi,gamma,psi in degrees, one header line; a row phi,gamma,psi,AXIS,RATE is a rate segment: the
+table turns about AXIS -- outer, middle or inner -- at RATE deg/s with the other axes at their
+angles, announced as {"cmd":"rate"} for a gyroscope model) or, with --plan, from the daemon's own advice
 ({"cmd":"next_pose"}) until the publication gate passes for every model of every device
 ({"cmd":"result"}).
 
@@ -18,7 +20,8 @@ stopped before the gate passed; 2 usage, connection or protocol error, a pose re
 example a user not in control_users), or a failed table command.
 
 Replace move_table() with your table's driver; the default runs --table-cmd with the three
-angles as arguments (it must return once the table is at the pose) or asks the operator.
+angles as arguments, and for a rate segment the axis and the rate after them (it must return once
+the table is at the pose, or turns at the rate steadily), or asks the operator.
 """
 import argparse
 import collections
@@ -42,16 +45,25 @@ class Fatal(Exception):
 # --------------------------------------------------------------------------------------------
 # The turntable. Replace this with your own driver.
 
-def move_table(phi, gamma, psi, args):
-    """Brings the table to (phi, gamma, psi) degrees and returns once it is there."""
+def move_table(pose, args):
+    """Brings the table to pose (phi, gamma, psi) degrees and returns once it is there; for a
+    rate segment (phi, gamma, psi, axis, rate_dps), once it turns about the axis at the rate
+    steadily with the other axes at their angles."""
+    phi, gamma, psi = pose[:3]
     if args.table_cmd:
         command = shlex.split(args.table_cmd) + [fmt_angle(phi), fmt_angle(gamma), fmt_angle(psi)]
+        if len(pose) == 5:
+            command += [pose[3], fmt_angle(pose[4])]
         done = subprocess.run(command)
         if done.returncode != 0:
             raise Fatal(f"table command {command} exited with {done.returncode}")
         return
     prompt = (f"Move the table to phi {phi:g}, gamma {gamma:g}, psi {psi:g} degrees, "
               "let it stop, then press Enter: ")
+    if len(pose) == 5:
+        prompt = (f"Turn the table about its {pose[3]} axis at {pose[4]:g} deg/s with the others "
+                  f"at phi {phi:g}, gamma {gamma:g}, psi {psi:g} degrees; once the rate is "
+                  "steady, press Enter: ")
     try:
         with open("/dev/tty", "r+") as tty:  # the operator, even when stdout is redirected
             tty.write(prompt)
@@ -172,6 +184,8 @@ def announce(conn, args, pose, targets, progress):
     index)} (a device that did not answer in time is missing), the devices skipped {device:
     state}."""
     base = {"cmd": "pose", "phi_deg": pose[0], "gamma_deg": pose[1], "psi_deg": pose[2]}
+    if len(pose) == 5:  # a rate segment (docs/protocol.md "rate")
+        base.update(cmd="rate", axis=pose[3], rate_dps=pose[4])
     if args.dwell:
         base["dwell_s"] = args.dwell
     requests = []
@@ -218,10 +232,11 @@ def announce(conn, args, pose, targets, progress):
 
 
 def run_pose(conn, args, pose, progress, summary, total=None):
-    phi, gamma, psi = pose
+    phi, gamma, psi = pose[:3]
     number = f"{len(summary) + 1}/{total}" if total else f"{len(summary) + 1} (planned)"
-    print(f"pose {number}: phi {phi:g} gamma {gamma:g} psi {psi:g}", flush=True)
-    move_table(phi, gamma, psi, args)
+    spin = f", turning about the {pose[3]} axis at {pose[4]:g} deg/s" if len(pose) == 5 else ""
+    print(f"pose {number}: phi {phi:g} gamma {gamma:g} psi {psi:g}{spin}", flush=True)
+    move_table(pose, args)
     if args.settle > 0:
         time.sleep(args.settle)
     outcome, skipped, attempts, targets = {}, {}, 0, None  # outcome: device -> (class, index)
@@ -250,6 +265,8 @@ def run_pose(conn, args, pose, progress, summary, total=None):
              "answers": {d: {"class": kind, "index": index}
                          for d, (kind, index) in outcome.items()},
              "skipped": skipped, "ok": captured and not skipped}
+    if len(pose) == 5:
+        entry["pose"].update(rate_axis=pose[3], rate_dps=pose[4])
     summary.append(entry)
     return entry["ok"]
 
@@ -268,8 +285,15 @@ def read_poses(path):
     for n, row in enumerate(rows):
         try:
             phi, gamma, psi = (float(x) for x in row[:3])
+            if len(row) >= 5 and row[3].strip():
+                axis, rate = row[3].strip(), float(row[4])
+                if axis not in ("outer", "middle", "inner") or rate == 0:
+                    raise ValueError(axis)
+                poses.append((phi, gamma, psi, axis, rate))
+                continue
         except ValueError:
-            raise Fatal(f"{path}: pose {n}: need phi,gamma,psi in degrees, got {row}")
+            raise Fatal(f"{path}: pose {n}: need phi,gamma,psi in degrees (and for a rate "
+                        f"segment AXIS,RATE: outer|middle|inner, deg/s), got {row}")
         poses.append((phi, gamma, psi))
     return poses
 
