@@ -20,6 +20,7 @@
 #include <random>
 #include <vector>
 
+#include "core/estimation/move_record.h"
 #include "core/estimation/pose_record.h"
 #include "core/modeling/measurement_model.h"
 #include "core/planning/table_motion.h"
@@ -128,6 +129,13 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
 // accelerometer, magnetometer or gyroscope triad (a rate segment: its whole revolutions).
 PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& event,
                        SensorKind sensor);
+
+// The move from pose event `from` to pose event `to` as the gyro saw it (the ideal cut, with the
+// simulator's known times): the raw gyro integrated over blocks of `block_s` (whole samples,
+// at least one) from the end of `from`'s dwell to the start of `to`'s, the raw accelerometer's
+// mean per block, times in session seconds (core/estimation/move_record.h).
+MoveRecord MoveBetween(const SimulatedSession& session, const SessionPoseEvent& from,
+                       const SessionPoseEvent& to, double rate_hz, double block_s = 0.01);
 
 // The default plan: the 26 cube directions, then 10 rotations about intermediate axes (down along
 // directions between the cube's, psi varied), 36 poses in all.

@@ -131,7 +131,7 @@ int RunData(const MeasurementModel& model, const ObservabilityArgs& args,
   if (!ReadPoses(args.poses_file, &poses, "observability")) return 2;
   const Eigen::Matrix3d W = ExpectedWeight(model, sensor, args.dwell_s);
   std::vector<WeightedPose> weighted;
-  for (const auto& p : poses) weighted.push_back({p, Eigen::Vector3d::Zero(), W});
+  for (const auto& p : poses) weighted.push_back({p, Eigen::Vector3d::Zero(), W, nullptr});
   const DataReport r =
       AnalyzeData(model, Point(model, args, sensor, false), weighted, ObservabilityOptions{});
   GateOptions gate;
@@ -232,7 +232,7 @@ int RunPlan(const ObservabilityArgs& args) {
     t.drift = o.drift;
     // The captured poses as if taken in the file's order from home at the table's rates.
     for (const auto& p : captured)
-      t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information});
+      t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information, nullptr});
     if (t.drift.enabled()) t.captured_windows = options.motion.DwellWindows(captured, args.dwell_s);
     GateDefaultsForClass(args.sensor_class, &t.gate);
     t.gate.accept_gauge_dependent_correction = args.accept_gauge;

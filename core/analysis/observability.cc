@@ -1,5 +1,6 @@
 #include "core/analysis/observability.h"
 
+#include <ceres/cost_function.h>
 #include <fmt/format.h>
 
 #include <Eigen/Eigenvalues>
@@ -231,7 +232,17 @@ Eigen::MatrixXd WhitenedJacobian(const MeasurementModel& model, const Eigen::Vec
   Eigen::MatrixXd J(3 * poses.size(), model.num_parameters());
   Jacobian3 Ji;
   for (std::size_t i = 0; i < poses.size(); ++i) {
-    model.Predict(theta, poses[i].pose, &Ji);
+    if (poses[i].raw_residual) {
+      // A move: its residual's Jacobian (core/estimation/move_residual.h).
+      Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor> Jr(3, theta.size());
+      Eigen::Vector3d value;
+      const double* parameters[] = {theta.data()};
+      double* jacobians[] = {Jr.data()};
+      poses[i].raw_residual->Evaluate(parameters, value.data(), jacobians);
+      Ji = Jr;
+    } else {
+      model.Predict(theta, poses[i].pose, &Ji);
+    }
     J.middleRows(3 * static_cast<Eigen::Index>(i), 3) = poses[i].sqrt_information * Ji;
   }
   return J;

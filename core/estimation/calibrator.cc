@@ -12,6 +12,7 @@
 #include "core/estimation/gls_whitening.h"
 #include "core/estimation/gyro_linear_start.h"
 #include "core/estimation/linear_start.h"
+#include "core/estimation/move_residual.h"
 #include "core/modeling/accel_physical.h"
 #include "core/modeling/mag22_gauge.h"
 
@@ -19,6 +20,7 @@ namespace turncal {
 
 struct Calibrator::Pose {
   WeightedPose weighted;
+  bool move = false;  // a move between two poses: `raw` is its residual (pose: the destination)
   std::unique_ptr<ceres::CostFunction> cost;  // whitened by the pose's own covariance
   // With a drift model: the unwhitened residual, the pose's own (white) covariance and its window.
   std::unique_ptr<ceres::CostFunction> raw;
@@ -278,10 +280,68 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   return true;
 }
 
+bool Calibrator::add_move(const MoveRecord& move, std::string* error) {
+  auto fail = [&](const std::string& message) {
+    if (error) *error = message;
+    return false;
+  };
+  if (!model_) return fail(model_error_);
+  if (model_->sensor() != SensorKind::kGyroscope) return fail("a move is a gyroscope's record");
+  if (!(options_.noise_density > 0)) return fail("a move needs the gyro's noise_density");
+  const Eigen::VectorXd theta0 =
+      theta_.size() == model_->num_parameters() ? theta_ : model_->nominal();
+  std::string why;
+  auto raw = MoveResidual::Make(*model_, move, theta0, options_.noise_density, &why);
+  if (!raw) return fail(why);
+  auto weighted = MoveResidual::Make(*model_, move, theta0, options_.noise_density, &why);
+  Eigen::Matrix3d white = raw->white_covariance();
+  white = 0.5 * (white + white.transpose());
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(white);
+  const Eigen::Vector3d lambda =
+      eig.eigenvalues().array() + options_.pose_offset_sigma * options_.pose_offset_sigma;
+  if (!(lambda.minCoeff() > 0)) return fail("the move's covariance is singular");
+  Pose pose;
+  pose.move = true;
+  pose.weighted.pose = move.to;
+  pose.weighted.measured = Eigen::Vector3d::Zero();
+  pose.weighted.sqrt_information = SqrtInformation(eig.eigenvectors(), lambda);
+  weighted->SetSqrtInformation(pose.weighted.sqrt_information);
+  pose.weighted.raw_residual = std::shared_ptr<const ceres::CostFunction>(
+      MoveResidual::Make(*model_, move, theta0, options_.noise_density, &why).release());
+  pose.cost = std::move(weighted);
+  pose.raw = std::move(raw);
+  pose.white = eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
+  pose.window = TimeWindow{move.t_start_s, move.t_end_s};
+  pose.host_window = pose.window;
+  poses_.push_back(std::move(pose));
+  return true;
+}
+
+Eigen::Vector3d Calibrator::MeasuredMinusPredicted(const Pose& p, const Eigen::VectorXd& theta,
+                                                   Jacobian3* jacobian) const {
+  if (!p.move) {
+    return p.weighted.measured - (jacobian ? model_->Predict(theta, p.weighted.pose, jacobian)
+                                           : model_->Predict(theta, p.weighted.pose));
+  }
+  // The raw residual is prediction - measurement (as the static poses' raw cost).
+  Eigen::Vector3d value;
+  const double* parameters[] = {theta.data()};
+  if (jacobian) {
+    Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor> J(3, theta.size());
+    double* jacobians[] = {J.data()};
+    p.raw->Evaluate(parameters, value.data(), jacobians);
+    *jacobian = J;
+  } else {
+    p.raw->Evaluate(parameters, value.data(), nullptr);
+  }
+  return -value;
+}
+
 bool Calibrator::StartFromLinearForm(Eigen::VectorXd* theta, std::string* error) const {
   std::vector<TablePose> poses;
   std::vector<Eigen::Vector3d> measured;
   for (const auto& p : poses_) {
+    if (p.move) continue;  // the linear start uses the poses' means only
     poses.push_back(p.weighted.pose);
     measured.push_back(p.weighted.measured);
   }
@@ -378,7 +438,7 @@ DriftScale Calibrator::IdentifyDrift(const Estimate& est) const {
   Jacobian3 Ji;
   for (int i = 0; i < n; ++i) {
     const Pose& p = poses_[static_cast<std::size_t>(i)];
-    model_->Predict(est.theta, p.weighted.pose, &Ji);
+    MeasuredMinusPredicted(p, est.theta, &Ji);
     J.middleRows<3>(3 * i) = Ji;
     r.segment<3>(3 * i) = est.residuals[static_cast<std::size_t>(i)].raw;
     white.push_back(p.white.diagonal());
@@ -560,7 +620,7 @@ Estimate Calibrator::SolveOnce() {
   est.chi2 = 0;
   for (const auto& p : poses_) {
     PoseResidual r;
-    r.raw = p.weighted.measured - model_->Predict(theta, p.weighted.pose);
+    r.raw = MeasuredMinusPredicted(p, theta, nullptr);
     r.whitened = p.weighted.sqrt_information * r.raw;
     est.residuals.push_back(r);
   }

@@ -18,6 +18,7 @@
 #include "core/estimation/bias_drift.h"
 #include "core/estimation/drift_identify.h"
 #include "core/estimation/fit_check.h"
+#include "core/estimation/move_record.h"
 #include "core/estimation/pose_record.h"
 #include "core/modeling/measurement_model.h"
 
@@ -167,6 +168,12 @@ class Calibrator {
   // triad, holds a non-finite value, or has a covariance that is singular with no floor set.
   bool add_pose(const PoseRecord& record, std::string* error);
 
+  // Adds a move between two static poses (a gyroscope model only; core/estimation/move_residual.h),
+  // weighed by the gyro's white noise (noise_density) over its blocks, the pose-to-pose offset,
+  // and with a drift model correlated with the poses through the bias process over its window.
+  // False with a message (nothing added) for another model or an invalid record.
+  bool add_move(const MoveRecord& move, std::string* error);
+
   // Estimates the parameters from every pose added so far.
   Estimate solve();
 
@@ -186,6 +193,10 @@ class Calibrator {
   // The drift scale the poses and `est` (a solve) give, with options_.drift as the prior.
   DriftScale IdentifyDrift(const Estimate& est) const;
   bool StartFromLinearForm(Eigen::VectorXd* theta, std::string* error) const;
+  // A record's measured - predicted at theta, with d(predicted)/d(theta) when asked (a move:
+  // its residual s, core/estimation/move_residual.h).
+  Eigen::Vector3d MeasuredMinusPredicted(const Pose& p, const Eigen::VectorXd& theta,
+                                         Jacobian3* jacobian) const;
   bool StartGyro(const std::vector<TablePose>& poses, const std::vector<Eigen::Vector3d>& measured,
                  Eigen::VectorXd* theta, std::string* error) const;
 

@@ -6,10 +6,15 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <string>
 
 #include "core/frames/table_pose.h"
+
+namespace ceres {
+class CostFunction;
+}
 
 namespace turncal {
 
@@ -52,6 +57,9 @@ struct WeightedPose {
   TablePose pose;
   Eigen::Vector3d measured = Eigen::Vector3d::Zero();
   Eigen::Matrix3d sqrt_information = Eigen::Matrix3d::Identity();
+  // A gyroscope's move between two poses (core/estimation/move_residual.h): its unwhitened
+  // residual, whose Jacobian stands for the model's prediction's (`pose` is its destination).
+  std::shared_ptr<const ceres::CostFunction> raw_residual;
 };
 
 }  // namespace turncal

@@ -13,7 +13,7 @@ std::vector<WeightedPose> Poses(const MeasurementModel& model, int n, std::mt199
   const CalibratorOptions o = OptionsForClass(model, IndustrialClass());
   const Eigen::Matrix3d W = ExpectedSqrtInformation(o.noise_density, o.pose_offset_sigma, 5.0);
   std::vector<WeightedPose> out;
-  for (const auto& p : RandomPoses(n, rng)) out.push_back({p, Eigen::Vector3d::Zero(), W});
+  for (const auto& p : RandomPoses(n, rng)) out.push_back({p, Eigen::Vector3d::Zero(), W, nullptr});
   return out;
 }
 

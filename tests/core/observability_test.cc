@@ -132,7 +132,7 @@ std::vector<WeightedPose> Weighted(const MeasurementModel& model,
   const CalibratorOptions o = OptionsForClass(model, sensor);
   const Eigen::Matrix3d W = ExpectedSqrtInformation(o.noise_density, o.pose_offset_sigma, dwell_s);
   std::vector<WeightedPose> out;
-  for (const auto& p : poses) out.push_back({p, Eigen::Vector3d::Zero(), W});
+  for (const auto& p : poses) out.push_back({p, Eigen::Vector3d::Zero(), W, nullptr});
   return out;
 }
 
@@ -224,7 +224,7 @@ TEST(Data, BetaIsTwoOrdersOfMagnitudeWeakerThanTheOtherAngles) {
   const Eigen::VectorXd theta = DrawTruth(*model, IndustrialClass(), &rng);
   std::vector<WeightedPose> poses;
   for (const auto& p : RandomPoses(60, &rng)) {
-    poses.push_back({p, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity() / 2e-3});
+    poses.push_back({p, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity() / 2e-3, nullptr});
   }
   const DataReport r = AnalyzeData(*model, theta, poses, ObservabilityOptions{});
   const double sigma_beta = r.sigma[model->index_of("beta")];

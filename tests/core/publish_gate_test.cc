@@ -206,7 +206,7 @@ TEST(Planner, RecommendsTheLargestGainAndShowsItsReasoning) {
   const CalibratorOptions o = OptionsForClass(*model, IndustrialClass());
   t.sqrt_information = ExpectedSqrtInformation(o.noise_density, o.pose_offset_sigma, 5.0);
   for (const auto& p : AboutZPoses(8))
-    t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information});
+    t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information, nullptr});
   PlannerOptions options;
   const NextPoseAdvice a = PlanNextPose({t}, options);
   ASSERT_TRUE(a.ok) << a.error;

@@ -90,7 +90,7 @@ TEST(ObservabilityJson, UndeterminedSigmaIsNull) {
   auto model = MakeModel("accel13", ModelContext{}, &error);
   std::vector<WeightedPose> poses;
   for (const auto& p : AboutZPoses(10))
-    poses.push_back({p, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity()});
+    poses.push_back({p, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity(), nullptr});
   const DataReport r = AnalyzeData(*model, model->nominal(), poses, ObservabilityOptions{});
   const nlohmann::json j = ToJson(r, *model);
   EXPECT_EQ(j["rank"], 9);
