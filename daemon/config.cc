@@ -105,10 +105,14 @@ bool GetAxes(const toml::table& t, const char* key, Eigen::Vector3d* out, const 
 
 bool ParseTable(const toml::table& t, const std::string& source, StationOptions* st,
                 std::string* error) {
-  if (!OnlyKeys(t, {"rate_dps", "accel_dps2", "settle_s", "plan_for"}, "[table]", source, error) ||
+  if (!OnlyKeys(t,
+                {"rate_dps", "accel_dps2", "settle_s", "plan_for", "rate_accuracy", "rate_ripple"},
+                "[table]", source, error) ||
       !GetAxes(t, "rate_dps", &st->table.rate_dps, source, error) ||
       !GetAxes(t, "accel_dps2", &st->table.accel_dps2, source, error) ||
-      !GetNumber(t, "settle_s", &st->table.settle_s, source, error)) {
+      !GetNumber(t, "settle_s", &st->table.settle_s, source, error) ||
+      !GetNumber(t, "rate_accuracy", &st->rate_accuracy, source, error) ||
+      !GetNumber(t, "rate_ripple", &st->sequencer.rate_steady.ripple, source, error)) {
     return false;
   }
   std::string why;

@@ -41,6 +41,7 @@ ModelPipeline ModelPipeline::Make(const std::string& name, const StationOptions&
   // The class's drift (or the one configured) is the prior; the session's poses identify
   // its strength.
   co.identify_drift = options.drift_model && options.identify_drift;
+  co.rate_accuracy = options.rate_accuracy;
   m.calibrator = std::make_unique<Calibrator>(co);
   return m;
 }

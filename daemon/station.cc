@@ -20,6 +20,10 @@ namespace turncal::daemon {
 
 bool StationOptions::IsValid(std::string* error) const {
   if (!sequencer.IsValid(error) || !gate.IsValid(error) || !table.IsValid(error)) return false;
+  if (!(rate_accuracy >= 0 && rate_accuracy < 0.1)) {
+    if (error) *error = "[table] rate_accuracy must be in [0, 0.1) (relative 1 sigma)";
+    return false;
+  }
   SensorClass c;
   if (!SensorClassByName(sensor_class, &c)) {
     if (error) *error = "unknown sensor class '" + sensor_class + "' (industrial, consumer)";

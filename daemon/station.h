@@ -70,6 +70,10 @@ struct StationOptions {
   double mag_random_walk = -1.0;
   // The table's motion and what the next-pose planner minimises (core/planning/pose_planner.h).
   TableMotion table;
+  // The table's rate accuracy for rate segments, relative 1 sigma ([table] rate_accuracy).
+  double rate_accuracy = 1e-5;
+  // The rate ripple the sequencer allows in a rate segment ([table] rate_ripple): see
+  // SequencerOptions::rate_steady.
   PlanObjective plan_objective = PlanObjective::kTime;
   ModelContext context;
   GateOptions gate;  // tolerances and min_dof replaced by the class's unless gate_tolerances_set

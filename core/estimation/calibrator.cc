@@ -60,6 +60,8 @@ bool CalibratorOptions::IsValid(std::string* error) const {
   }
   if (!context.IsValid(error)) return false;
   if (loss != RobustLoss::kNone && !(loss_scale > 0)) return fail("loss_scale must be > 0");
+  if (!(rate_accuracy >= 0 && rate_accuracy < 0.1))
+    return fail("rate_accuracy must be in [0, 0.1)");
   if (!(noise_density >= 0) || !(pose_offset_sigma >= 0)) {
     return fail("noise_density and pose_offset_sigma must be >= 0");
   }
@@ -257,8 +259,17 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   // Floor the eigenvalues (the mean is never known much better than the white noise allows), then
   // add the pose-to-pose offset variance.
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
-  Eigen::Vector3d lambda = eig.eigenvalues().cwiseMax(floor_var).array() +
-                           options_.pose_offset_sigma * options_.pose_offset_sigma;
+  Eigen::Vector3d floored = eig.eigenvalues().cwiseMax(floor_var);
+  if (p.is_rate()) {
+    // The table's own rate error, along the turning axis as the gyro sees it (nominally).
+    const Eigen::Vector3d axis = options_.context.mounting * p.TableRate_q();
+    sigma = eig.eigenvectors() * floored.asDiagonal() * eig.eigenvectors().transpose() +
+            options_.rate_accuracy * options_.rate_accuracy * axis * axis.transpose();
+    eig.compute(sigma);
+    floored = eig.eigenvalues();
+  }
+  Eigen::Vector3d lambda =
+      floored.array() + options_.pose_offset_sigma * options_.pose_offset_sigma;
   if (!(lambda.minCoeff() > 0) || lambda.minCoeff() < 1e-12 * lambda.maxCoeff()) {
     return fail(
         "the record's covariance is singular and no noise floor is configured "

@@ -59,6 +59,11 @@ struct CalibratorOptions {
   // between poses (~4e-4 m/s^2 for an industrial MEMS accelerometer, SENSORS.md).
   double noise_density = 0.0;
   double pose_offset_sigma = 0.0;
+  // A rate segment's rate is the table's to this relative 1 sigma (averaged over its whole
+  // revolutions; a rate table's datasheet "rate accuracy"): its variance along the turning axis,
+  // in the gyro's nominal frame, is added to the record's covariance. 1e-5 by default
+  // ([table] rate_accuracy).
+  double rate_accuracy = 1e-5;
 
   // Bias drift as a process in time (core/estimation/bias_drift.h). When enabled, the poses' errors
   // are correlated through it and the calibrator solves by generalised least squares over all poses
