@@ -83,6 +83,20 @@ const std::map<std::string, Manual>& Manuals() {
         "an ERROR, no answer within --timeout, or a command-line mistake",
         "tools/examples/README.md (a whole controller), docs/SEQUENCER.md (why poses are "
         "rejected)"}},
+      {"rate",
+       {"Tells turncald that the table turns about AXIS (outer, middle or inner) at RATE deg/s, "
+        "the other axes at --phi/--gamma/--psi degrees, and waits until every device captured "
+        "or rejected the rate segment: once the gyro's rate is steady, turncald averages it over "
+        "whole revolutions (at least the dwell) for the gyroscope models (gyro12, gyro21). "
+        "A controller calls this once the table turns steadily. {socket}",
+        "turncal rate outer 100\n"
+        "turncal rate outer -100 --gamma 90\n"
+        "turncal rate inner 30 --dwell 20 || echo \"rejected or failed: $?\"",
+        "0 every device captured the segment; 1 some device rejected it (the reason is printed: "
+        "a rate that is not steady, or not the announced one); 2 an ERROR, no answer within "
+        "--timeout, or a command-line mistake",
+        "docs/protocol.md (\"rate\"), docs/models.md (\"Gyroscope models\"), docs/SEQUENCER.md "
+        "(\"Rate segments\")"}},
       {"reset",
        {"Starts a new session: the current poses and noise profiles are archived under "
         "sessions/ in the state directory; active calibrations stay active. Needs a permitted "

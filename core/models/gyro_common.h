@@ -66,4 +66,44 @@ inline Eigen::Vector3d Correct(const double* theta, bool with_g_sensitivity,
   return C_q_r(eps[0], eps[1], eps[2], context.mounting).transpose() * w_r;
 }
 
+// The model definition (core/modeling/model_adapter.h) of gyro12 (without B_g) and gyro21 (with
+// it); each model's file names it and registers it.
+template <bool kWithGSensitivity>
+struct Def {
+  static constexpr SensorKind kSensor = SensorKind::kGyroscope;
+
+  static std::vector<ParameterInfo> Parameters(const ModelContext&) {
+    return gyro::Parameters(kWithGSensitivity);
+  }
+  template <typename T>
+  static Vec3<T> PredictRate(const T* theta, const Vec3<T>& omega_q, const Vec3<T>& f_q,
+                             const ModelContext& context) {
+    Vec3<T> y = accel::G(theta, context.mounting) * omega_q + Bias(theta);
+    if constexpr (kWithGSensitivity) y += GSensitivity(theta) * f_q;
+    return y;
+  }
+  static Eigen::Vector3d Correct(const double* theta, const Eigen::Vector3d& raw,
+                                 const Eigen::Vector3d& f_q, const ModelContext& context) {
+    return gyro::Correct(theta, kWithGSensitivity, raw, f_q, context);
+  }
+  static OutputFrame CorrectedFrame(const ModelContext& c) { return c.accel_output_frame; }
+  static bool FromLinear(const Mat3<double>& G, double /*beta*/, const Eigen::Vector3d& b,
+                         const ModelContext& context, double* theta, std::string* error) {
+    const int n = kWithGSensitivity ? kGSens + 9 : kGSens;
+    for (int i = kGSens; i < n; ++i) theta[i] = 0.0;
+    return accel::FromLinear(G, b, context, kBias, theta, error);
+  }
+  // theta^e: G_w row by row, then b_g, then (gyro21) B_g row by row.
+  template <typename T>
+  static void Extended(const T* theta, const ModelContext& context, std::vector<T>* out) {
+    const Mat3<T> G = accel::G(theta, context.mounting);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) out->push_back(G(r, c));
+    for (int i = 0; i < 3; ++i) out->push_back(theta[kBias + i]);
+    if constexpr (kWithGSensitivity) {
+      for (int i = kGSens; i < kGSens + 9; ++i) out->push_back(theta[i]);
+    }
+  }
+};
+
 }  // namespace turncal::gyro

@@ -16,15 +16,13 @@ Usage: e2e_gyro_test.py TURNCAL TURNCALD
 """
 import json
 import math
-import os
-import shutil
 import signal
 import subprocess
 import sys
 import tempfile
 import time
 
-from live_session import check, failures, wait_for, worst_sigma
+from live_session import check, failures, finish_dir, wait_for, worst_sigma
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
 SPEED = 10
@@ -136,11 +134,6 @@ d = tempfile.mkdtemp(prefix="turncal-e2e-gyro-")
 try:
     main(d)
 finally:
-    for p in subprocess.run(["pgrep", "-f", d], capture_output=True, text=True).stdout.split():
-        os.kill(int(p), signal.SIGKILL)
-    if failures:
-        print(f"(kept {d} for inspection)")
-    else:
-        shutil.rmtree(d, ignore_errors=True)
+    finish_dir(d)
 print(f"e2e: {len(failures)} failure(s)")
 sys.exit(1 if failures else 0)

@@ -21,7 +21,6 @@ import json
 import math
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -254,12 +253,7 @@ for name, fn in (("clean", scenario_clean), ("kill", scenario_kill)):
         live_session.cube_poses(TURNCAL, f"{d}/poses.csv", N_POSES)
         fn(d)
     finally:
-        for p in subprocess.run(["pgrep", "-f", d], capture_output=True, text=True).stdout.split():
-            os.kill(int(p), signal.SIGKILL)
-        if failures:
-            print(f"(kept {d} for inspection)")
-        else:
-            shutil.rmtree(d, ignore_errors=True)
+        live_session.finish_dir(d)
 
 print(f"e2e: {len(failures)} failure(s)")
 sys.exit(1 if failures else 0)

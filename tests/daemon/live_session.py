@@ -3,6 +3,8 @@ poses as CSV, waiting for a path, and `turncal sim --live --controller` with a s
 Xbus IMU on one table (ptys DIR/mip and DIR/xbus, turncald's socket DIR/t.sock)."""
 import json
 import os
+import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -55,3 +57,14 @@ def worst_sigma(model_result, device_truth, model):
             continue
         worst = max(worst, (abs(v["value"] - true) / v["sigma"], p))
     return worst
+
+
+def finish_dir(d):
+    """Kills what still runs in the temporary directory DIR, then keeps it when a check failed
+    (and says so) or removes it."""
+    for p in subprocess.run(["pgrep", "-f", d], capture_output=True, text=True).stdout.split():
+        os.kill(int(p), signal.SIGKILL)
+    if failures:
+        print(f"(kept {d} for inspection)")
+    else:
+        shutil.rmtree(d, ignore_errors=True)
