@@ -172,10 +172,7 @@ int ModelPipeline::triad() const {
 }
 
 const TriadStats* ModelPipeline::TriadOf(const PoseRecord& record) const {
-  const auto& t = triad() == kTriadAcc   ? record.acc
-                  : triad() == kTriadGyr ? record.gyr
-                                         : record.mag;
-  return t ? &*t : nullptr;
+  return TriadFor(model->sensor(), record);
 }
 
 Eigen::Vector3d ModelPipeline::Correct(const Eigen::Vector3d& raw_in, double t_s,

@@ -70,7 +70,6 @@ struct ModelPipeline {
   static ModelPipeline Make(const std::string& name, const StationOptions& options,
                             const SensorClass& sensor);
 
-  bool accel() const { return model->sensor() == SensorKind::kAccelerometer; }
   // The triad the model calibrates (kTriadAcc, kTriadGyr or kTriadMag).
   int triad() const;
   // The record's statistics of that triad (nullptr when it has none).

@@ -10,13 +10,6 @@
 namespace turncal::report {
 namespace {
 
-const TriadStats* TriadOf(const MeasurementModel& model, const PoseRecord& record) {
-  const auto& triad = model.sensor() == SensorKind::kAccelerometer ? record.acc
-                      : model.sensor() == SensorKind::kGyroscope   ? record.gyr
-                                                                   : record.mag;
-  return triad ? &*triad : nullptr;
-}
-
 // 1 sigma of every parameter from the weighted poses' Fisher information at theta; infinite for
 // a parameter the information leaves undetermined (a null direction of the column-scaled
 // information touching it by more than 1e-3).
@@ -103,7 +96,7 @@ ModelAnalysis AnalyzeCalibration(const protocol::CalibrationDocument& doc) {
   Estimate last;
   for (std::size_t i = 0; i < doc.records.size(); ++i) {
     const PoseRecord& record = doc.records[i];
-    const TriadStats* triad = TriadOf(model, record);
+    const TriadStats* triad = TriadFor(model.sensor(), record);
     if (triad == nullptr || !calibrator.add_pose(record, nullptr)) continue;
     const Eigen::Vector3d measured = triad->mean;
     a.residuals.pose_index.push_back(static_cast<int>(i));

@@ -128,19 +128,19 @@ std::unique_ptr<ceres::LossFunction> MakeLoss(RobustLoss loss, double scale) {
   return nullptr;
 }
 
-const TriadStats* TriadFor(SensorKind sensor, const PoseRecord& record) {
-  const auto& triad = sensor == SensorKind::kAccelerometer ? record.acc
-                      : sensor == SensorKind::kGyroscope   ? record.gyr
-                                                           : record.mag;
-  return triad ? &*triad : nullptr;
-}
-
 // Sigma^{-1/2} of the covariance V diag(variances) V^T.
 Eigen::Matrix3d SqrtInformation(const Eigen::Matrix3d& V, const Eigen::Vector3d& variances) {
   return V * variances.cwiseInverse().cwiseSqrt().asDiagonal() * V.transpose();
 }
 
 }  // namespace
+
+const TriadStats* TriadFor(SensorKind sensor, const PoseRecord& record) {
+  const auto& triad = sensor == SensorKind::kAccelerometer ? record.acc
+                      : sensor == SensorKind::kGyroscope   ? record.gyr
+                                                           : record.mag;
+  return triad ? &*triad : nullptr;
+}
 
 double WhiteFloorFraction(std::int64_t count) {
   constexpr double kLeast = 0.1;

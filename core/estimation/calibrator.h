@@ -161,6 +161,10 @@ struct Estimate {
 // chi^2 too small). Never below 0.1.
 double WhiteFloorFraction(std::int64_t count);
 
+// The record's statistics of the triad a model of `sensor` calibrates (nullptr when it has none,
+// e.g. a rate segment's record for an accelerometer).
+const TriadStats* TriadFor(SensorKind sensor, const PoseRecord& record);
+
 class Calibrator {
  public:
   // Options must be valid (check IsValid first); an invalid model yields estimates with !ok.
