@@ -320,7 +320,8 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
     if (!OnlyKeys(*t,
                   {"dwell_s", "window_s", "settle_guard_s", "still_timeout_s", "startup_s",
                    "max_bad_fraction", "max_lost_fraction", "false_alarm", "outlier_k",
-                   "gyr_bias_drift_radps", "pose_check_false_alarm"},
+                   "gyr_bias_drift_radps", "pose_check_false_alarm", "moves", "move_block_s",
+                   "move_max_s"},
                   "[sequencer]", source, error)) {
       return false;
     }
@@ -335,8 +336,18 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
         !GetNumber(*t, "false_alarm", &q.stillness.false_alarm, source, error) ||
         !GetNumber(*t, "outlier_k", &q.stillness.outlier_k, source, error) ||
         !GetNumber(*t, "gyr_bias_drift_radps", &q.stillness.gyr_bias_drift_radps, source, error) ||
-        !GetNumber(*t, "pose_check_false_alarm", &q.pose_check_false_alarm, source, error)) {
+        !GetNumber(*t, "pose_check_false_alarm", &q.pose_check_false_alarm, source, error) ||
+        !GetNumber(*t, "move_block_s", &q.moves.block_s, source, error) ||
+        !GetNumber(*t, "move_max_s", &q.moves.max_s, source, error)) {
       return false;
+    }
+    if (const toml::node* n = t->get("moves")) {
+      const auto* v = n->as_boolean();
+      if (!v) {
+        *error = fmt::format("{}: 'moves' must be true or false", Where(*n, source));
+        return false;
+      }
+      q.moves.enabled = v->get();
     }
   }
   if (const toml::table* t = root["table"].as_table()) {

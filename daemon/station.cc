@@ -80,16 +80,22 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
       so.noise = stored;
       d->noise_stored = true;
     }
-    d->sequencer = std::make_unique<Sequencer>(
-        so, [this, i](const SequencerEvent& e) { OnSequencerEvent(i, e); });
     d->gate = options_.gate;
     std::vector<std::string> models = options_.models;
     if (auto it = options_.per_device.find(d->name); it != options_.per_device.end()) {
       if (it->second.models) models = *it->second.models;
       if (it->second.gate) d->gate = *it->second.gate;
     }
-    for (const auto& name : models)
+    bool gyro = false;
+    for (const auto& name : models) {
       d->models.push_back(ModelPipeline::Make(name, options_, sensor_));
+      const auto& model = d->models.back().model;
+      gyro = gyro || (model && model->sensor() == SensorKind::kGyroscope);
+    }
+    // The moves between poses are a gyroscope model's evidence: tracked only for one.
+    so.moves.enabled = so.moves.enabled && gyro;
+    d->sequencer = std::make_unique<Sequencer>(
+        so, [this, i](const SequencerEvent& e) { OnSequencerEvent(i, e); });
     devices_.push_back(std::move(d));
   }
   if (!options_.state_dir.empty()) {

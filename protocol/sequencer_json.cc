@@ -7,6 +7,7 @@
 #include "core/frames/units.h"
 #include "protocol/calibration_json.h"
 #include "protocol/json_vec3.h"
+#include "protocol/move_json.h"
 #include "protocol/pose_json.h"
 
 namespace turncal::protocol {
@@ -72,7 +73,7 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
   return true;
 }
 
-nlohmann::json ToJson(const PoseRecord& r) {
+nlohmann::json ToJson(const PoseRecord& r, bool move_blocks) {
   nlohmann::json j = {{"pose", ToJson(r.pose)}, {"t_start", r.t_start_s}, {"t_end", r.t_end_s}};
   if (r.acc) j["acc"] = Triad(*r.acc);
   if (r.gyr) j["gyr"] = Triad(*r.gyr);
@@ -82,6 +83,7 @@ nlohmann::json ToJson(const PoseRecord& r) {
     j["t_sensor_start"] = r.sensor_t_start_s;
     j["t_sensor_end"] = r.sensor_t_end_s;
   }
+  if (r.move_in) j["move_in"] = ToJson(*r.move_in, move_blocks);
   return j;
 }
 
@@ -138,6 +140,16 @@ bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* erro
   if (j.contains("temp")) {
     if (!j["temp"].is_number()) return fail("temp is not a number");
     r.temp_c = j["temp"].get<double>();
+  }
+  // A move without its blocks (an event's summary) is left out: nothing to calibrate from.
+  if (j.contains("move_in") && j["move_in"].contains("increment_rad")) {
+    MoveRecord m;
+    std::string why;
+    if (!ParseMoveRecord(j["move_in"], &m, &why)) {
+      if (error) *error = "pose record: " + why;
+      return false;
+    }
+    r.move_in = std::move(m);
   }
   *out = r;
   return true;
@@ -233,7 +245,7 @@ nlohmann::json ToJson(const SequencerEvent& e) {
                    {"lost", e.counts.lost}};
   }
   if (!e.reason.empty()) j["reason"] = e.reason;
-  if (e.record) j["record"] = ToJson(*e.record);
+  if (e.record) j["record"] = ToJson(*e.record, /*move_blocks=*/false);
   return j;
 }
 

@@ -26,7 +26,9 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
 //  "counts":{...}, "reason":..., "record":{...}} -- the record with each triad's mean, covariance
 // and count, the window and the temperature.
 nlohmann::json ToJson(const SequencerEvent& event);
-nlohmann::json ToJson(const PoseRecord& record);
+// The record's move (PoseRecord::move_in) goes with its blocks unless `move_blocks` is false
+// (an event's summary: protocol/move_json.h).
+nlohmann::json ToJson(const PoseRecord& record, bool move_blocks = true);
 // A noise profile (the state directory keeps the measured one, so a restarted station judges
 // stillness exactly as before) and its inverse; the parse checks NoiseProfile::IsValid.
 nlohmann::json ToJson(const NoiseProfile& profile);

@@ -119,6 +119,7 @@ ModelAnalysis AnalyzeCalibration(const protocol::CalibrationDocument& doc) {
   }
   PoseResiduals& r = a.residuals;
   for (const WeightedPose& w : calibrator.weighted_poses()) {
+    if (w.raw_residual) continue;  // a move (the residuals are the poses')
     const Eigen::Matrix3d information = w.sqrt_information.transpose() * w.sqrt_information;
     r.sigma_mean.push_back(information.inverse().diagonal().cwiseMax(0.0).cwiseSqrt());
   }

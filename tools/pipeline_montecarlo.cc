@@ -157,7 +157,10 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       return 1;
     }
   }
-  if (gyro) {
+  if (gyro && args.gyro_sources == "all") {
+    // The static poses (and the moves between them), then the rate segments.
+    for (const TablePose& r : DefaultRateSegments()) plan.push_back(r);
+  } else if (gyro && args.gyro_sources != "moves") {
     // Rate segments after the first static poses, or alone.
     const std::vector<TablePose> rates = DefaultRateSegments();
     std::vector<TablePose> mixed;
@@ -222,6 +225,10 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       // The simulated table's rate accuracy: its ripple (1e-4 at 2 Hz, phase drawn per segment)
       // averages to ~2e-6 of the rate over a revolution at 100 deg/s (1e-4 / (2 pi 2 Hz 3.6 s)).
       station.rate_accuracy = 2e-6;
+      // The moves between static poses count for "moves" and "all" only (a rate segment between
+      // two static poses drops the move anyway).
+      station.sequencer.moves.enabled =
+          gyro && (args.gyro_sources == "moves" || args.gyro_sources == "all");
       station.sensor_class = args.sensor_class;
       station.warmup_in_instabilities = args.station_warmup;
       station.warmup_tau_s = args.warmup_tau_s;

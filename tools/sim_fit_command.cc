@@ -326,8 +326,10 @@ void AddSimFitCommands(CLI::App* app) {
       ->capture_default_str();
   mc->add_option("--gyro-sources", pipe->gyro_sources,
                  "with --pipeline and a gyro model: mixed (the plan's static poses and the "
-                 "default rate segments) | rates (the rate segments alone)")
-      ->check(CLI::IsMember({"mixed", "rates"}))
+                 "default rate segments, interleaved; no moves) | rates (the rate segments "
+                 "alone) | moves (the static poses and the moves between them) | all (the "
+                 "static poses with their moves, then the rate segments)")
+      ->check(CLI::IsMember({"mixed", "rates", "moves", "all"}))
       ->capture_default_str();
   mc->add_option("--table-rate", pipe->table_rate_dps,
                  "with --pipeline: the simulated table moves at this rate, deg/s, and the planner "

@@ -288,6 +288,13 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
     pose.raw = model_->MakeResidual(p, w.measured, Eigen::Matrix3d::Identity());
   }
   poses_.push_back(std::move(pose));
+  if (record.move_in && model_->sensor() == SensorKind::kGyroscope) {
+    std::string why;
+    if (!add_move(*record.move_in, &why)) {
+      ++moves_refused_;
+      last_move_refusal_ = why;
+    }
+  }
   return true;
 }
 
@@ -299,8 +306,10 @@ bool Calibrator::add_move(const MoveRecord& move, std::string* error) {
   if (!model_) return fail(model_error_);
   if (model_->sensor() != SensorKind::kGyroscope) return fail("a move is a gyroscope's record");
   if (!(options_.noise_density > 0)) return fail("a move needs the gyro's noise_density");
-  const Eigen::VectorXd theta0 =
-      theta_.size() == model_->num_parameters() ? theta_ : model_->nominal();
+  // Qbar and the white covariance at the nominal parameters (G_w the mounting): the same
+  // whenever the move is added, and never an early solve's (a gyro's static poses alone see
+  // only the Earth's rate, and can put G_w anywhere).
+  const Eigen::VectorXd theta0 = model_->nominal();
   std::string why;
   auto raw = MoveResidual::Make(*model_, move, theta0, options_.noise_density, &why);
   if (!raw) return fail(why);
@@ -325,6 +334,7 @@ bool Calibrator::add_move(const MoveRecord& move, std::string* error) {
   pose.window = TimeWindow{move.t_start_s, move.t_end_s};
   pose.host_window = pose.window;
   poses_.push_back(std::move(pose));
+  ++moves_;
   return true;
 }
 

@@ -175,6 +175,8 @@ class Calibrator {
 
   // Adds a pose. False with a message (and nothing added) when the record lacks the model's
   // triad, holds a non-finite value, or has a covariance that is singular with no floor set.
+  // A gyroscope model also adds the move that led to the pose (PoseRecord::move_in, add_move);
+  // a move it cannot use is left out and counted (moves_refused), the pose kept.
   bool add_pose(const PoseRecord& record, std::string* error);
 
   // Adds a move between two static poses (a gyroscope model only; core/estimation/move_residual.h),
@@ -186,7 +188,11 @@ class Calibrator {
   // Estimates the parameters from every pose added so far.
   Estimate solve();
 
+  // Residual blocks: the poses and the moves added so far.
   int num_poses() const;
+  int num_moves() const { return moves_; }
+  int moves_refused() const { return moves_refused_; }
+  const std::string& last_move_refusal() const { return last_move_refusal_; }
   // The poses added so far with the weights the estimator gives them (for the observability
   // analysis and the pose planner).
   std::vector<WeightedPose> weighted_poses() const;
@@ -212,6 +218,8 @@ class Calibrator {
   // The residual blocks the solver sees: each pose's own (no drift), or each pose's whitened
   // innovation (drift; rebuilt for every solve, order_ gives the poses' time order).
   bool BuildBlocks(std::string* error);
+  int moves_ = 0, moves_refused_ = 0;
+  std::string last_move_refusal_;
   std::vector<ceres::CostFunction*> blocks_;
   std::vector<std::unique_ptr<ceres::CostFunction>> gls_blocks_;
   Eigen::MatrixXd gls_w_;

@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 
+#include "core/estimation/move_record.h"
 #include "core/frames/table_pose.h"
 
 namespace ceres {
@@ -40,6 +41,10 @@ struct PoseRecord {
   double sensor_t_start_s = std::numeric_limits<double>::quiet_NaN();
   double sensor_t_end_s = std::numeric_limits<double>::quiet_NaN();
   std::optional<double> temp_c;
+  // The move from the previous captured static pose to this one as the gyro saw it (issue 21;
+  // core/sequencing/move_tracker.h): absent for the first pose, a rate segment, or a move the
+  // sequencer dropped.
+  std::optional<MoveRecord> move_in;
 
   double duration_s() const { return t_end_s - t_start_s; }
   bool has_sensor_window() const {

@@ -87,6 +87,7 @@ void Sequencer::Complete(double t_s) {
         t_last_sensor_s_ + (prof.device_period_s ? *prof.device_period_s : 1.0 / prof.rate_hz);
   }
   if (temp_n_ > 0) record.temp_c = temp_sum_ / static_cast<double>(temp_n_);
+  if (!rate_mode_) record.move_in = moves_.TakeEnded();
 
   if (predictor_) {
     for (int t : {kTriadAcc, kTriadMag}) {
@@ -116,7 +117,17 @@ void Sequencer::Complete(double t_s) {
   }
   ++captured_;
   Emit(SequencerEventKind::kCaptured, t_s,
-       fmt::format("{} samples over {:.2f} s", counts_.used, record.duration_s()), &record);
+       fmt::format("{} samples over {:.2f} s{}", counts_.used, record.duration_s(),
+                   record.move_in
+                       ? fmt::format("; the move here over {:.2f} s", record.move_in->duration_s())
+                       : std::string()),
+       &record);
+  // The next move starts at this dwell's last sample (a rate segment's end attitude is unknown).
+  if (rate_mode_) {
+    moves_.Abort("a rate segment came between");
+  } else {
+    moves_.Start(pose_, last_committed_);
+  }
   if (scheduled()) {
     ++next_scheduled_;
     NextScheduled(t_s);
@@ -128,6 +139,7 @@ void Sequencer::Complete(double t_s) {
 
 void Sequencer::Reject(double t_s, std::string reason) {
   ++rejected_;
+  moves_.Abort("the pose it led to was rejected");
   Emit(SequencerEventKind::kRejected, t_s, std::move(reason));
   state_ = State::kIdle;
   needed_ = 0;
@@ -135,6 +147,7 @@ void Sequencer::Reject(double t_s, std::string reason) {
 
 void Sequencer::SkipSegment(double t_s, std::string reason) {
   ++skipped_segments_;
+  moves_.Abort("the still segment it led to was skipped");
   Emit(SequencerEventKind::kSegmentSkipped, t_s, std::move(reason));
   counts_ = SampleCounts{};
   needed_ = 0;

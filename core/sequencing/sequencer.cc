@@ -9,6 +9,16 @@
 namespace turncal {
 namespace {
 
+// The moves' time step (core/estimation/move_integrator.h): the device's nominal period, its
+// measured rate rounded to whole hertz when within 0.1 % of one (a device clock 20 ppm fast
+// measures 499.99 Hz for 500), otherwise the measured period.
+double NominalPeriod(const NoiseProfile& profile) {
+  const double rate = profile.device_period_s ? 1.0 / *profile.device_period_s : profile.rate_hz;
+  const double whole = std::round(rate);
+  if (whole >= 1 && std::abs(rate - whole) <= 1e-3 * whole) return 1.0 / whole;
+  return 1.0 / rate;
+}
+
 constexpr std::uint32_t kBadFlags =
     kAccSaturated | kGyrSaturated | kMagSaturated | kStatusError | kClipping;
 // Beyond a window, how long a tick lets a stream be silent before it has stopped (CheckTimeout).
@@ -37,7 +47,8 @@ bool SequencerOptions::IsValid(std::string* error) const {
     return fail("the pose-check false alarm must be in (0, 1)");
   }
   if (!(progress_step > 0 && progress_step <= 1)) return fail("progress step must be in (0, 1]");
-  if (!stillness.IsValid(error) || !noise_meter.IsValid(error) || !rate_steady.IsValid(error)) {
+  if (!stillness.IsValid(error) || !noise_meter.IsValid(error) || !rate_steady.IsValid(error) ||
+      !moves.IsValid(error)) {
     return false;
   }
   if (noise && !noise->IsValid(error)) return false;
@@ -69,7 +80,10 @@ const char* ToString(SequencerEventKind kind) {
 }
 
 Sequencer::Sequencer(const SequencerOptions& options, Sink sink)
-    : options_(options), sink_(std::move(sink)), meter_(options.noise_meter) {}
+    : options_(options),
+      sink_(std::move(sink)),
+      meter_(options.noise_meter),
+      moves_(options.moves) {}
 
 void Sequencer::Emit(SequencerEventKind kind, double t_s, std::string reason,
                      const PoseRecord* record) {
@@ -110,6 +124,7 @@ void Sequencer::StartDetector(const NoiseProfile& profile, double t_s) {
       detector_->SetDriftScale(t, drift_scale_[k]);
     }
   }
+  moves_.SetPeriod(NominalPeriod(profile));
   required_run_ = detector_->window() +
                   static_cast<std::int64_t>(std::ceil(options_.settle_guard_s * profile.rate_hz));
   if (!options_.noise) {
@@ -151,6 +166,7 @@ bool Sequencer::Announce(const Announcement& a, std::string* error) {
     }
     Reject(t_s, why);
   }
+  if (a.pose.is_rate()) moves_.Abort("a rate segment came between");
   index_ = a.index;
   pose_ = a.pose;
   t_announce_ns_ = a.t_host_ns;
@@ -321,7 +337,8 @@ void Sequencer::Accept(StillSample s) {
                          : fmt::format("the stream was interrupted (no sample for {:.2f} s)",
                                        host_gap_s));
     } else {
-      pending_lost_ += lost;
+      // Carried with the sample (a held outlier may go in before it: its gap is after that one).
+      s.lost_before = lost;
     }
   }
   bool finite = true;
@@ -329,6 +346,7 @@ void Sequencer::Accept(StillSample s) {
     if (s.has(t) && !s.v[t].allFinite()) finite = false;
   }
   if ((s.flags & kBadFlags) || !finite) {
+    pending_lost_ += s.lost_before;
     ++pending_flagged_;
     ++totals_.flagged;
     if (excluded_) excluded_(s, finite ? "flagged" : "non-finite");
@@ -343,6 +361,7 @@ void Sequencer::Accept(StillSample s) {
       }
       std::string error;
       if (!profile.IsValid(&error)) {
+        pending_lost_ += s.lost_before;
         ++pending_flagged_;
         ++totals_.flagged;
         if (excluded_) excluded_(s, "incomplete");
@@ -350,6 +369,7 @@ void Sequencer::Accept(StillSample s) {
       }
       StartDetector(profile, t_s);
     } else {
+      pending_lost_ += s.lost_before;  // the noise meter takes the sample
       switch (meter_.Add(s)) {
         case NoiseMeter::Status::kCollecting:
           return;
@@ -371,6 +391,7 @@ void Sequencer::Accept(StillSample s) {
   }
   for (int t = 0; t < 3; ++t) {
     if (detector_->profile().sigma[t] && !s.has(t)) {
+      pending_lost_ += s.lost_before;
       ++pending_flagged_;
       ++totals_.flagged;
       if (excluded_) excluded_(s, "incomplete");
@@ -391,6 +412,7 @@ void Sequencer::Accept(StillSample s) {
       held_.reset();
       Feed(s);
     } else {
+      pending_lost_ += held_->lost_before;
       ++pending_outliers_;
       ++totals_.outliers;
       if (excluded_) excluded_(*held_, "outlier");
@@ -407,6 +429,7 @@ void Sequencer::Accept(StillSample s) {
 void Sequencer::Interrupt(double t_s, const std::string& why) {
   detector_->Clear();
   held_.reset();
+  moves_.Abort("the stream was interrupted");
   pending_lost_ = pending_flagged_ = pending_outliers_ = 0;
   if (state_ == State::kCollecting) {
     if (scheduled()) {
@@ -425,7 +448,7 @@ void Sequencer::Interrupt(double t_s, const std::string& why) {
 
 void Sequencer::Feed(const StillSample& in) {
   StillSample s = in;
-  s.lost_before = pending_lost_;
+  s.lost_before = in.lost_before + pending_lost_;
   s.flagged_before = pending_flagged_;
   s.outliers_before = pending_outliers_;
   pending_lost_ = pending_flagged_ = pending_outliers_ = 0;
@@ -438,6 +461,7 @@ void Sequencer::Feed(const StillSample& in) {
     last_motion_t_s_ = t_s;
   }
   const bool moving = !still && detector_->finding().kind != StillFinding::kFilling;
+  if (has_evicted) moves_.Add(evicted);
   if (rate_mode_ && (state_ == State::kWaiting || state_ == State::kCollecting)) {
     FeedRate(s);
     return;
@@ -535,6 +559,8 @@ void Sequencer::StartCollecting(const StillSample& first) {
   t_first_ns_ = first.t_host_ns;
   t_first_sensor_s_ = first.t_sensor_s;
   state_ = State::kCollecting;
+  // The move from the last captured pose ends at this dwell's first sample (the last one added).
+  moves_.End(pose_);
   Emit(SequencerEventKind::kCollecting, first.t_s(),
        fmt::format("still; collecting {} samples", needed_));
   // What was lost or left out before the first sample belongs to before the window.
@@ -564,6 +590,7 @@ void Sequencer::Commit(const StillSample& s) {
   }
   t_last_ns_ = s.t_host_ns;
   t_last_sensor_s_ = s.t_sensor_s;
+  last_committed_ = s;
   if (counts_.used + counts_.bad() >= next_progress_ && counts_.used + counts_.bad() < needed_) {
     Emit(SequencerEventKind::kProgress, s.t_s());
     while (next_progress_ <= counts_.used + counts_.bad()) {
@@ -614,6 +641,7 @@ void Sequencer::Tick(std::int64_t now_ns) { CheckTimeout(now_ns); }
 
 void Sequencer::Finish(std::int64_t now_ns) {
   const double t_s = static_cast<double>(now_ns) * 1e-9;
+  moves_.Abort("");  // the input ended: a move in progress leads nowhere
   if (jumped_) {
     // No successor to vouch for its jump.
     ++pending_flagged_;

@@ -45,6 +45,7 @@
 
 #include "core/estimation/pose_record.h"
 #include "core/sequencing/host_clock.h"
+#include "core/sequencing/move_tracker.h"
 #include "core/sequencing/pose_check.h"
 #include "core/sequencing/rate_steady.h"
 #include "core/sequencing/sample.h"
@@ -65,6 +66,8 @@ struct SequencerOptions {
   // Rate segments (an announced pose with a rate axis): the steadiness of the gyro's rate.
   RateSteadyOptions rate_steady;
   NoiseMeterOptions noise_meter;
+  // The moves between static poses (core/sequencing/move_tracker.h).
+  MoveTrackerOptions moves;
   std::optional<NoiseProfile> noise;  // configured; measured at start-up when absent
   bool IsValid(std::string* error) const;
 };
@@ -149,6 +152,8 @@ class Sequencer {
   const SampleCounts& totals() const { return totals_; }
   std::int64_t captured() const { return captured_; }
   std::int64_t rejected() const { return rejected_; }
+  // The moves handed to records, and those dropped with the last reason.
+  const MoveTracker& moves() const { return moves_; }
   // Scales the bias wander the stillness and creep tests allow for on one triad (kTriadAcc,
   // kTriadGyr, kTriadMag): the drift's strength the calibrator identified, as a sigma factor.
   void SetDriftScale(int triad, double scale);
@@ -231,6 +236,8 @@ class Sequencer {
   std::string last_noise_failure_;
   SampleCounts totals_;
   std::int64_t captured_ = 0, rejected_ = 0;
+  MoveTracker moves_;
+  StillSample last_committed_;
 };
 
 }  // namespace turncal
