@@ -17,13 +17,9 @@ Eigen::VectorXd FisherSigma(const MeasurementModel& model, const Eigen::VectorXd
                             const std::vector<WeightedPose>& poses) {
   const int n = model.num_parameters();
   const Eigen::VectorXd scale = ParameterScales(model);
-  Eigen::MatrixXd info = Eigen::MatrixXd::Zero(n, n);
-  for (const WeightedPose& w : poses) {
-    Jacobian3 J;
-    model.Predict(theta, w.pose, &J);
-    const Eigen::MatrixXd Jw = w.sqrt_information * J * scale.asDiagonal();
-    info += Jw.transpose() * Jw;
-  }
+  // Each record's whitened Jacobian (a move's from its own residual).
+  const Eigen::MatrixXd Jw = WhitenedJacobian(model, theta, poses) * scale.asDiagonal();
+  const Eigen::MatrixXd info = Jw.transpose() * Jw;
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(info);
   const Eigen::VectorXd lambda = eig.eigenvalues();
   const double top = lambda.maxCoeff();
@@ -149,14 +145,22 @@ ModelAnalysis AnalyzeCalibration(const protocol::CalibrationDocument& doc) {
   a.observability = AnalyzeData(model, doc.theta, weighted, ObservabilityOptions{});
   a.observability_done = true;
   if (model.sensor() == SensorKind::kGyroscope) {
-    std::vector<WeightedPose> still, rate;
-    for (const WeightedPose& w : weighted) (w.pose.is_rate() ? rate : still).push_back(w);
-    if (!still.empty() && !rate.empty()) {
-      SourceSigmas& src = a.sources;
+    std::vector<WeightedPose> still, rate, moves;
+    for (const WeightedPose& w : weighted) {
+      (w.raw_residual ? moves : w.pose.is_rate() ? rate : still).push_back(w);
+    }
+    const std::pair<const char*, const std::vector<WeightedPose>*> sources[] = {
+        {"static poses", &still}, {"rate segments", &rate}, {"moves", &moves}};
+    SourceSigmas src;
+    for (const auto& [name, list] : sources) {
+      if (list->empty()) continue;
+      src.source.push_back(name);
+      src.records.push_back(static_cast<int>(list->size()));
+      src.sigma.push_back(FisherSigma(model, doc.theta, *list));
+    }
+    if (src.source.size() >= 2) {
       src.sigma_all = FisherSigma(model, doc.theta, weighted);
-      src.source = {"static poses", "rate segments"};
-      src.records = {static_cast<int>(still.size()), static_cast<int>(rate.size())};
-      src.sigma = {FisherSigma(model, doc.theta, still), FisherSigma(model, doc.theta, rate)};
+      a.sources = std::move(src);
     }
   }
   return a;

@@ -43,7 +43,7 @@ struct Convergence {
 // estimate with each record weighed as the observability analysis weighs it; infinite where that
 // source alone leaves the parameter undetermined.
 struct SourceSigmas {
-  std::vector<std::string> source;     // "static poses", "rate segments"
+  std::vector<std::string> source;     // "static poses", "rate segments", "moves" (those present)
   std::vector<int> records;            // per source
   std::vector<Eigen::VectorXd> sigma;  // per source, in the model's order
   Eigen::VectorXd sigma_all;           // every record together, the same way

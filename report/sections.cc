@@ -265,8 +265,14 @@ std::string SourcesHtml(const protocol::CalibrationDocument& doc, const ModelAna
       // A source determines a parameter alone when its sigma is within 3x of the combined one.
       if (std::isfinite(s) && s <= 3 * src.sigma_all[j]) by.push_back(src.source[k]);
     }
-    std::string verdict = by.empty() ? "both together" : by.front();
-    if (by.size() > 1) verdict = "either (" + by[0] + " or " + by[1] + ")";
+    std::string verdict = by.empty() ? "together" : by.front();
+    if (by.size() > 1) {
+      verdict = "either (" + by[0];
+      for (std::size_t k = 1; k < by.size(); ++k) {
+        verdict += (k + 1 == by.size() ? " or " : ", ") + by[k];
+      }
+      verdict += ")";
+    }
     o += fmt::format(R"(<td class="num">{}</td><td>{}</td></tr>)",
                      Escape(FormatSigma(p, src.sigma_all[j])), Escape(verdict));
   }
@@ -274,7 +280,7 @@ std::string SourcesHtml(const protocol::CalibrationDocument& doc, const ModelAna
   o += "<p class=\"small\">Each source's records alone, weighed as the observability analysis "
        "weighs them, by the Fisher information at the estimate; inf: that source alone cannot "
        "determine the parameter. \"Determined by\" names a source whose sigma alone is within 3"
-       "&#215; of the combined one; \"both together\" means neither comes near alone.</p>";
+       "&#215; of the combined one; \"together\" means none comes near alone.</p>";
   return o;
 }
 

@@ -146,10 +146,14 @@ Eigen::Vector3d MoveResidual::Rotation(const double* theta, Eigen::MatrixXd* jac
   Eigen::Matrix<double, 3, 9> JB = Eigen::Matrix<double, 3, 9>::Zero();
   Eigen::Matrix3d sum_q = Eigen::Matrix3d::Zero(), sum_qq = Eigen::Matrix3d::Zero();
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // R_{N<-k}: the turn after block k
-  // d r / d phi_k = +R_{N<-k} (FrameTurn(phi + d) = FrameTurn(d) FrameTurn(phi) to first order),
-  // d phi_k = -A dG phi_k - A tau_k (db + dB f_k).
+  // d r / d phi_k = +R_{N<-k} J_k with FrameTurn(phi + d) = FrameTurn(J_k d) FrameTurn(phi),
+  // J_k = I - [phi_k x] / 2 + [phi_k x]^2 / 6 (SO(3)'s left Jacobian at -phi_k, to the second
+  // order: a block turns < 0.03 rad), and d phi_k = -A dG phi_k - A tau_k (db + dB f_k).
   for (std::size_t kk = n; kk-- > 0;) {
-    const Eigen::Matrix3d Q = R * A;
+    Eigen::Matrix3d hat;
+    hat << 0, -phi[kk].z(), phi[kk].y(), phi[kk].z(), 0, -phi[kk].x(), -phi[kk].y(), phi[kk].x(), 0;
+    const Eigen::Matrix3d Jl = Eigen::Matrix3d::Identity() - 0.5 * hat + hat * hat / 6.0;
+    const Eigen::Matrix3d Q = R * Jl * A;
     const double tau = record_.block_s[kk];
     for (int i = 0; i < 3; ++i) {
       for (int j = 0; j < 3; ++j) {

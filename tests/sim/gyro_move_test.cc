@@ -78,8 +78,10 @@ TEST(GyroMove, TheResidualIsZeroAtTheTruthAndItsJacobianIsRight) {
         residual->Evaluate(pu, vu.data(), nullptr);
         residual->Evaluate(pd, vd.data(), nullptr);
         const Eigen::Vector3d numeric = (vu - vd) / (2 * h);
-        // First order in each block's turn (< 0.01 rad): within 2 % of the column.
-        EXPECT_LT((J.col(k) - numeric).norm(), 0.02 * numeric.norm() + 1e-9)
+        // Within 0.5 % of the column: second order in each block's turn (< 0.03 rad); what is
+        // left is Log's own Jacobian at r, ~3e-3 rad away from the truth (measured 0.4 %; the
+        // first-order Jacobian, without SO(3)'s left Jacobian, was within 2 %).
+        EXPECT_LT((J.col(k) - numeric).norm(), 0.005 * numeric.norm() + 1e-9)
             << "move " << i << " " << r.gyro->parameters()[static_cast<std::size_t>(k)].name;
       }
     }
