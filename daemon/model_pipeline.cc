@@ -126,12 +126,11 @@ namespace {
 // 1 sigma per axis of model.Correct(theta, raw) from cov(theta): J cov J^T with J by central
 // differences (steps of 1e-6 of each parameter's scale); nullopt without a usable covariance.
 // `bias_drift_var`, per axis, is added to the bias parameters' variance: how far the bias may
-// have wandered since the calibration.
-std::optional<Eigen::Vector3d> CorrectionSigma(const MeasurementModel& model,
-                                               const Eigen::VectorXd& theta,
-                                               Eigen::MatrixXd covariance,
-                                               const Eigen::Vector3d& raw,
-                                               const Eigen::Vector3d& bias_drift_var) {
+// have wandered since the calibration. With `f_q` a g-sensitivity (gyro21's B_g) comes off the
+// raw rate first, so its covariance counts too.
+std::optional<Eigen::Vector3d> CorrectionSigma(
+    const MeasurementModel& model, const Eigen::VectorXd& theta, Eigen::MatrixXd covariance,
+    const Eigen::Vector3d& raw, const Eigen::Vector3d& bias_drift_var, const Eigen::Vector3d* f_q) {
   const Eigen::Index n = theta.size();
   if (covariance.rows() != n || covariance.cols() != n || !covariance.allFinite()) {
     return std::nullopt;
@@ -142,14 +141,24 @@ std::optional<Eigen::Vector3d> CorrectionSigma(const MeasurementModel& model,
     if (name == "bx" || name == "by" || name == "bz")
       covariance(k, k) += bias_drift_var[name[1] - 'x'];
   }
+  const int g = f_q ? model.index_of("Bg_xx") : -1;
+  const auto corrected = [&](const Eigen::VectorXd& at) {
+    Eigen::Vector3d r = raw;
+    if (g >= 0) {
+      Eigen::Matrix3d B;
+      for (int e = 0; e < 9; ++e) B(e / 3, e % 3) = at[g + e];
+      r -= B * *f_q;
+    }
+    return model.Correct(at, r);
+  };
   Jacobian3 jacobian(3, n);
   Eigen::VectorXd t = theta;
   for (Eigen::Index k = 0; k < n; ++k) {
     const double h = 1e-6 * std::max(1.0, std::abs(theta[k]));
     t[k] = theta[k] + h;
-    const Eigen::Vector3d up = model.Correct(t, raw);
+    const Eigen::Vector3d up = corrected(t);
     t[k] = theta[k] - h;
-    const Eigen::Vector3d down = model.Correct(t, raw);
+    const Eigen::Vector3d down = corrected(t);
     t[k] = theta[k];
     jacobian.col(k) = (up - down) / (2 * h);
   }
@@ -199,7 +208,7 @@ Eigen::Vector3d ModelPipeline::Correct(const Eigen::Vector3d& raw_in, double t_s
         drift_var[axis] = applied_drift.VarianceSince(axis, w, since_s);
       }
     }
-    *sigma = CorrectionSigma(*model, applied_theta, applied_covariance, raw, drift_var);
+    *sigma = CorrectionSigma(*model, applied_theta, applied_covariance, raw_in, drift_var, f_q);
   }
   return value;
 }

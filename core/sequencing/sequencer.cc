@@ -559,8 +559,6 @@ void Sequencer::StartCollecting(const StillSample& first) {
   t_first_ns_ = first.t_host_ns;
   t_first_sensor_s_ = first.t_sensor_s;
   state_ = State::kCollecting;
-  // The move from the last captured pose ends at this dwell's first sample (the last one added).
-  moves_.End(pose_);
   Emit(SequencerEventKind::kCollecting, first.t_s(),
        fmt::format("still; collecting {} samples", needed_));
   // What was lost or left out before the first sample belongs to before the window.

@@ -40,14 +40,14 @@ struct Session {
 // did not pass are published by operator override, so every model has a calibration.
 Session RunSession(const std::string& stem, drivers::Protocol protocol,
                    const std::string& accel_model, const std::string& mag_model, std::uint64_t seed,
-                   const std::string& gyro_model = "") {
+                   const std::string& gyro_model = "", bool rate_segments = true) {
   sim::SimCaptureOptions o;
   o.protocol = protocol;
   o.accel_model = accel_model;
   o.mag_model = mag_model;
   o.gyro_model = gyro_model;
   o.poses = CubePoses26();
-  if (!gyro_model.empty()) {
+  if (!gyro_model.empty() && rate_segments) {
     for (const auto& r : DefaultRateSegments()) o.poses.push_back(r);
   }
   o.session.seed = seed;
@@ -329,6 +329,27 @@ TEST(GyroReport, SaysWhichSourceDeterminedWhatAndTheTriadAngle) {
   const double truth = std::acos(std::clamp((R.trace() - 1) / 2, -1.0, 1.0));
   EXPECT_GT(sigma, 0.0);
   EXPECT_LT(std::abs(angle - truth), 4 * sigma) << angle << " truth " << truth;
+}
+
+// A table without a rate mode: 26 static poses and the 25 moves between them. The report's
+// sources table has the static poses and the moves, and says the moves determined the scale
+// factors and the misalignment.
+TEST(GyroReport, MovesAloneSayWhatTheyDetermine) {
+  const Session s =
+      RunSession("gyro_moves", drivers::Protocol::kXbus, "accel13", "mag13", 11, "gyro12", false);
+  std::string html, error;
+  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, ""}, &html, &error)) << error;
+  std::filesystem::remove_all(s.dir);
+  EXPECT_NE(html.find("from static poses alone (26)"), std::string::npos);
+  EXPECT_NE(html.find("from moves alone (25)"), std::string::npos);
+  EXPECT_EQ(html.find("from rate segments alone"), std::string::npos);
+  const auto row = [&](const std::string& p) {
+    const std::size_t at = html.find("id=\"source-gyro12-" + p + "\"");
+    return at == std::string::npos ? std::string() : html.substr(at, html.find("</tr>", at) - at);
+  };
+  for (const char* p : {"Sx", "Sy", "Sz", "alpha1", "eps_z"}) {
+    EXPECT_NE(row(p).find("<td>moves</td>"), std::string::npos) << row(p);
+  }
 }
 
 TEST_F(CalibrationReport, MalformedInputGivesAnErrorNotACrash) {
