@@ -6,10 +6,10 @@
 namespace turncal::protocol {
 
 nlohmann::json ToJson(const MoveRecord& m, bool with_blocks) {
-  nlohmann::json j = {{"from", ToJson(m.from)},    {"to", ToJson(m.to)},
-                      {"t_start", m.t_start_s},    {"t_end", m.t_end_s},
-                      {"samples", m.samples},      {"duration_s", m.duration_s()},
-                      {"blocks", m.block_s.size()}};
+  nlohmann::json j = {{"from", ToJson(m.from)},     {"to", ToJson(m.to)},
+                      {"t_start", m.t_start_s},     {"t_end", m.t_end_s},
+                      {"samples", m.samples},       {"duration_s", m.duration_s()},
+                      {"blocks", m.block_s.size()}, {"bridged", m.bridged}};
   if (!with_blocks) return j;
   nlohmann::json increments = nlohmann::json::array(), forces = nlohmann::json::array();
   for (const auto& v : m.increment_rad) increments.push_back(JsonVec3(v));
@@ -38,6 +38,9 @@ bool ParseMoveRecord(const nlohmann::json& j, MoveRecord* out, std::string* erro
   m.t_start_s = j["t_start"].get<double>();
   m.t_end_s = j["t_end"].get<double>();
   m.samples = j["samples"].get<std::int64_t>();
+  if (j.contains("bridged") && j["bridged"].is_number_integer()) {
+    m.bridged = j["bridged"].get<std::int64_t>();
+  }
   const auto& blocks = j.value("block_s", nlohmann::json());
   const auto& increments = j.value("increment_rad", nlohmann::json());
   const auto& forces = j.value("force_mps2", nlohmann::json::array());

@@ -17,6 +17,9 @@ bool SessionSimOptions::IsValid(std::string* error) const {
     return fail("dwell and move times must be > 0, settle and start >= 0");
   }
   if (!(sensor.bias_tau_s > 0)) return fail("bias time constant must be > 0");
+  if (!lever_arm_q_m.allFinite() || lever_arm_q_m.norm() > 2.0) {
+    return fail("the lever arm must be finite and at most 2 m");
+  }
   if (!(acc_random_walk >= 0 && mag_random_walk >= 0 && acc_warmup >= 0 && mag_warmup >= 0)) {
     return fail("random walk and warm-up must be >= 0");
   }
@@ -251,6 +254,7 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   out.acc_drift_sum.reserve(n + 1);
   out.mag_drift_sum.reserve(n + 1);
   std::size_t seg = 0;
+  Eigen::Vector3d previous_rate_q = Eigen::Vector3d::Zero();
   for (std::size_t k = 0; k < n; ++k) {
     const double tk = static_cast<double>(k) * dt;
     while (seg + 1 < segments.size() && tk >= segments[seg].t1) ++seg;
@@ -310,6 +314,15 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     const Eigen::Vector3d drift_mag = wander_mag + walk_mag + settle * warm_mag;
     out.acc_drift_sum.push_back(out.acc_drift_sum.back() + drift_acc);
     out.mag_drift_sum.push_back(out.mag_drift_sum.back() + drift_mag);
+    // The lever arm's acceleration in q (zero without one).
+    Eigen::Vector3d lever_q = Eigen::Vector3d::Zero();
+    if (!o.lever_arm_q_m.isZero()) {
+      const Eigen::Vector3d w = BodyRate(a);
+      const Eigen::Vector3d w_dot =
+          k > 0 ? Eigen::Vector3d((w - previous_rate_q) / dt) : Eigen::Vector3d::Zero();
+      lever_q = w.cross(w.cross(o.lever_arm_q_m)) + w_dot.cross(o.lever_arm_q_m);
+      previous_rate_q = w;
+    }
     Eigen::Vector3d gyr;
     if (gyro_model) {
       for (int i = 0; i < 3; ++i) {
@@ -318,10 +331,10 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
       }
       const Eigen::Vector3d drift_gyr = wander_gyr + walk_gyr;
       out.gyr_drift_sum.push_back(out.gyr_drift_sum.back() + drift_gyr);
-      // The instantaneous inertial rate and specific force in q (the table at its centre: no
-      // lever arm).
+      // The instantaneous inertial rate and specific force in q (with the lever arm's).
       const Mat3<double> C = pose.C_p_q();
-      gyr = gyro_model->PredictRate(out.gyro_truth, C * earth_ned + BodyRate(a), C * f_ned) +
+      gyr = gyro_model->PredictRate(out.gyro_truth, C * earth_ned + BodyRate(a),
+                                    C * f_ned + lever_q) +
             drift_gyr;
     } else {
       gyr = accel_model.context().mounting * BodyRate(a) + out.gyro_bias_radps;
@@ -331,6 +344,7 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
     smp.t_device_s = o.clock_offset_s + tk * (1.0 + o.clock_drift_ppm * 1e-6);
     smp.counter = static_cast<std::uint32_t>(k);
     Eigen::Vector3d acc = accel_model.Predict(out.accel_truth, pose) + drift_acc;
+    if (!o.lever_arm_q_m.isZero()) acc += accel_model.context().mounting * lever_q;
     Eigen::Vector3d mag = mag_model.Predict(out.mag_truth, pose) + drift_mag;
     for (int i = 0; i < 3; ++i) {
       acc[i] = Quantise(acc[i] + white_acc * normal(rng), c.acc_quantum);

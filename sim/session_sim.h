@@ -62,6 +62,12 @@ struct SessionSimOptions {
   double ripple_hz = 2.0;
   // Gyro bias random walk, rad/s/sqrt(s) (0: none; only with a gyro model).
   double gyr_random_walk = 0.0;
+  // The IMU's lever arm from the table's centre, in the inner frame q, m (zero: the bytes of a
+  // session without one are unchanged). In motion the accelerometer (and a gyro's
+  // g-sensitivity) then see the centripetal and tangential acceleration w x (w x r) + dw/dt x r
+  // (dw/dt by the backward difference over one sample), turned by the nominal mounting; the
+  // gyro does not (a rigid body turns alike everywhere). Still poses are unaffected.
+  Eigen::Vector3d lever_arm_q_m = Eigen::Vector3d::Zero();
   std::uint64_t seed = 1;
 
   bool IsValid(std::string* error) const;

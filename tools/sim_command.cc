@@ -38,8 +38,9 @@ struct SimCommandArgs {
   std::string poses_file;
   std::uint64_t seed = 1;
   double dwell_s = 5.0;
-  double rate_hz = 0.0;  // 0: the protocol's default
-  int baud = 0;          // 0: the protocol's default
+  std::vector<double> lever_arm_m;  // x, y, z in the table's inner frame
+  double rate_hz = 0.0;             // 0: the protocol's default
+  int baud = 0;                     // 0: the protocol's default
   std::string sensor_class = "industrial";
   std::string truth_out;
   std::string output;
@@ -212,6 +213,7 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
       {"class", args.sensor_class},
       {"protocol", args.protocol},
       {"seed", args.seed},
+      {"lever_arm_m", args.lever_arm_m},
       {"rate_hz", capture.session_options.rate_hz},
       {"dwell_s", capture.session_options.dwell_s},
       {"move_s", capture.session_options.table ? nlohmann::json("at the table's rates")
@@ -381,6 +383,10 @@ int RunSim(const SimCommandArgs& args) {
   if (args.no_quantisation) o.sensor.acc_quantum = o.sensor.gyr_quantum = o.sensor.mag_quantum = 0;
   o.rate_hz = args.rate_hz;  // <= 0: the protocol's default
   o.dwell_s = args.dwell_s;
+  if (args.lever_arm_m.size() == 3) {
+    o.lever_arm_q_m =
+        Eigen::Vector3d(args.lever_arm_m[0], args.lever_arm_m[1], args.lever_arm_m[2]);
+  }
   o.seed = args.seed;
   options.baud = args.baud;
   options.faults = args.faults;
@@ -450,6 +456,11 @@ void AddSimCommand(CLI::App* app) {
                   "directions + 10 intermediate)");
   cmd->add_option("--seed", args->seed, "random seed (same seed: byte-identical output)")
       ->capture_default_str();
+  cmd->add_option("--lever-arm", args->lever_arm_m,
+                  "the IMU's offset from the table's centre, X Y Z in the table's inner frame, m "
+                  "(default none): in motion the accelerometer sees its centripetal and "
+                  "tangential acceleration")
+      ->expected(3);
   cmd->add_option("--dwell", args->dwell_s, "seconds at rest per pose after settling")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

@@ -17,6 +17,7 @@ void MoveIntegrator::Clear() {
   force_sum_.setZero();
   in_block_ = 0;
   samples_ = 0;
+  bridged_ = 0;
   acc_last_.reset();
 }
 
@@ -47,6 +48,7 @@ void MoveIntegrator::Add(double t_s, const Eigen::Vector3d& gyr_radps,
     with_force_ = false;
   }
   in_block_ += std::max(1, periods);
+  bridged_ += std::max(1, periods) - 1;
   gyr_last_ = gyr_radps;
   acc_last_ = acc_mps2;
   record_.t_end_s = t_s;
@@ -76,6 +78,7 @@ MoveRecord MoveIntegrator::Finish(const TablePose& from, const TablePose& to) {
   m.from = from;
   m.to = to;
   m.samples = samples_;
+  m.bridged = bridged_;
   if (!with_force_) m.force_mps2.clear();
   Clear();
   return m;

@@ -64,7 +64,7 @@ class MoveIntegrator {
   std::optional<Eigen::Vector3d> acc_last_;
   Eigen::Vector3d phi_ = Eigen::Vector3d::Zero(), force_sum_ = Eigen::Vector3d::Zero();
   int in_block_ = 0;  // sample periods in the open block
-  std::int64_t samples_ = 0;
+  std::int64_t samples_ = 0, bridged_ = 0;
 };
 
 }  // namespace turncal

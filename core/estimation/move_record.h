@@ -23,6 +23,7 @@ struct MoveRecord {
   double t_start_s = 0.0;  // the sensor's clock (drift), first and last sample
   double t_end_s = 0.0;
   std::int64_t samples = 0;
+  std::int64_t bridged = 0;  // samples lost or left out inside it, bridged by the trapezoid
 
   double duration_s() const;
   // False with a message when the blocks disagree in number, a value is not finite, a block's

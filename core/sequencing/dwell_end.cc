@@ -87,14 +87,7 @@ void Sequencer::Complete(double t_s) {
         t_last_sensor_s_ + (prof.device_period_s ? *prof.device_period_s : 1.0 / prof.rate_hz);
   }
   if (temp_n_ > 0) record.temp_c = temp_sum_ / static_cast<double>(temp_n_);
-  if (!rate_mode_) {
-    // The move from the last captured pose ends at this dwell's last sample (the last one
-    // added): the table has settled there. At the dwell's first sample a servo's decaying
-    // oscillation may still be under the noise's stillness limit, and a move's end is one
-    // instant, not a mean.
-    moves_.End(pose_);
-    record.move_in = moves_.TakeEnded();
-  }
+  if (!rate_mode_) record.move_in = moves_.TakeEnded();
 
   if (predictor_) {
     for (int t : {kTriadAcc, kTriadMag}) {

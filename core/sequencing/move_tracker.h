@@ -2,11 +2,9 @@
 // The moves between static poses as the gyro saw them (issue 21, the third source; DESIGN.md
 // "Pose sources"): the sequencer hands every sample, in order, to a MoveTracker, which
 // integrates the raw gyro (core/estimation/move_integrator.h) from the last sample of a captured
-// static pose's dwell to the last sample of the next static pose's dwell (both ends settled: at
-// a dwell's first sample a servo's decaying oscillation may still be under the stillness limit,
-// which with a consumer gyro's noise let the simulated table's 2e-4 rad settling through, one
-// sign, and biased the misalignments by 0.2-0.3 sigma); the next pose's record carries the move
-// that led to it (PoseRecord::move_in).
+// static pose's dwell to the first sample of the next static pose's dwell (the windows of moves
+// and records do not overlap: their white noise is their own); the next pose's record carries
+// the move that led to it (PoseRecord::move_in).
 //
 // Both ends are samples the sequencer vouched for: the table rested at the announced pose there
 // (still, and the dwell's mean fitted). A move is dropped, with its reason counted, when
@@ -45,7 +43,7 @@ class MoveTracker {
   void Start(const TablePose& from, const StillSample& last);
   // The next sample in the stream (ignored unless a move is being tracked).
   void Add(const StillSample& s);
-  // The next static pose's dwell ended at the last sample added: the move ends there.
+  // The next static pose's dwell begins at the last sample added: the move ends there.
   void End(const TablePose& to);
   // The move that ended, for the record of the pose it led to (once).
   std::optional<MoveRecord> TakeEnded();

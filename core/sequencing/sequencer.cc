@@ -266,6 +266,7 @@ void Sequencer::Push(StillSample s) {
     const std::optional<std::int64_t> steps = StepsAhead(s);
     if (steps && plausible(steps)) {
       ++pending_flagged_;
+      ++move_flagged_;  // its interval is missing from a move, uncounted: the move is dropped
       ++totals_.flagged;
       if (excluded_) excluded_(jumped, "corrupt counter");
       // It stood for the sample after the last one (unless `s` is that one): not lost.
@@ -345,7 +346,10 @@ void Sequencer::Accept(StillSample s) {
   for (int t = 0; t < 3; ++t) {
     if (s.has(t) && !s.v[t].allFinite()) finite = false;
   }
+  s.seq = ++accepted_;
   if ((s.flags & kBadFlags) || !finite) {
+    ++move_flagged_;
+    move_lost_ += s.lost_before;
     pending_lost_ += s.lost_before;
     ++pending_flagged_;
     ++totals_.flagged;
@@ -391,12 +395,25 @@ void Sequencer::Accept(StillSample s) {
   }
   for (int t = 0; t < 3; ++t) {
     if (detector_->profile().sigma[t] && !s.has(t)) {
+      ++move_flagged_;
+      move_lost_ += s.lost_before;
       pending_lost_ += s.lost_before;
       ++pending_flagged_;
       ++totals_.flagged;
       if (excluded_) excluded_(s, "incomplete");
       return;
     }
+  }
+  // The moves integrate every sample, outliers too (in motion the window's median lags behind the
+  // rate, and a sample at the edge of a move that the outlier test drops is not a random one):
+  // they take the samples from their own queue, in step with the detector's delayed stream.
+  if (options_.moves.enabled) {
+    StillSample q = s;
+    q.lost_before += move_lost_;
+    q.flagged_before = move_flagged_;
+    q.outliers_before = 0;
+    move_lost_ = move_flagged_ = 0;
+    move_queue_.push_back(q);
   }
   // Isolated outliers: a sample far from the window's median is held; if the next one is far
   // too, both are real (the table moves) and go in; otherwise the held one is dropped. In a rate
@@ -430,6 +447,8 @@ void Sequencer::Interrupt(double t_s, const std::string& why) {
   detector_->Clear();
   held_.reset();
   moves_.Abort("the stream was interrupted");
+  move_queue_.clear();
+  move_lost_ = move_flagged_ = 0;
   pending_lost_ = pending_flagged_ = pending_outliers_ = 0;
   if (state_ == State::kCollecting) {
     if (scheduled()) {
@@ -461,7 +480,12 @@ void Sequencer::Feed(const StillSample& in) {
     last_motion_t_s_ = t_s;
   }
   const bool moving = !still && detector_->finding().kind != StillFinding::kFilling;
-  if (has_evicted) moves_.Add(evicted);
+  if (has_evicted) {
+    while (!move_queue_.empty() && move_queue_.front().seq <= evicted.seq) {
+      moves_.Add(move_queue_.front());
+      move_queue_.pop_front();
+    }
+  }
   if (rate_mode_ && (state_ == State::kWaiting || state_ == State::kCollecting)) {
     FeedRate(s);
     return;
@@ -559,6 +583,9 @@ void Sequencer::StartCollecting(const StillSample& first) {
   t_first_ns_ = first.t_host_ns;
   t_first_sensor_s_ = first.t_sensor_s;
   state_ = State::kCollecting;
+  // The move from the last captured pose ends at this dwell's first sample (the last one added):
+  // its samples are the record's, and their white noise must not count twice.
+  if (!rate_mode_) moves_.End(pose_);
   Emit(SequencerEventKind::kCollecting, first.t_s(),
        fmt::format("still; collecting {} samples", needed_));
   // What was lost or left out before the first sample belongs to before the window.

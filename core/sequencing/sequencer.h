@@ -37,6 +37,7 @@
 
 #include <array>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -238,6 +239,11 @@ class Sequencer {
   std::int64_t captured_ = 0, rejected_ = 0;
   MoveTracker moves_;
   StillSample last_committed_;
+  // The accepted samples, outliers included, until the detector's delayed stream reaches them;
+  // what was flagged or lost before each (at most a window and a held sample).
+  std::deque<StillSample> move_queue_;
+  std::uint32_t move_lost_ = 0, move_flagged_ = 0;
+  std::uint64_t accepted_ = 0;
 };
 
 }  // namespace turncal

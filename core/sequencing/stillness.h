@@ -53,6 +53,8 @@ struct StillSample {
   // The sequencer's sensor clock (Sequencer: the device clock, kept continuous across resets;
   // the host clock for devices without one): what bias drift evolves in.
   double t_sensor_s = std::numeric_limits<double>::quiet_NaN();
+  // The sequencer's count of the samples it accepted (stream order), for the moves' own queue.
+  std::uint64_t seq = 0;
 
   bool has(int triad) const { return (present >> triad) & 1u; }
   double t_s() const { return static_cast<double>(t_host_ns) * 1e-9; }
