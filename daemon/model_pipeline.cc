@@ -230,6 +230,7 @@ nlohmann::json ModelPipeline::PrecisionJson(const GateOptions& gate_options) con
 nlohmann::json ModelPipeline::StatusJson() const {
   const CalibratorOptions& co = calibrator->options();
   return {{"poses", estimate.poses},
+          {"moves", estimate.moves},
           {"gate", ToJson(gate)},
           {"fit_check", ToString(estimate.fit.verdict)},
           {"noise_model", co.drift.enabled()
@@ -245,6 +246,7 @@ nlohmann::json ModelPipeline::ResultJson() const {
   const Estimate& e = estimate;
   return {{"ok", e.ok},
           {"poses", e.poses},
+          {"moves", e.moves},
           {"params", ParamsJson(e)},
           {"rank", rank},
           {"chi2", e.chi2},

@@ -445,6 +445,7 @@ void Station::Apply(std::size_t device, std::size_t model, double t_s, const Mod
            {"device", d.name},
            {"model", m.model->name()},
            {"poses", m.estimate.poses},
+           {"moves", m.estimate.moves},
            {"summary", m.estimate.BriefReport()},
            {"precision", precision},
            {"gate", ToJson(m.gate)}});
@@ -469,7 +470,8 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
                           {"device", d.name},
                           {"model", m.model->name()},
                           {"version", m.active_version},
-                          {"poses", m.estimate.poses}};
+                          {"poses", m.estimate.poses},
+                          {"moves", m.estimate.moves}};
   if (!override_who.is_null()) event["override"] = override_who;
   // Persisted (atomically, fsynced: off the loop), then applied and announced.
   auto write_error = std::make_shared<std::string>();

@@ -52,6 +52,7 @@ struct SimCommandArgs {
   double bias_tau_s = -1, acc_random_walk = 0, mag_random_walk = 0, acc_warmup = 0, mag_warmup = 0,
          warmup_tau_s = 60;
   bool no_quantisation = false;
+  bool no_rate_segments = false;  // a table without a rate mode
   double table_rate_dps = 0;  // 0: every move takes 3 s (SessionSimOptions::move_s)
   double table_accel_dps2 = TableMotion{}.accel_dps2[0];
   std::vector<std::string> lives;  // ptys (or writable ttys/files) to stream to at real time
@@ -355,7 +356,7 @@ int RunSim(const SimCommandArgs& args) {
   }
   const bool has_rates = std::any_of(options.poses.begin(), options.poses.end(),
                                      [](const TablePose& p) { return p.is_rate(); });
-  if (!options.gyro_model.empty() && !has_rates) {
+  if (!options.gyro_model.empty() && !has_rates && !args.no_rate_segments) {
     // What a gyro model needs besides the static poses: rate segments, one after each of the
     // first poses (DefaultRateSegments), unless the poses hold their own.
     options.poses = WithRateSegments(options.poses, DefaultRateSegments());
@@ -514,6 +515,9 @@ void AddSimCommand(CLI::App* app) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_flag("--no-quantisation", args->no_quantisation, "floats without ADC steps");
+  cmd->add_flag("--no-rate-segments", args->no_rate_segments,
+                "with a gyro model: a table without a rate mode, static poses only (the gyro model "
+                "then learns from the moves between them)");
   cmd->add_flag(
       "--faults", args->faults,
       fmt::format("inject faults: bit flips (~1 frame in 500), dropped bytes (~1 in 700), "

@@ -90,8 +90,9 @@ double Estimate::sigma_of(std::string_view name) const {
 std::string Estimate::BriefReport() const {
   if (!ok) return fmt::format("{}: no estimate: {}", model, error);
   return fmt::format(
-      "{}: {} poses, rank {}/{}, chi2 {:.1f} on {} dof (p = {:.3g}){}{}, {} iterations, {}", model,
-      poses, rank, parameters.size(), chi2, dof, p_value,
+      "{}: {} poses{}, rank {}/{}, chi2 {:.1f} on {} dof (p = {:.3g}){}{}, {} iterations, {}",
+      model, poses, moves > 0 ? fmt::format(" and {} moves", moves) : "", rank, parameters.size(),
+      chi2, dof, p_value,
       covariance_scale > 1 ? fmt::format(", covariance x{:.2f}", covariance_scale) : "",
       gauge.empty() ? "" : ", gauge: " + gauge, iterations, termination);
 }
@@ -471,7 +472,8 @@ DriftScale Calibrator::IdentifyDrift(const Estimate& est) const {
 Estimate Calibrator::SolveOnce() {
   Estimate est;
   est.model = options_.model;
-  est.poses = num_poses();
+  est.poses = num_poses() - moves_;
+  est.moves = moves_;
   if (!model_) {
     est.error = model_error_;
     return est;
