@@ -37,7 +37,6 @@
 
 #include <array>
 #include <cstdint>
-#include <deque>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -241,7 +240,9 @@ class Sequencer {
   StillSample last_committed_;
   // The accepted samples, outliers included, until the detector's delayed stream reaches them;
   // what was flagged or lost before each (at most a window and a held sample).
-  std::deque<StillSample> move_queue_;
+  // A ring of fixed capacity (two detector windows), allocated once with the detector.
+  std::vector<StillSample> move_ring_;
+  std::size_t move_head_ = 0, move_size_ = 0;
   std::uint32_t move_lost_ = 0, move_flagged_ = 0;
   std::uint64_t accepted_ = 0;
 };

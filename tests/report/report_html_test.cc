@@ -306,14 +306,22 @@ TEST(GyroReport, SaysWhichSourceDeterminedWhatAndTheTriadAngle) {
   std::filesystem::remove_all(s.dir);
   EXPECT_NE(html.find("G (gyroscope)"), std::string::npos);
   ASSERT_NE(html.find("id=\"sources-gyro12\""), std::string::npos);
-  // The scale factors come from the rate segments: the static poses alone see the Earth's rate
-  // only and leave them hundreds of times less certain; the bias is determined by either.
+  // The scale factors come from the rate segments (and the 25 moves between the 26 static poses,
+  // within 3x of the combined sigma: "either (rate segments or moves)"): the static poses alone
+  // see the Earth's rate only and leave them hundreds of times less certain; the bias is
+  // determined by more than one source.
   const auto row = [&](const std::string& p) {
     const std::size_t at = html.find("id=\"source-gyro12-" + p + "\"");
     return at == std::string::npos ? std::string() : html.substr(at, html.find("</tr>", at) - at);
   };
-  EXPECT_NE(row("Sx").find("<td>rate segments</td>"), std::string::npos) << row("Sx");
-  EXPECT_NE(row("eps_z").find("<td>rate segments</td>"), std::string::npos) << row("eps_z");
+  EXPECT_NE(html.find("from moves alone (25)"), std::string::npos);
+  for (const char* p : {"Sx", "eps_z"}) {
+    const std::string r = row(p);
+    const std::size_t verdict = r.rfind("<td>");
+    ASSERT_NE(verdict, std::string::npos) << r;
+    EXPECT_NE(r.find("rate segments", verdict), std::string::npos) << r;
+    EXPECT_EQ(r.find("static poses", verdict), std::string::npos) << r;
+  }
   EXPECT_NE(row("bx").find("either"), std::string::npos) << row("bx");
   // The triad angle within 4 sigma of the truth's.
   std::smatch m;
