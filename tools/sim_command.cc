@@ -53,7 +53,7 @@ struct SimCommandArgs {
          warmup_tau_s = 60;
   bool no_quantisation = false;
   bool no_rate_segments = false;  // a table without a rate mode
-  double table_rate_dps = 0;  // 0: every move takes 3 s (SessionSimOptions::move_s)
+  double table_rate_dps = 0;      // 0: every move takes 3 s (SessionSimOptions::move_s)
   double table_accel_dps2 = TableMotion{}.accel_dps2[0];
   std::vector<std::string> lives;  // ptys (or writable ttys/files) to stream to at real time
   std::string live;                // the first of lives

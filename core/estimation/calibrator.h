@@ -124,7 +124,7 @@ struct Estimate {
   Eigen::VectorXd sigma;       // sqrt of the covariance's diagonal; inf when undetermined
   int rank = 0;                // of the whitened Jacobian, out of parameters.size()
   double condition = 0.0;      // of the column-scaled whitened Jacobian
-  int poses = 0;  // pose records (static poses and rate segments)
+  int poses = 0;               // pose records (static poses and rate segments)
   int moves = 0;  // moves between poses (a gyroscope's; residuals has poses + moves entries)
   std::vector<PoseResidual> residuals;
   double chi2 = 0.0;

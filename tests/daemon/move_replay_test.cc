@@ -12,6 +12,7 @@
 #include "core/estimation/move_residual.h"
 #include "daemon/capture_replay.h"
 #include "sim/capture.h"
+#include "tests/daemon/sim_replay.h"
 
 namespace turncal {
 namespace {
@@ -38,25 +39,31 @@ sim::SimCapture Build(drivers::Protocol protocol, std::vector<TablePose> poses, 
   return c;
 }
 
-ReplayResult Replay(const sim::SimCapture& c, ReplayOptions options = {}) {
-  std::vector<std::uint8_t> bytes;
-  const std::string header = drivers::EncodeCaptureHeader(c.header);
-  bytes.assign(header.begin(), header.end());
-  for (const auto& r : c.records) {
-    drivers::AppendCaptureRecord(r.type, r.device, r.t_ns, r.payload, &bytes);
-  }
-  drivers::CaptureReader reader;
-  std::string error;
-  EXPECT_TRUE(reader.Parse(std::move(bytes), &error)) << error;
-  ReplayResult result;
-  EXPECT_TRUE(ReplayCapture(&reader, options, &result, &error)) << error;
-  return result;
+ReplayResult Replay(const sim::SimCapture& c, const ReplayOptions& options = {}) {
+  return ReplaySimCapture(c, options);
 }
 
 std::vector<TablePose> FirstPoses(int n) {
   std::vector<TablePose> p = DefaultSessionPoses();
   p.resize(static_cast<std::size_t>(n));
   return p;
+}
+
+// Every record's move against the table's turn at the truth, within `limit` rad; the moves' count.
+int CheckMovesAtTheTruth(const ReplayResult& r, const sim::SimCapture& c, double limit) {
+  std::string error;
+  auto gyro = MakeModel("gyro12", ModelContext{}, &error);
+  int moves = 0;
+  for (const auto& record : r.devices[0].records) {
+    if (!record.move_in) continue;
+    ++moves;
+    auto residual = MoveResidual::Make(*gyro, *record.move_in, c.session.gyro_truth, 1e-4, &error);
+    EXPECT_NE(residual, nullptr) << error;
+    if (residual) {
+      EXPECT_LT(residual->RotationError(c.session.gyro_truth).norm(), limit);
+    }
+  }
+  return moves;
 }
 
 class MoveReplay : public ::testing::TestWithParam<drivers::Protocol> {};
@@ -122,16 +129,7 @@ TEST(MoveReplayRules, ARateSegmentBetweenDropsTheMoveAndMovesCanBeSwitchedOff) {
 TEST(MoveReplayRules, FaultsDropOrBridgeMovesAndWhatIsKeptIsRight) {
   const sim::SimCapture c = Build(drivers::Protocol::kXbus, FirstPoses(12), true, /*faults=*/true);
   const ReplayResult r = Replay(c);
-  std::string error;
-  auto gyro = MakeModel("gyro12", ModelContext{}, &error);
-  int moves = 0;
-  for (const auto& record : r.devices[0].records) {
-    if (!record.move_in) continue;
-    ++moves;
-    auto residual = MoveResidual::Make(*gyro, *record.move_in, c.session.gyro_truth, 1e-4, &error);
-    ASSERT_NE(residual, nullptr) << error;
-    EXPECT_LT(residual->RotationError(c.session.gyro_truth).norm(), 4e-6);
-  }
+  const int moves = CheckMovesAtTheTruth(r, c, 4e-6);
   EXPECT_GE(moves, 8);  // of up to 11
 }
 
@@ -165,15 +163,7 @@ TEST(MoveReplayRules, ALeverArmChangesNeitherTheRateSegmentsNorTheMoves) {
   EXPECT_GT(largest, 0.5);
   const ReplayResult r = Replay(c);
   ASSERT_EQ(r.devices[0].records.size(), o.poses.size());
-  auto gyro = MakeModel("gyro12", ModelContext{}, &error);
-  int moves = 0;
-  for (const auto& record : r.devices[0].records) {
-    if (!record.move_in) continue;
-    ++moves;
-    auto residual = MoveResidual::Make(*gyro, *record.move_in, c.session.gyro_truth, 1e-4, &error);
-    ASSERT_NE(residual, nullptr) << error;
-    EXPECT_LT(residual->RotationError(c.session.gyro_truth).norm(), 4e-6);
-  }
+  const int moves = CheckMovesAtTheTruth(r, c, 4e-6);
   EXPECT_EQ(moves, 6);  // 3 before the rate segments, 3 after the first static pose after them
 }
 

@@ -12,6 +12,7 @@
 #include "daemon/capture_replay.h"
 #include "sim/capture.h"
 #include "sim/synthetic.h"
+#include "tests/daemon/sim_replay.h"
 
 namespace turncal {
 namespace {
@@ -43,18 +44,7 @@ Built Build(drivers::Protocol protocol, bool faults) {
 }
 
 ReplayResult Replay(const sim::SimCapture& c, const ReplayOptions& options) {
-  std::vector<std::uint8_t> bytes;
-  const std::string header = drivers::EncodeCaptureHeader(c.header);
-  bytes.assign(header.begin(), header.end());
-  for (const auto& r : c.records) {
-    drivers::AppendCaptureRecord(r.type, r.device, r.t_ns, r.payload, &bytes);
-  }
-  drivers::CaptureReader reader;
-  std::string error;
-  EXPECT_TRUE(reader.Parse(std::move(bytes), &error)) << error;
-  ReplayResult result;
-  EXPECT_TRUE(ReplayCapture(&reader, options, &result, &error)) << error;
-  return result;
+  return ReplaySimCapture(c, options);
 }
 
 double CaptureTime(const sim::SimCapture& c, double session_t_s) {

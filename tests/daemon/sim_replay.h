@@ -1,0 +1,32 @@
+#pragma once
+// Tests' helper: a `turncal sim` capture built in-process (sim/capture.h), encoded to .tcap bytes
+// and replayed through the decoders into the sequencer (daemon/capture_replay.h).
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "daemon/capture_replay.h"
+#include "sim/capture.h"
+
+namespace turncal {
+
+inline daemon::ReplayResult ReplaySimCapture(const sim::SimCapture& c,
+                                             const daemon::ReplayOptions& options) {
+  std::vector<std::uint8_t> bytes;
+  const std::string header = drivers::EncodeCaptureHeader(c.header);
+  bytes.assign(header.begin(), header.end());
+  for (const auto& r : c.records) {
+    drivers::AppendCaptureRecord(r.type, r.device, r.t_ns, r.payload, &bytes);
+  }
+  drivers::CaptureReader reader;
+  std::string error;
+  EXPECT_TRUE(reader.Parse(std::move(bytes), &error)) << error;
+  daemon::ReplayResult result;
+  EXPECT_TRUE(daemon::ReplayCapture(&reader, options, &result, &error)) << error;
+  return result;
+}
+
+}  // namespace turncal
