@@ -77,6 +77,27 @@ bool GetVector(const toml::table& t, const char* key, Eigen::Vector3d* out,
   return ok;
 }
 
+// A list of finite numbers (possibly empty).
+bool GetNumberList(const toml::table& t, const char* key, std::vector<double>* out,
+                   const std::string& source, std::string* error) {
+  const toml::node* n = t.get(key);
+  if (!n) return true;
+  const toml::array* a = n->as_array();
+  std::vector<double> values;
+  bool ok = a != nullptr;
+  for (std::size_t i = 0; ok && i < a->size(); ++i) {
+    auto v = (*a)[i].value<double>();
+    ok = v && std::isfinite(*v);
+    if (ok) values.push_back(*v);
+  }
+  if (!ok) {
+    *error = fmt::format("{}: '{}' must be a list of finite numbers", Where(*n, source), key);
+    return false;
+  }
+  *out = values;
+  return true;
+}
+
 // A whole number in [0, 1000].
 bool GetInt(const toml::table& t, const char* key, int* out, const std::string& source,
             std::string* error) {
@@ -106,17 +127,19 @@ bool GetAxes(const toml::table& t, const char* key, Eigen::Vector3d* out, const 
 bool ParseTable(const toml::table& t, const std::string& source, StationOptions* st,
                 std::string* error) {
   if (!OnlyKeys(t,
-                {"rate_dps", "accel_dps2", "settle_s", "plan_for", "rate_accuracy", "rate_ripple"},
+                {"rate_dps", "accel_dps2", "settle_s", "plan_for", "rate_accuracy", "rate_ripple",
+                 "plan_rates_dps"},
                 "[table]", source, error) ||
       !GetAxes(t, "rate_dps", &st->table.rate_dps, source, error) ||
       !GetAxes(t, "accel_dps2", &st->table.accel_dps2, source, error) ||
       !GetNumber(t, "settle_s", &st->table.settle_s, source, error) ||
       !GetNumber(t, "rate_accuracy", &st->rate_accuracy, source, error) ||
-      !GetNumber(t, "rate_ripple", &st->sequencer.rate_steady.ripple, source, error)) {
+      !GetNumber(t, "rate_ripple", &st->sequencer.rate_steady.ripple, source, error) ||
+      !GetNumberList(t, "plan_rates_dps", &st->plan_rates.rates_dps, source, error)) {
     return false;
   }
   std::string why;
-  if (!st->table.IsValid(&why)) {
+  if (!st->table.IsValid(&why) || !st->plan_rates.IsValid(&why)) {
     *error = fmt::format("{}: [table] {}", source, why);
     return false;
   }

@@ -45,9 +45,8 @@ std::vector<PlanningTarget> DevicePipeline::PlanningTargets(double dwell_s) cons
     // The drift model and the poses' times: a new pose is weighed by what it adds given every
     // earlier one at the time the table would reach it (core/planning/pose_planner.h).
     // A new pose's white noise from the device's own noise profile when it has one.
-    // The planner places static poses for the accelerometer and magnetometer models; a
-    // gyroscope's rate segments are the controller's plan (docs/protocol.md "Rate segments").
-    if (m.triad() == kTriadGyr) continue;
+    // A gyroscope's also from rate segments (the table's rates, [table] plan_rates_dps) and the
+    // moves between static poses (core/planning/gyro_planning.h).
     const NoiseProfile* noise = sequencer->noise();
     const int triad = m.triad();
     std::lock_guard lock(*m.calibrator_mutex);  // a solve in progress finishes first
@@ -57,6 +56,18 @@ std::vector<PlanningTarget> DevicePipeline::PlanningTargets(double dwell_s) cons
         noise ? noise->rate_hz : 0.0));
   }
   return targets;
+}
+
+double DevicePipeline::MoveRestSeconds(const TableMotion& motion, double fallback) const {
+  double sum = 0.0;
+  int n = 0;
+  for (const PoseRecord& r : records_used) {
+    if (!r.move_in) continue;
+    const MoveRecord& m = *r.move_in;
+    sum += m.duration_s() - motion.MoveSeconds(m.from, m.to) - motion.settle_s;
+    ++n;
+  }
+  return n > 0 ? std::max(0.0, sum / n) : fallback;
 }
 
 nlohmann::json DevicePipeline::CalibrationJson(const ModelPipeline& m,
@@ -133,6 +144,14 @@ nlohmann::json DevicePipeline::CalibrationJson(const ModelPipeline& m,
           {"provenance", provenance}};
 }
 
+nlohmann::json DevicePipeline::MovesJson() const {
+  const MoveTracker& t = sequencer->moves();
+  return {{"enabled", sequencer->options().moves.enabled},
+          {"taken", t.moves()},
+          {"dropped", t.dropped()},
+          {"last_drop", t.last_drop()}};
+}
+
 nlohmann::json DevicePipeline::StatusJson() const {
   nlohmann::json model_status = nlohmann::json::object();
   for (const ModelPipeline& m : models) model_status[m.model->name()] = m.StatusJson();
@@ -147,6 +166,7 @@ nlohmann::json DevicePipeline::StatusJson() const {
           {"current", sequencer->busy() ? current : nlohmann::json()},
           {"samples",
            {{"used", t.used}, {"flagged", t.flagged}, {"outliers", t.outliers}, {"lost", t.lost}}},
+          {"moves", MovesJson()},
           {"models", model_status}};
 }
 
@@ -161,6 +181,7 @@ nlohmann::json DevicePipeline::ResultJson() const {
             {"lost", sequencer->totals().lost}}},
           {"captured", sequencer->captured()},
           {"rejected", sequencer->rejected()},
+          {"moves", MovesJson()},
           {"models", model_results}};
 }
 

@@ -46,6 +46,9 @@ struct DevicePipeline {
 
   // What the next-pose planner needs of each model: its poses, weights and the device's noise.
   std::vector<PlanningTarget> PlanningTargets(double dwell_s) const;
+  // The rest the moves captured so far spanned besides the table's motion and settling at
+  // `motion`'s rates (the mean, at least 0), for the planner's moves; `fallback` without one.
+  double MoveRestSeconds(const TableMotion& motion, double fallback) const;
 
   // The calibration document of model `m`'s current estimate (schema 1, docs/protocol.md).
   nlohmann::json CalibrationJson(const ModelPipeline& m, const std::string& sensor_class,
@@ -53,6 +56,9 @@ struct DevicePipeline {
   // The device's entry in `status` and in RESULT.
   nlohmann::json StatusJson() const;
   nlohmann::json ResultJson() const;
+  // The sequencer's moves between static poses: enabled, taken (handed to a record), dropped and
+  // why the latest was.
+  nlohmann::json MovesJson() const;
 };
 
 }  // namespace turncal::daemon

@@ -109,6 +109,8 @@ void ModelPipeline::AddAndSolve(const PoseRecord& record, const GateOptions& gat
                                 ModelUpdate* job) {
   std::lock_guard lock(*calibrator_mutex);
   job->added = calibrator->add_pose(record, &job->error);
+  job->moves_refused = calibrator->moves_refused();
+  job->last_move_refusal = calibrator->last_move_refusal();
   if (!job->added) return;
   job->estimate = calibrator->solve();
   if (job->estimate.ok) {
@@ -231,6 +233,8 @@ nlohmann::json ModelPipeline::StatusJson() const {
   const CalibratorOptions& co = calibrator->options();
   return {{"poses", estimate.poses},
           {"moves", estimate.moves},
+          {"moves_refused", moves_refused},
+          {"last_move_refusal", last_move_refusal},
           {"gate", ToJson(gate)},
           {"fit_check", ToString(estimate.fit.verdict)},
           {"noise_model", co.drift.enabled()

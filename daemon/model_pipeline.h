@@ -35,6 +35,9 @@ struct ModelUpdate {
   Estimate estimate;
   int rank = 0;
   GateResult gate;
+  // A gyroscope's moves the calibrator could not use, and why the latest was refused.
+  int moves_refused = 0;
+  std::string last_move_refusal;
 };
 
 struct ModelPipeline {
@@ -46,6 +49,8 @@ struct ModelPipeline {
   std::size_t estimate_poses = 0;
   GateResult gate;
   int rank = 0;
+  int moves_refused = 0;  // as of the latest update (ModelUpdate)
+  std::string last_move_refusal;
   int active_version = 0;  // 0: no active calibration
   Estimate active;
   // The calibration live samples are corrected with: the active one, or the one stored in the

@@ -432,6 +432,8 @@ void Station::Apply(std::size_t device, std::size_t model, double t_s, const Mod
     }
     return;
   }
+  m.moves_refused = job.moves_refused;
+  m.last_move_refusal = job.last_move_refusal;
   m.estimate = job.estimate;
   m.estimate_poses = job.device_poses;
   if (m.estimate.ok && m.calibrator->options().identify_drift) RecordIdentifiedDrift(device, m);
@@ -542,6 +544,13 @@ nlohmann::json Station::NextPose(const std::string& device) const {
   planner.motion = options_.table;
   planner.objective = options_.plan_objective;
   planner.dwell_s = options_.sequencer.dwell_s;
+  planner.rates = options_.plan_rates;
+  planner.moves = options_.sequencer.moves.enabled;
+  // From where the table was last announced; the move into the next pose counts when the
+  // sequencer tracks one (a static pose captured there, no rate segment since).
+  if (const auto at = d.sequencer->announced()) planner.table_at = *at;
+  planner.move_from_table_at = d.sequencer->moves().tracking();
+  planner.move_rest_s = d.MoveRestSeconds(options_.table, planner.move_rest_s);
   nlohmann::json j = ToJson(PlanNextPose(targets, planner));
   j["device"] = device;
   return j;

@@ -72,9 +72,11 @@ struct StationOptions {
   TableMotion table;
   // The table's rate accuracy for rate segments, relative 1 sigma ([table] rate_accuracy).
   double rate_accuracy = 1e-5;
-  // The rate ripple the sequencer allows in a rate segment ([table] rate_ripple): see
-  // SequencerOptions::rate_steady.
+  // What the next-pose planner minimises ([table] plan_for), and the rate segments it may
+  // recommend to a gyroscope ([table] plan_rates_dps; none: the table has no rate mode). The
+  // rate ripple the sequencer allows ([table] rate_ripple) is SequencerOptions::rate_steady's.
   PlanObjective plan_objective = PlanObjective::kTime;
+  RatePlan plan_rates;
   ModelContext context;
   GateOptions gate;  // tolerances and min_dof replaced by the class's unless gate_tolerances_set
   bool gate_tolerances_set = false;

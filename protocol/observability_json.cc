@@ -120,7 +120,8 @@ nlohmann::json ToJson(const NextPoseAdvice& a) {
                    {"gain", c.gain},
                    {"seconds", c.seconds},
                    {"score", c.score},
-                   {"model_gains", c.model_gains}});
+                   {"model_gains", c.model_gains},
+                   {"move", c.move}});
   }
   j["top"] = top;
   nlohmann::json models = nlohmann::json::array();
@@ -130,6 +131,13 @@ nlohmann::json ToJson(const NextPoseAdvice& a) {
                         {"shortfalls_after", m.shortfalls_after},
                         {"gauge_blocks_gate", m.gauge_blocks}};
     if (m.sigma_after.size() > 0) o["sigma_after"] = ByName(m.names, m.sigma_after);
+    if (m.sigma_planned.size() > 0) o["sigma_planned"] = ByName(m.names, m.sigma_planned);
+    o["captured"] = {{"poses", m.captured_poses},
+                     {"rate_segments", m.captured_rate_segments},
+                     {"moves", m.captured_moves}};
+    o["planned"] = {{"poses", m.planned_poses},
+                    {"rate_segments", m.planned_rate_segments},
+                    {"moves", m.planned_moves}};
     models.push_back(o);
   }
   j["models"] = models;

@@ -38,8 +38,10 @@ struct ObservabilityArgs {
   double settle_s = TableMotion{}.settle_s;
   std::string objective = "time";
   std::string drift_model = "gauss-markov";
-  double rate_hz = 100.0;  // samples per second (the magnetometer's noise per pose mean)
-  int min_poses = 0;       // plan at least this many poses, past the predicted gate
+  double rate_hz = 100.0;         // samples per second (the magnetometer's noise per pose mean)
+  int min_poses = 0;              // plan at least this many poses, past the predicted gate
+  std::vector<double> rates_dps;  // rate segments the table can hold (a gyroscope's candidates)
+  bool no_moves = false;          // credit no move between static poses to a gyroscope
 };
 
 void AddCommonOptions(CLI::App* cmd, ObservabilityArgs* args) {
@@ -202,6 +204,8 @@ int RunPlan(const ObservabilityArgs& args) {
   options.motion.accel_dps2.setConstant(args.table_accel_dps2);
   options.motion.settle_s = args.settle_s;
   options.objective = args.objective == "poses" ? PlanObjective::kPoses : PlanObjective::kTime;
+  options.rates.rates_dps = args.rates_dps;
+  options.moves = !args.no_moves;
   if (!ParseRange(args.phi, &options.grid.phi) || !ParseRange(args.gamma, &options.grid.gamma) ||
       !ParseRange(args.psi, &options.grid.psi)) {
     fmt::print(stderr, "turncal plan: a range is MIN:MAX:STEP in degrees, or one angle\n");
@@ -234,6 +238,11 @@ int RunPlan(const ObservabilityArgs& args) {
     for (const auto& p : captured)
       t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information, nullptr});
     if (t.drift.enabled()) t.captured_windows = options.motion.DwellWindows(captured, args.dwell_s);
+    if (model->sensor() == SensorKind::kGyroscope) {
+      t.noise_density = o.noise_density;
+      t.rate_accuracy = o.rate_accuracy;
+    }
+    t.pose_offset_sigma = o.pose_offset_sigma;
     GateDefaultsForClass(args.sensor_class, &t.gate);
     t.gate.accept_gauge_dependent_correction = args.accept_gauge;
     targets.push_back(t);
@@ -249,6 +258,20 @@ int RunPlan(const ObservabilityArgs& args) {
     return 1;
   }
   auto show = [](const TablePose& p) {
+    if (p.is_rate()) {
+      // The turning axis's own angle means nothing.
+      const double held[3] = {p.phi_rad, p.gamma_rad, p.psi_rad};
+      const char* names[3] = {"phi", "gamma", "psi"};
+      const int turning = p.rate_axis == TableAxis::kInner    ? 0
+                          : p.rate_axis == TableAxis::kMiddle ? 1
+                                                              : 2;
+      std::string text = fmt::format("rate {:+7.1f} deg/s about {:<6}", p.rate_radps * kDegPerRad,
+                                     ToString(p.rate_axis));
+      for (int i = 0; i < 3; ++i) {
+        if (i != turning) text += fmt::format("  {} {:6.1f}", names[i], held[i] * kDegPerRad);
+      }
+      return text;
+    }
     return fmt::format("phi {:7.1f}  gamma {:6.1f}  psi {:7.1f}", p.phi_rad * kDegPerRad,
                        p.gamma_rad * kDegPerRad, p.psi_rad * kDegPerRad);
   };
@@ -288,8 +311,21 @@ int RunPlan(const ObservabilityArgs& args) {
   } else if (a.poses_to_gate == 0) {
     fmt::print("the captured poses already meet the predicted gate\n");
   } else if (a.poses_to_gate > 0) {
-    fmt::print("predicted to the gate: {} poses, {:.0f} s of table time (greedy plan below)\n",
-               a.poses_to_gate, a.seconds_to_gate);
+    const bool rates = std::any_of(a.continuation.begin(), a.continuation.end(),
+                                   [](const TablePose& p) { return p.is_rate(); });
+    fmt::print("predicted to the gate: {} {}, {:.0f} s of table time (greedy plan below)\n",
+               a.poses_to_gate, rates ? "steps (poses and rate segments)" : "poses",
+               a.seconds_to_gate);
+    for (const auto& m : a.models) {
+      if (m.planned_rate_segments + m.planned_moves + m.captured_rate_segments + m.captured_moves ==
+          0)
+        continue;
+      fmt::print(
+          "  {}: {} static poses, {} rate segments and {} moves captured; the plan adds {}, {} and "
+          "{}\n",
+          m.model, m.captured_poses, m.captured_rate_segments, m.captured_moves, m.planned_poses,
+          m.planned_rate_segments, m.planned_moves);
+    }
   } else {
     fmt::print("the gate is not predicted within {} more poses\n", options.horizon);
   }
@@ -414,6 +450,13 @@ void AddObservabilityCommands(CLI::App* app) {
                    "the class's bias drift as a process in time, or independent per pose")
       ->check(CLI::IsMember({"gauss-markov", "independent"}))
       ->capture_default_str();
+  plan->add_option("--rates", plan_args->rates_dps,
+                   "rates the table can hold, deg/s, comma separated (a gyroscope's rate segments; "
+                   "none: no rate mode)")
+      ->delimiter(',');
+  plan->add_flag(
+      "--no-moves", plan_args->no_moves,
+      "credit a gyroscope with no move between static poses ([sequencer] moves = false)");
   AddCommonOptions(plan, plan_args.get());
   plan->callback([plan_args] { throw CLI::RuntimeError(RunPlan(*plan_args)); });
 }

@@ -16,6 +16,7 @@
 #include <thread>
 
 #include "core/planning/pose_planner.h"
+#include "core/sequencing/sequencer.h"
 #include "daemon/persistence.h"
 #include "daemon/replay_once.h"
 #include "protocol/calibration_json.h"
@@ -27,32 +28,54 @@ namespace turncal::tools {
 
 namespace {
 
+// The rates the planner may give a gyroscope's rate segments: sim/session_sim.h's defaults.
+const std::vector<double> kPlannedRatesDps = {100.0, -100.0, 100.0 / 3, -100.0 / 3};
+
 // The D-optimal planner's plan to the gate from nominal values, for the accelerometer and
 // magnetometer models a station calibrates together (what `turncal plan --model accel13 --model
-// mag13` prints): the recommended pose and its continuation, for the simulated table.
+// mag13` prints), or for a gyroscope model alone with the rate segments and moves its sources
+// allow (`turncal plan --model gyro12 [--rates ...] [--no-moves]`): the recommended pose and its
+// continuation, for the simulated table.
 std::vector<TablePose> PlannerSequence(const SensorClass& sensor,
                                        const PipelineMonteCarloArgs& args,
                                        const std::optional<TableMotion>& table, double rate_hz,
-                                       std::string* error) {
+                                       bool gyro, int* predicted_poses, std::string* error) {
   std::vector<std::unique_ptr<MeasurementModel>> models;
   std::vector<PlanningTarget> targets;
-  for (const char* name : {"accel13", "mag13"}) {
+  // A gyroscope's records are what the station captures: its sequencer's dwell (whole
+  // revolutions of at least it for a rate segment) of the simulator's longer rest, the rest of
+  // which lengthens each move (the station measures the same on the moves it captures).
+  const double station_dwell_s = SequencerOptions{}.dwell_s;
+  const double dwell_s = gyro ? std::min(args.dwell_s, station_dwell_s) : args.dwell_s;
+  const std::vector<std::string> names =
+      gyro ? std::vector<std::string>{args.model} : std::vector<std::string>{"accel13", "mag13"};
+  for (const std::string& name : names) {
     auto model = MakeModel(name, ModelContext{}, error);
     if (!model) return {};
     PlanningTarget t;
     t.model = model.get();
     t.theta = model->nominal();
-    const CalibratorOptions o = args.planner_drift == "independent"
-                                    ? OptionsForClass(*model, sensor)
-                                    : DriftOptionsForClass(*model, sensor);
-    t.sqrt_information = ExpectedPoseSqrtInformation(*model, sensor, o, args.dwell_s, rate_hz);
+    CalibratorOptions o = args.planner_drift == "independent"
+                              ? OptionsForClass(*model, sensor)
+                              : DriftOptionsForClass(*model, sensor);
+    t.sqrt_information = ExpectedPoseSqrtInformation(*model, sensor, o, dwell_s, rate_hz);
     t.drift = o.drift;
+    t.pose_offset_sigma = o.pose_offset_sigma;
+    if (gyro) {
+      t.noise_density = o.noise_density;
+      t.rate_accuracy = 2e-6;  // the station's in these runs (below)
+    }
     GateDefaultsForClass(args.sensor_class, &t.gate);
     targets.push_back(t);
     models.push_back(std::move(model));
   }
   PlannerOptions options;
-  options.dwell_s = args.dwell_s;
+  if (gyro) {
+    if (args.gyro_sources != "moves") options.rates.rates_dps = kPlannedRatesDps;
+    options.moves = args.gyro_sources == "moves" || args.gyro_sources == "all";
+    options.move_rest_s = std::max(0.0, args.dwell_s - station_dwell_s);
+  }
+  options.dwell_s = dwell_s;
   options.objective =
       args.planner_objective == "poses" ? PlanObjective::kPoses : PlanObjective::kTime;
   if (table) {
@@ -71,6 +94,7 @@ std::vector<TablePose> PlannerSequence(const SensorClass& sensor,
     *error = "the planner: " + a.error;
     return {};
   }
+  *predicted_poses = a.poses_to_gate;
   return a.continuation;
 }
 
@@ -144,20 +168,18 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
     table->settle_s = SessionSimOptions{}.settle_s;
   }
   std::vector<TablePose> plan = DefaultSessionPoses();
-  if (gyro && args.plan == "planner") {
-    fmt::print(stderr,
-               "turncal montecarlo: the planner plans static poses for accelerometer and "
-               "magnetometer models; a gyro model takes --plan default or shuffled\n");
-    return 2;
-  }
+  int predicted_poses = -1;  // the planner's prediction of the gate
   if (args.plan == "planner") {
-    plan = PlannerSequence(sensor, args, table, sim::SimDefaultRateHz(*protocol), &error);
+    plan = PlannerSequence(sensor, args, table, sim::SimDefaultRateHz(*protocol), gyro,
+                           &predicted_poses, &error);
     if (plan.empty()) {
       fmt::print(stderr, "turncal montecarlo: {}\n", error);
       return 1;
     }
   }
-  if (gyro && args.gyro_sources == "all") {
+  if (gyro && args.plan == "planner") {
+    // The planner placed the rate segments its sources allow.
+  } else if (gyro && args.gyro_sources == "all") {
     // The static poses (and the moves between them), then the rate segments.
     for (const TablePose& r : DefaultRateSegments()) plan.push_back(r);
   } else if (gyro && args.gyro_sources != "moves") {
@@ -407,6 +429,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                       {"class", args.sensor_class},
                                       {"protocol", args.protocol},
                                       {"plan", args.plan},
+                                      {"planner_predicted_poses", predicted_poses},
                                       {"gyro_sources", gyro ? args.gyro_sources : ""},
                                       {"planner_objective", args.planner_objective},
                                       {"planner_drift", args.planner_drift},
@@ -450,12 +473,16 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
     fmt::print(
         "\nchi^2 p-values against uniform: Kolmogorov-Smirnov D = {:.3f}, p = {:.3g} ({})\n"
         "gate passed in {} of {} runs; first passed after {:.2f} poses (at most {}) and {:.1f} s "
-        "of session on average ({} runs)\n"
+        "of session on average ({} runs){}\n"
         "Criteria: std z in [0.9, 1.1] and |mean z| <= 0.15 for every parameter, KS p > 0.01; "
         "{} of {} parameters fail{}.\n",
         ks_d, ks_p, ks_ok ? "ok" : "NOT UNIFORM", gate_pass, ok,
         activated ? gate_poses / activated : NAN, gate_poses_max,
-        activated ? gate_s / activated : NAN, activated, bad, N,
+        activated ? gate_s / activated : NAN, activated,
+        predicted_poses > 0
+            ? fmt::format("; the planner predicted it after {} poses", predicted_poses)
+            : "",
+        bad, N,
         ok < args.runs
             ? fmt::format("; {} runs without an estimate (first: {})", args.runs - ok, first_error)
             : "");

@@ -19,11 +19,14 @@ struct PipelineMonteCarloArgs {
   std::string protocol = "mip";
   // default: DefaultSessionPoses (26 cube directions in loop order + 10); shuffled: the same
   // poses in a new random order every run; planner: the D-optimal planner's sequence to the gate
-  // from nominal values (as `turncal plan` prints it).
+  // from nominal values (as `turncal plan` prints it; a gyroscope model alone, with the rate
+  // segments at sim/session_sim.h's default rates unless the sources are "moves", and the moves
+  // credited for "moves" and "all").
   std::string plan = "default";
   // A gyroscope model's sources (issue 21): "mixed" (the plan's static poses with the default
-  // rate segments after the first of them, sim/session_sim.h DefaultRateSegments) or "rates"
-  // (the rate segments alone).
+  // rate segments after the first of them, sim/session_sim.h DefaultRateSegments), "rates"
+  // (the rate segments alone), "moves" (the static poses and the moves between them) or "all"
+  // (the static poses with their moves, then the rate segments).
   std::string gyro_sources = "mixed";
   int runs = 200;
   std::uint64_t seed = 1;

@@ -321,7 +321,7 @@ void AddSimFitCommands(CLI::App* app) {
   mc->add_option("--plan", pipe->plan,
                  "with --pipeline: default (26 cube directions in loop order + 10) | shuffled "
                  "(the same poses, a new order each run) | planner (the D-optimal plan to the "
-                 "gate)")
+                 "gate; a gyro model's with the rate segments and moves of --gyro-sources)")
       ->check(CLI::IsMember({"default", "shuffled", "planner"}))
       ->capture_default_str();
   mc->add_option("--gyro-sources", pipe->gyro_sources,

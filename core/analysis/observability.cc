@@ -227,23 +227,29 @@ PoseDiversity AnalyzePoseDiversity(const std::vector<TablePose>& poses,
   return d;
 }
 
+Jacobian3 RecordJacobian(const MeasurementModel& model, const Eigen::VectorXd& theta,
+                         const WeightedPose& record) {
+  Jacobian3 Ji;
+  if (record.raw_residual) {
+    // A move: its residual's Jacobian (core/estimation/move_residual.h).
+    Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor> Jr(3, theta.size());
+    Eigen::Vector3d value;
+    const double* parameters[] = {theta.data()};
+    double* jacobians[] = {Jr.data()};
+    record.raw_residual->Evaluate(parameters, value.data(), jacobians);
+    Ji = Jr;
+  } else {
+    model.Predict(theta, record.pose, &Ji);
+  }
+  return Ji;
+}
+
 Eigen::MatrixXd WhitenedJacobian(const MeasurementModel& model, const Eigen::VectorXd& theta,
                                  const std::vector<WeightedPose>& poses) {
   Eigen::MatrixXd J(3 * poses.size(), model.num_parameters());
-  Jacobian3 Ji;
   for (std::size_t i = 0; i < poses.size(); ++i) {
-    if (poses[i].raw_residual) {
-      // A move: its residual's Jacobian (core/estimation/move_residual.h).
-      Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor> Jr(3, theta.size());
-      Eigen::Vector3d value;
-      const double* parameters[] = {theta.data()};
-      double* jacobians[] = {Jr.data()};
-      poses[i].raw_residual->Evaluate(parameters, value.data(), jacobians);
-      Ji = Jr;
-    } else {
-      model.Predict(theta, poses[i].pose, &Ji);
-    }
-    J.middleRows(3 * static_cast<Eigen::Index>(i), 3) = poses[i].sqrt_information * Ji;
+    J.middleRows(3 * static_cast<Eigen::Index>(i), 3) =
+        poses[i].sqrt_information * RecordJacobian(model, theta, poses[i]);
   }
   return J;
 }

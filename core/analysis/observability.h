@@ -108,6 +108,11 @@ Eigen::MatrixXd GaugeDirections(const MeasurementModel& model, const Eigen::Vect
 Eigen::VectorXd OutsideGauge(const MeasurementModel& model, const Eigen::VectorXd& theta,
                              const Eigen::VectorXd& scaled);
 
+// One record's unwhitened Jacobian at theta: the model's prediction's for a pose or rate
+// segment, its residual's for a move (WeightedPose::raw_residual).
+Jacobian3 RecordJacobian(const MeasurementModel& model, const Eigen::VectorXd& theta,
+                         const WeightedPose& record);
+
 // The whitened Jacobian J = Sigma^{-1/2} dr/dtheta over the poses, stacked (3 rows a pose).
 Eigen::MatrixXd WhitenedJacobian(const MeasurementModel& model, const Eigen::VectorXd& theta,
                                  const std::vector<WeightedPose>& poses);

@@ -11,6 +11,11 @@
 // (core/planning/drift_design.h). Orders in which slow drift would look like a sensor parameter
 // then score low by themselves (docs/OBSERVABILITY.md "Planning for time").
 //
+// A gyroscope model (issue 21) also learns from rate segments, which are candidates of their own
+// when the table can hold rates (PlannerOptions::rates), and from the move into each static pose,
+// which the planner credits it with as the calibrator would weigh it (core/planning/
+// gyro_planning.h; docs/OBSERVABILITY.md "Planning a gyroscope").
+//
 // The information is that of the linearised model at a fixed parameter point (the current
 // estimate, or nominal values before there is one), in scaled units (ParameterScale), plus a weak
 // prior of `prior_sigma_scaled` on every scaled parameter so that log det is finite before the
@@ -26,6 +31,7 @@
 #include "core/analysis/publish_gate.h"
 #include "core/estimation/bias_drift.h"
 #include "core/estimation/calibrator.h"
+#include "core/planning/gyro_planning.h"
 #include "core/planning/table_motion.h"
 
 namespace turncal {
@@ -63,6 +69,13 @@ struct PlanningTarget {
   std::vector<TimeWindow> captured_windows;
   BiasDrift drift;  // not enabled: poses independent, time only costs
   GateOptions gate;
+  // A gyroscope's rate segments and moves (core/planning/gyro_planning.h), weighed as the
+  // calibrator weighs them: the white noise density (rad/s/sqrt(Hz); 0: no move is credited), the
+  // pose-to-pose offset (rad/s; already in sqrt_information) and the table's relative rate
+  // accuracy.
+  double noise_density = 0.0;
+  double pose_offset_sigma = 0.0;
+  double rate_accuracy = 0.0;
 };
 
 enum class PlanObjective {
@@ -76,9 +89,27 @@ struct PlannerOptions {
   TableMotion motion;
   double dwell_s = 5.0;  // a planned pose's dwell, seconds
   PlanObjective objective = PlanObjective::kTime;
-  // Where the table is now; unset: the latest captured pose of the first target (home, all
+  // Rate segments to consider besides the grid's static poses (a gyroscope learns from them; the
+  // other models gain nothing). No rates: none.
+  RatePlan rates;
+  // Credit a gyroscope with the move into each static pose (the sequencer integrates the moves
+  // between static poses: [sequencer] moves). Not after a rate segment, whose next move the
+  // sequencer drops.
+  bool moves = true;
+  // The rest a move spans besides the table's motion and settling: from the last dwell sample to
+  // the table's start, and from the settling's end until the sequencer's stillness detector lets
+  // the next dwell begin (its window and look-ahead, the controller's reaction). A longer move
+  // gathers more of the gyro's angle random walk for the same turn. The station measures it on
+  // the moves it captured.
+  double move_rest_s = 1.0;
+  // Where the table is now (a rate segment: the table was turning, so no move is credited into
+  // the next pose); unset: the latest captured pose of the first target (home, all
   // angles 0, when nothing is captured).
   std::optional<TablePose> table_at;
+  // Whether a move into the next pose is being integrated (the sequencer captured a static pose
+  // where the table is and tracks the move from it); unset: when some record is captured and the
+  // table is not in a rate segment.
+  std::optional<bool> move_from_table_at;
   double prior_sigma_scaled = 1.0;
   int horizon = 60;  // the most poses the greedy continuation looks ahead
   // The continuation goes on past the predicted gate to at least this many poses (a whole
@@ -90,18 +121,25 @@ struct PlannerOptions {
 };
 
 struct CandidateScore {
-  TablePose pose;
+  TablePose pose;                   // a static pose or a rate segment
   double gain = 0.0;                // increase of sum_models log det F
   std::vector<double> model_gains;  // per target
-  double seconds = 0.0;             // move + settle + dwell from where the table is
-  double score = 0.0;               // gain per second (kTime) or gain (kPoses)
+  double seconds = 0.0;  // move + settle + dwell from where the table is (a rate segment: the move
+                         // to its attitude, spin-up, steadiness, whole revolutions, spin-down)
+  bool move = false;     // a gyroscope is credited with the move into it
+  double score = 0.0;    // gain per second (kTime) or gain (kPoses)
 };
 
 struct ModelOutlook {
   std::string model;
   std::vector<std::string> names;
-  Eigen::VectorXd sigma_now;                  // predicted from the captured poses (and the prior)
-  Eigen::VectorXd sigma_after;                // after the recommended pose
+  Eigen::VectorXd sigma_now;  // predicted from the captured records (and the prior)
+  // The records sigma_now rests on (poses, rate segments, moves), and those the continuation adds
+  // (up to the gate, the horizon or min_continuation).
+  int captured_poses = 0, captured_rate_segments = 0, captured_moves = 0;
+  int planned_poses = 0, planned_rate_segments = 0, planned_moves = 0;
+  Eigen::VectorXd sigma_after;    // after the recommended pose
+  Eigen::VectorXd sigma_planned;  // after the whole continuation (empty when there is none)
   std::vector<std::string> shortfalls_after;  // gated parameters still above tolerance
   bool gauge_blocks = false;  // the correction rests on a gauge the gate does not accept
 };

@@ -173,6 +173,7 @@ bool Sequencer::Announce(const Announcement& a, std::string* error) {
   if (a.pose.is_rate()) moves_.Abort("a rate segment came between");
   index_ = a.index;
   pose_ = a.pose;
+  has_pose_ = true;
   t_announce_ns_ = a.t_host_ns;
   announced_ = true;
   dwell_s_ = dwell;
@@ -219,6 +220,7 @@ void Sequencer::NextScheduled(double t_s) {
   }
   index_ = static_cast<int>(next_scheduled_);
   pose_ = schedule_[next_scheduled_];
+  has_pose_ = true;
   t_announce_ns_ = std::numeric_limits<std::int64_t>::min();
   announced_ = false;
   dwell_s_ = options_.dwell_s;

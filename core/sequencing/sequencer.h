@@ -154,6 +154,11 @@ class Sequencer {
   std::int64_t rejected() const { return rejected_; }
   // The moves handed to records, and those dropped with the last reason.
   const MoveTracker& moves() const { return moves_; }
+  const SequencerOptions& options() const { return options_; }
+  // The latest pose announced or scheduled (none before the first): where the table is or goes.
+  std::optional<TablePose> announced() const {
+    return has_pose_ ? std::optional<TablePose>(pose_) : std::nullopt;
+  }
   // Scales the bias wander the stillness and creep tests allow for on one triad (kTriadAcc,
   // kTriadGyr, kTriadMag): the drift's strength the calibrator identified, as a sigma factor.
   void SetDriftScale(int triad, double scale);
@@ -198,6 +203,7 @@ class Sequencer {
   std::int64_t extra_segments_ = 0, skipped_segments_ = 0;
   int index_ = -1;
   TablePose pose_;
+  bool has_pose_ = false;
   std::int64_t t_announce_ns_ = 0;
   bool announced_ = false;  // announced mode (t_announce_ns_ meaningful, timeouts apply)
   bool seen_motion_after_schedule_ = false;

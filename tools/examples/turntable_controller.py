@@ -9,7 +9,8 @@ again to the devices that rejected it, up to --retries times, without moving the
 table turns about AXIS -- outer, middle or inner -- at RATE deg/s with the other axes at their
 angles, announced as {"cmd":"rate"} for a gyroscope model) or, with --plan, from the daemon's own advice
 ({"cmd":"next_pose"}) until the publication gate passes for every model of every device
-({"cmd":"result"}).
+({"cmd":"result"}). The advice is a rate segment when the daemon's [table] plan_rates_dps lists
+the rates the table can hold and a gyroscope model needs one.
 
     turntable_controller.py --poses cube.csv --table-cmd "/usr/local/bin/move-table"
     turntable_controller.py --plan --socket /run/turncal/turncal.sock   # the operator moves it
@@ -389,8 +390,10 @@ def main():
                     print(f"no next pose: {advice.get('error', advice.get('message'))}")
                     break
                 p = advice["pose"]
-                run_pose(conn, args, (p["phi_deg"], p["gamma_deg"], p["psi_deg"]), progress,
-                         summary)
+                pose = (p["phi_deg"], p["gamma_deg"], p["psi_deg"])
+                if "rate_axis" in p:  # a rate segment ([table] plan_rates_dps)
+                    pose += (p["rate_axis"], p["rate_dps"])
+                run_pose(conn, args, pose, progress, summary)
             else:
                 g = gates(conn, settle_s=3.0)
                 if args.device:
