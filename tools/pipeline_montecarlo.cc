@@ -227,6 +227,10 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       o.session.acc_warmup = args.warmup * sensor.acc_bias_instability;
       o.session.mag_warmup = args.warmup * sensor.mag_bias_instability;
       o.session.warmup_tau_s = args.warmup_tau_s;
+      if (args.lever_arm_m.size() == 3) {
+        o.session.lever_arm_q_m =
+            Eigen::Vector3d(args.lever_arm_m[0], args.lever_arm_m[1], args.lever_arm_m[2]);
+      }
       o.session.acc_random_walk = args.random_walk * sensor.acc_bias_instability / 10.0;
       o.session.mag_random_walk = args.random_walk * sensor.mag_bias_instability / 10.0;
       sim::SimCapture capture;
@@ -436,6 +440,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                       {"table_rate_dps", args.table_rate_dps},
                                       {"warmup", args.warmup},
                                       {"random_walk", args.random_walk},
+                                      {"lever_arm_m", args.lever_arm_m},
                                       {"drift_scale", args.drift_scale},
                                       {"identify_drift", args.identify_drift},
                                       {"station_warmup", args.station_warmup},
@@ -466,6 +471,10 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
                                      : std::string()),
         args.warmup > 0 ? fmt::format(", warm-up {} x bias instability", args.warmup) : "",
         (args.random_walk > 0 ? fmt::format(", random walk {}", args.random_walk) : "") +
+            (args.lever_arm_m.size() == 3
+                 ? fmt::format(", lever arm [{:g}, {:g}, {:g}] m", args.lever_arm_m[0],
+                               args.lever_arm_m[1], args.lever_arm_m[2])
+                 : std::string()) +
             (args.station_warmup >= 0
                  ? fmt::format(", station warm-up allowance {}", args.station_warmup)
                  : std::string()),

@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace turncal::tools {
 
@@ -38,6 +39,8 @@ struct PipelineMonteCarloArgs {
   double warmup = 0.0;
   double warmup_tau_s = 60.0;
   double random_walk = 0.0;
+  // The IMU's lever arm from the table's centre in q, m (empty: none; sim/session_sim.h).
+  std::vector<double> lever_arm_m;
   // The simulated bias instability in units of the class's (the station keeps the class's as
   // its prior), and whether the station identifies the drift's strength ([station]
   // identify_drift).

@@ -364,6 +364,10 @@ void AddSimFitCommands(CLI::App* app) {
                  "instability per sqrt(100 s) (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  mc->add_option("--lever-arm", pipe->lever_arm_m,
+                 "with --pipeline: the IMU's offset from the table's centre, X Y Z in the table's "
+                 "inner frame, m (default none)")
+      ->expected(3);
   mc->add_option("--station-warmup", pipe->station_warmup,
                  "with --pipeline: the station's warm-up allowance ([station] warmup, in bias "
                  "instabilities, with --warmup-tau); default none");
