@@ -162,6 +162,7 @@ ModelAnalysis AnalyzeCalibration(const protocol::CalibrationDocument& doc) {
       src.sigma_all = FisherSigma(model, doc.theta, weighted);
       a.sources = std::move(src);
     }
+    if (!rate.empty()) a.linearity = AnalyzeRateLinearity(model, doc.theta, rate);
   }
   return a;
 }

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/analysis/observability.h"
+#include "core/analysis/rate_linearity.h"
 #include "protocol/calibration_json.h"
 
 namespace turncal::report {
@@ -62,6 +63,9 @@ struct ModelAnalysis {
   DataReport observability;  // at the estimate over the document's records
   // For a gyroscope model whose records hold more than one kind (empty source list otherwise).
   SourceSigmas sources;
+  // For a gyroscope model with rate segments: its scale against the rate
+  // (core/analysis/rate_linearity.h; segments 0 otherwise).
+  RateLinearity linearity;
 };
 
 // Everything above for one calibration document.

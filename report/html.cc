@@ -156,6 +156,7 @@ std::string ModelSection(const protocol::CalibrationDocument& d) {
   o += "<h3>Parameters</h3>" + ParameterTableHtml(d);
   o += "<h3>Sensor matrix</h3>" + PhysicalFormHtml(d);
   if (!a.sources.source.empty()) o += "<h3>What each source determines</h3>" + SourcesHtml(d, a);
+  if (a.linearity.segments > 0) o += "<h3>Scale against the rate</h3>" + RateLinearityHtml(d, a);
   o += "<h3>Residuals</h3>" + ResidualSummaryHtml(d, a) + ResidualsSvg(d, a);
   o += "<h3>Pose coverage</h3>" + CoverageSvg(d, a);
   o += "<h3>Convergence</h3>" + ConvergenceSvg(d, a);

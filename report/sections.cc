@@ -284,6 +284,30 @@ std::string SourcesHtml(const protocol::CalibrationDocument& doc, const ModelAna
   return o;
 }
 
+std::string RateLinearityHtml(const protocol::CalibrationDocument& doc, const ModelAnalysis& a) {
+  const RateLinearity& r = a.linearity;
+  std::string o = fmt::format(
+      R"(<table class="linearity" id="linearity-{}"><thead><tr><th>|rate| (&#176;/s)</th>)"
+      "<th>segments</th><th>scale error (ppm)</th><th>1&#963; (ppm)</th></tr></thead><tbody>",
+      Escape(doc.model));
+  for (const RateLevel& l : r.levels) {
+    o += fmt::format(
+        R"(<tr><td class="num">{:g}</td><td class="num">{}</td><td class="num">{:+.1f}</td>)"
+        R"(<td class="num">{:.1f}</td></tr>)",
+        l.rate_dps, l.segments, l.scale_error * 1e6, l.sigma * 1e6);
+  }
+  o += "</tbody></table>";
+  o += fmt::format(R"(<p id="linearity-finding-{}">{}.)", Escape(doc.model), Escape(r.finding));
+  if (r.has_asymmetry) {
+    o += fmt::format(" Positive rates read {:+.1f} &#177; {:.1f} ppm more than negative ones.",
+                     r.asymmetry * 1e6, r.asymmetry_sigma * 1e6);
+  }
+  o += R"(</p><p class="small">Each rate segment's residual along the table's rate, relative to )"
+       "it, at the estimate: a linear gyro's scatter about zero at every rate (the scale factors "
+       "absorb their mean per axis). The sigmas are the records'.</p>";
+  return o;
+}
+
 std::string ObservabilityHtml(const protocol::CalibrationDocument& doc, const ModelAnalysis& a) {
   std::string o = fmt::format(
       "<p>Rank recorded with the calibration: {} of {} parameters ({} when the model's gauge "

@@ -21,6 +21,10 @@ std::string ResidualSummaryHtml(const protocol::CalibrationDocument& doc,
 // A gyroscope's parameters by source: 1 sigma from the static poses alone, from the rate
 // segments alone, and from both (ModelAnalysis::sources).
 std::string SourcesHtml(const protocol::CalibrationDocument& doc, const ModelAnalysis& analysis);
+// A gyroscope's scale against the rate: the rate segments' apparent scale error per |rate|, the
+// slope, the chi^2 test and the asymmetry of the two signs (core/analysis/rate_linearity.h).
+std::string RateLinearityHtml(const protocol::CalibrationDocument& doc,
+                              const ModelAnalysis& analysis);
 std::string ObservabilityHtml(const protocol::CalibrationDocument& doc,
                               const ModelAnalysis& analysis);
 

@@ -333,8 +333,9 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
       out.gyr_drift_sum.push_back(out.gyr_drift_sum.back() + drift_gyr);
       // The instantaneous inertial rate and specific force in q (with the lever arm's).
       const Mat3<double> C = pose.C_p_q();
-      gyr = gyro_model->PredictRate(out.gyro_truth, C * earth_ned + BodyRate(a),
-                                    C * f_ned + lever_q) +
+      Eigen::Vector3d table_q = BodyRate(a);
+      table_q *= 1.0 + o.gyr_scale_nonlinearity * table_q.norm();
+      gyr = gyro_model->PredictRate(out.gyro_truth, C * earth_ned + table_q, C * f_ned + lever_q) +
             drift_gyr;
     } else {
       gyr = accel_model.context().mounting * BodyRate(a) + out.gyro_bias_radps;

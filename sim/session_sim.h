@@ -62,6 +62,10 @@ struct SessionSimOptions {
   double ripple_hz = 2.0;
   // Gyro bias random walk, rad/s/sqrt(s) (0: none; only with a gyro model).
   double gyr_random_walk = 0.0;
+  // The gyro's scale grows with the table's rate: the rate it senses is w (1 + k |w|), k relative
+  // per rad/s (0: linear; only with a gyro model). Not in the truth's parameters: the models are
+  // linear, and the report's rate linearity shows it (core/analysis/rate_linearity.h).
+  double gyr_scale_nonlinearity = 0.0;
   // The IMU's lever arm from the table's centre, in the inner frame q, m (zero: the bytes of a
   // session without one are unchanged). In motion the accelerometer (and a gyro's
   // g-sensitivity) then see the centripetal and tangential acceleration w x (w x r) + dw/dt x r

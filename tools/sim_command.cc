@@ -39,8 +39,9 @@ struct SimCommandArgs {
   std::uint64_t seed = 1;
   double dwell_s = 5.0;
   std::vector<double> lever_arm_m;  // x, y, z in the table's inner frame
-  double rate_hz = 0.0;             // 0: the protocol's default
-  int baud = 0;                     // 0: the protocol's default
+  double gyr_nonlinearity_ppm_per_dps = 0.0;
+  double rate_hz = 0.0;  // 0: the protocol's default
+  int baud = 0;          // 0: the protocol's default
   std::string sensor_class = "industrial";
   std::string truth_out;
   std::string output;
@@ -215,6 +216,7 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
       {"protocol", args.protocol},
       {"seed", args.seed},
       {"lever_arm_m", args.lever_arm_m},
+      {"gyr_nonlinearity_ppm_per_dps", args.gyr_nonlinearity_ppm_per_dps},
       {"rate_hz", capture.session_options.rate_hz},
       {"dwell_s", capture.session_options.dwell_s},
       {"move_s", capture.session_options.table ? nlohmann::json("at the table's rates")
@@ -388,6 +390,8 @@ int RunSim(const SimCommandArgs& args) {
     o.lever_arm_q_m =
         Eigen::Vector3d(args.lever_arm_m[0], args.lever_arm_m[1], args.lever_arm_m[2]);
   }
+  // ppm per deg/s -> relative per rad/s.
+  o.gyr_scale_nonlinearity = args.gyr_nonlinearity_ppm_per_dps * 1e-6 * kDegPerRad;
   o.seed = args.seed;
   options.baud = args.baud;
   options.faults = args.faults;
@@ -462,6 +466,9 @@ void AddSimCommand(CLI::App* app) {
                   "(default none): in motion the accelerometer sees its centripetal and "
                   "tangential acceleration")
       ->expected(3);
+  cmd->add_option("--gyr-nonlinearity", args->gyr_nonlinearity_ppm_per_dps,
+                  "with a gyro model: its scale grows with the rate by this many ppm per deg/s "
+                  "(default 0: linear; the report's rate linearity shows it)");
   cmd->add_option("--dwell", args->dwell_s, "seconds at rest per pose after settling")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

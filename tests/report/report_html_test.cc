@@ -315,6 +315,10 @@ TEST(GyroReport, SaysWhichSourceDeterminedWhatAndTheTriadAngle) {
     return at == std::string::npos ? std::string() : html.substr(at, html.find("</tr>", at) - at);
   };
   EXPECT_NE(html.find("from moves alone (25)"), std::string::npos);
+  // The rate segments at two rates: the scale against the rate, linear within the noise (the
+  // simulator's gyro is linear; 1 session in 1000 would fail the 0.001 test by chance).
+  EXPECT_NE(html.find("id=\"linearity-gyro12\""), std::string::npos);
+  EXPECT_NE(html.find("linear within the noise"), std::string::npos);
   for (const char* p : {"Sx", "eps_z"}) {
     const std::string r = row(p);
     const std::size_t verdict = r.rfind("<td>");
@@ -351,6 +355,7 @@ TEST(GyroReport, MovesAloneSayWhatTheyDetermine) {
   EXPECT_NE(html.find("from static poses alone (26)"), std::string::npos);
   EXPECT_NE(html.find("from moves alone (25)"), std::string::npos);
   EXPECT_EQ(html.find("from rate segments alone"), std::string::npos);
+  EXPECT_EQ(html.find("id=\"linearity-gyro12\""), std::string::npos);  // no rate segment
   const auto row = [&](const std::string& p) {
     const std::size_t at = html.find("id=\"source-gyro12-" + p + "\"");
     return at == std::string::npos ? std::string() : html.substr(at, html.find("</tr>", at) - at);
