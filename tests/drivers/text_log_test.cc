@@ -7,8 +7,14 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <sstream>
 
+#include <fmt/format.h>
+
+#include "core/analysis/sphere_coverage.h"
+#include "core/sequencing/sequencer.h"
 #include "tests/drivers/decoder_test_util.h"
 
 namespace turncal::drivers {
@@ -105,6 +111,59 @@ TEST(TextLog, TheImuTkRecordingReadsAsOneStreamOfRawCounts) {
   EXPECT_NEAR((*samples[0].gyr_radps)[1], (32429 - 32768) / 6258.0, 1e-12);
   // At rest the gyro reads near its bias, well inside a count range of +-32768.
   for (std::size_t i = 0; i < 100; ++i) EXPECT_LT(samples[i].gyr_radps->norm(), 0.2);
+}
+
+// Toward free mode (issue 22): the sequencer, given as many poses as the recording could hold
+// and no table, takes every still segment of the imu_tk recording; its thresholds come from the
+// noise it measures over the first second of the 50 s rest, not from a hand-set threshold. The
+// accelerometer is scaled roughly to m/s^2 (|counts - 32768| is ~3720 at rest), which only the
+// drift allowance's units need. Measured: the rest and 39 positions (40 segments), 4 segments
+// shorter than the 1 s dwell skipped; many positions repeat, and their gravity directions fill 19
+// of MicroStrain's 576 bins (3.3 %).
+TEST(TextLog, TheImuTkRecordingsStillSegmentsAreFoundFromTheMeasuredNoise) {
+  const auto acc = testing::Fixture("imu_tk/xsens_acc.mat");
+  const auto gyr = testing::Fixture("imu_tk/xsens_gyro.mat");
+  if (acc.empty() || gyr.empty()) {
+    GTEST_SKIP() << "../shared/fixtures is absent: skipping the imu_tk recording";
+  }
+  TriadColumns a, g;
+  a.offset = g.offset = 32768;
+  a.scale = 9.81744 / 3720;
+  g.scale = 1.0 / 6258;
+  std::vector<Sample> samples;
+  std::string error;
+  ASSERT_TRUE(ReadImuTkPair(acc.string(), gyr.string(), a, g, "xsens", &samples, nullptr, &error))
+      << error;
+  SequencerOptions options;
+  options.dwell_s = 1.0;
+  std::vector<Eigen::Vector3d> down;
+  int skipped = 0;
+  bool measured = false;
+  Sequencer sequencer(options, [&](const SequencerEvent& e) {
+    if (e.kind == SequencerEventKind::kNoiseMeasured) measured = true;
+    if (e.kind == SequencerEventKind::kSegmentSkipped) ++skipped;
+    if (e.kind == SequencerEventKind::kCaptured && e.record) {
+      down.push_back(-e.record->acc->mean);
+      if (std::getenv("TURNCAL_PRINT_SEGMENTS")) {
+        std::printf("segment %2d: %7.2f s to %7.2f s, f = %s\n", e.index, e.record->t_start_s,
+                    e.record->t_end_s,
+                    fmt::format("[{:.3f}, {:.3f}, {:.3f}]", e.record->acc->mean.x(),
+                                e.record->acc->mean.y(), e.record->acc->mean.z())
+                        .c_str());
+      }
+    }
+  });
+  ASSERT_TRUE(sequencer.SetSchedule(std::vector<TablePose>(80), &error)) << error;
+  for (const Sample& s : samples) sequencer.Push(s);
+  sequencer.Finish(samples.back().t_host_ns);
+  EXPECT_TRUE(measured);
+  // imu_tk's documentation speaks of about 37 positions after the rest.
+  EXPECT_GE(down.size(), 38u);
+  EXPECT_LE(down.size(), 44u);
+  EXPECT_LE(skipped, 6);
+  const SphereCoverage coverage = CoverageOf(down);
+  EXPECT_GE(coverage.filled, 15);
+  EXPECT_LT(coverage.fraction(), 0.1);  // a hand tumble of ~40 positions: a few % of the sphere
 }
 
 }  // namespace
