@@ -86,8 +86,9 @@ TablePose AfterRateSegment(const TablePose& from, const TablePose& segment) {
   TablePose at = segment;
   at.rate_axis = TableAxis::kNone;
   at.rate_radps = 0.0;
+  TablePose held = from;
   const int axis = IndexOf(segment.rate_axis);
-  Angle(at, axis) = axis == 0 ? from.phi_rad : axis == 1 ? from.gamma_rad : from.psi_rad;
+  Angle(at, axis) = Angle(held, axis);
   return at;
 }
 

@@ -191,15 +191,13 @@ PlannedRows MoveRows(const TargetState& s, const PlannerOptions& options, const 
           ? nullptr
           : MoveResidual::Make(model, record, model.nominal(), t.noise_density, nullptr);
   if (!residual) return PlannedRows{Eigen::MatrixXd(0, model.num_parameters()), {}};
-  Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor> Jr(3, t.theta.size());
-  Eigen::Vector3d value;
-  const double* parameters[] = {t.theta.data()};
-  double* jacobians[] = {Jr.data()};
-  residual->Evaluate(parameters, value.data(), jacobians);
   const Eigen::Matrix3d white = residual->white_covariance() + t.pose_offset_sigma *
                                                                    t.pose_offset_sigma *
                                                                    Eigen::Matrix3d::Identity();
-  return MakeRows(s, Jacobian3(Jr), white);
+  WeightedPose move;
+  move.pose = to;
+  move.raw_residual = std::move(residual);
+  return MakeRows(s, RecordJacobian(model, t.theta, move), white);
 }
 
 Eigen::MatrixXd Stack(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {

@@ -13,20 +13,10 @@
 #include "daemon/station.h"
 #include "sim/capture.h"
 #include "sim/session_sim.h"
+#include "tests/daemon/sim_replay.h"
 
 namespace turncal {
 namespace {
-
-std::string WriteCapture(const sim::SimCapture& c, const std::string& stem) {
-  const std::string path = ::testing::TempDir() + stem + "_" + std::to_string(::getpid()) + ".tcap";
-  std::string error;
-  auto writer = drivers::CaptureWriter::Create(path, c.header, &error);
-  EXPECT_TRUE(writer) << error;
-  for (const auto& r : c.records)
-    EXPECT_TRUE(writer->Append(r.type, r.device, r.t_ns, r.payload, &error));
-  EXPECT_TRUE(writer->Close(&error)) << error;
-  return path;
-}
 
 // Five static poses, a rate segment, two more static poses: five moves are taken (into poses 2 to
 // 5 and 8; none into the pose after the rate segment), the one across the segment is dropped.
@@ -93,7 +83,7 @@ const nlohmann::json& ModelOf(const nlohmann::json& advice, const std::string& n
 }
 
 TEST(GyroStation, NextPoseCountsTheMovesAndPlansRateSegmentsAndStatusCountsTheMoves) {
-  const std::string path = WriteCapture(Session(false), "gyro_station");
+  const std::string path = WriteSimCaptureFile(Session(false), "gyro_station");
   daemon::Station station({"imu"}, Options(), {});
   Replay(path, &station);
   // Status: 8 records, 6 moves taken (into poses 2-5 and 8; not into the rate segment nor the
@@ -137,7 +127,7 @@ TEST(GyroStation, NextPoseCountsTheMovesAndPlansRateSegmentsAndStatusCountsTheMo
 }
 
 TEST(GyroStation, AfterARateSegmentNoMoveIsCreditedIntoTheNextPose) {
-  const std::string path = WriteCapture(Session(true), "gyro_station_rate");
+  const std::string path = WriteSimCaptureFile(Session(true), "gyro_station_rate");
   daemon::Station station({"imu"}, Options(), {});
   Replay(path, &station);
   const nlohmann::json advice = station.NextPose("imu");

@@ -18,20 +18,10 @@
 #include "daemon/replay_once.h"
 #include "sim/capture.h"
 #include "sim/synthetic.h"
+#include "tests/daemon/sim_replay.h"
 
 namespace turncal {
 namespace {
-
-std::string WriteCapture(const sim::SimCapture& c, const std::string& stem) {
-  const std::string path = ::testing::TempDir() + stem + "_" + std::to_string(::getpid()) + ".tcap";
-  std::string error;
-  auto writer = drivers::CaptureWriter::Create(path, c.header, &error);
-  EXPECT_TRUE(writer) << error;
-  for (const auto& r : c.records)
-    EXPECT_TRUE(writer->Append(r.type, r.device, r.t_ns, r.payload, &error));
-  EXPECT_TRUE(writer->Close(&error)) << error;
-  return path;
-}
 
 class StationReplay : public ::testing::TestWithParam<drivers::Protocol> {};
 
@@ -46,7 +36,7 @@ TEST_P(StationReplay, EstimatesFromBytesAreWithinFourSigmaOfTheTruth) {
   sim::SimCapture c;
   std::string error;
   ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
-  const std::string path = WriteCapture(c, "station");
+  const std::string path = WriteSimCaptureFile(c, "station");
   const std::string result_path = path + ".result.json";
   daemon::ReplayOnceOutcome outcome;
   int active = 0;
@@ -107,7 +97,7 @@ TEST(StationDrift, TheSequencerAllowsForTheDriftTheCalibratorIdentified) {
   sim::SimCapture c;
   std::string error;
   ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
-  const std::string path = WriteCapture(c, "wander");
+  const std::string path = WriteSimCaptureFile(c, "wander");
   daemon::StationOptions options;
   options.sensor_class = "consumer";
   options.state_dir = ::testing::TempDir() + "wander_state_" + std::to_string(::getpid());
@@ -172,7 +162,7 @@ TEST(StationDrift, CorrectedSigmaGrowsWithTheTimeSinceTheCalibration) {
   sim::SimCapture c;
   std::string error;
   ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
-  const std::string path = WriteCapture(c, "drift");
+  const std::string path = WriteSimCaptureFile(c, "drift");
   daemon::StationOptions options;
   options.models = {"accel13"};
   daemon::Station station({"imu"}, options, {});
@@ -228,7 +218,7 @@ TEST(StationPlanning, NextPoseCountsTheTablesSecondsFromTheLatestPose) {
   sim::SimCapture c;
   std::string error;
   ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
-  const std::string path = WriteCapture(c, "planning");
+  const std::string path = WriteSimCaptureFile(c, "planning");
   for (const PlanObjective objective : {PlanObjective::kTime, PlanObjective::kPoses}) {
     daemon::StationOptions options;
     options.table.rate_dps = Eigen::Vector3d(30, 15, 10);
@@ -299,7 +289,7 @@ TEST(StationPersistence, ResumesAfterACrashWithEveryCapturedPose) {
                  std::vector<nlohmann::json>* events) {
     daemon::StationOptions so;
     so.state_dir = state_dir;
-    const std::string path = WriteCapture(part, "part");
+    const std::string path = WriteSimCaptureFile(part, "part");
     drivers::CaptureReader reader;
     EXPECT_TRUE(reader.Open(path, &error)) << error;
     daemon::Station station({"imu"}, so, [&](const nlohmann::json& e) { events->push_back(e); });
@@ -405,7 +395,7 @@ TEST(StationPersistence, PoseIsAnsweredOnlyOnceItsRecordIsJournaled) {
   station.SetExecutor([&](std::function<void()> work, std::function<void()> done) {
     queue.emplace_back(std::move(work), std::move(done));
   });
-  const std::string path = WriteCapture(c, "answer");
+  const std::string path = WriteSimCaptureFile(c, "answer");
   drivers::CaptureReader reader;
   ASSERT_TRUE(reader.Open(path, &error)) << error;
   daemon::ReplayStats stats;
@@ -479,7 +469,7 @@ TEST(StationLive, PerDeviceModelsCorrectionRestartAndOverride) {
   daemon::StationOptions so;
   so.state_dir = dir;
   so.per_device["imu"].models = std::vector<std::string>{"accel12"};
-  const std::string path = WriteCapture(c, "live");
+  const std::string path = WriteSimCaptureFile(c, "live");
   {
     drivers::CaptureReader reader;
     ASSERT_TRUE(reader.Open(path, &error)) << error;
@@ -541,7 +531,7 @@ TEST(StationLive, PerDeviceModelsCorrectionRestartAndOverride) {
         static_cast<std::uint64_t>(c.offset_ns + std::llround(c.session.events[5].t_s * 1e9));
     for (const auto& r : c.records)
       if (r.t_ns <= cut) part.records.push_back(r);
-    const std::string p2 = WriteCapture(part, "few");
+    const std::string p2 = WriteSimCaptureFile(part, "few");
     drivers::CaptureReader reader;
     ASSERT_TRUE(reader.Open(p2, &error)) << error;
     daemon::ReplayStats stats;

@@ -20,6 +20,15 @@
 namespace turncal::drivers {
 namespace {
 
+// The imu_tk recording's two files, or false when ../shared/fixtures is absent.
+bool ImuTkFiles(std::string* acc, std::string* gyr) {
+  const auto a = testing::Fixture("imu_tk/xsens_acc.mat");
+  const auto g = testing::Fixture("imu_tk/xsens_gyro.mat");
+  *acc = a.string();
+  *gyr = g.string();
+  return !a.empty() && !g.empty();
+}
+
 TEST(TextLog, ACsvWithAHeaderIsReadScaledAndItsOddLinesCounted) {
   std::istringstream in(
       "time_ms,ax,ay,az,gx,gy,gz\n"
@@ -85,9 +94,8 @@ TEST(TextLog, BadLayoutsAndLogsWithoutSamplesAreRefusedWithAReason) {
 // raw counts, the two files at the same times; imu_tk's example starts from the accelerometer
 // bias at 32768 counts and the gyro scale 1/6258.
 TEST(TextLog, TheImuTkRecordingReadsAsOneStreamOfRawCounts) {
-  const auto acc = testing::Fixture("imu_tk/xsens_acc.mat");
-  const auto gyr = testing::Fixture("imu_tk/xsens_gyro.mat");
-  if (acc.empty() || gyr.empty()) {
+  std::string acc, gyr;
+  if (!ImuTkFiles(&acc, &gyr)) {
     GTEST_SKIP() << "../shared/fixtures is absent: skipping the imu_tk recording";
   }
   TriadColumns a, g;
@@ -97,8 +105,7 @@ TEST(TextLog, TheImuTkRecordingReadsAsOneStreamOfRawCounts) {
   std::vector<Sample> samples;
   TextLogStats stats;
   std::string error;
-  ASSERT_TRUE(ReadImuTkPair(acc.string(), gyr.string(), a, g, "xsens", &samples, &stats, &error))
-      << error;
+  ASSERT_TRUE(ReadImuTkPair(acc, gyr, a, g, "xsens", &samples, &stats, &error)) << error;
   ASSERT_EQ(samples.size(), 51175u);
   EXPECT_EQ(stats.skipped, 0);
   EXPECT_EQ(stats.backwards, 0);
@@ -121,9 +128,8 @@ TEST(TextLog, TheImuTkRecordingReadsAsOneStreamOfRawCounts) {
 // shorter than the 1 s dwell skipped; many positions repeat, and their gravity directions fill 19
 // of MicroStrain's 576 bins (3.3 %).
 TEST(TextLog, TheImuTkRecordingsStillSegmentsAreFoundFromTheMeasuredNoise) {
-  const auto acc = testing::Fixture("imu_tk/xsens_acc.mat");
-  const auto gyr = testing::Fixture("imu_tk/xsens_gyro.mat");
-  if (acc.empty() || gyr.empty()) {
+  std::string acc, gyr;
+  if (!ImuTkFiles(&acc, &gyr)) {
     GTEST_SKIP() << "../shared/fixtures is absent: skipping the imu_tk recording";
   }
   TriadColumns a, g;
@@ -132,8 +138,7 @@ TEST(TextLog, TheImuTkRecordingsStillSegmentsAreFoundFromTheMeasuredNoise) {
   g.scale = 1.0 / 6258;
   std::vector<Sample> samples;
   std::string error;
-  ASSERT_TRUE(ReadImuTkPair(acc.string(), gyr.string(), a, g, "xsens", &samples, nullptr, &error))
-      << error;
+  ASSERT_TRUE(ReadImuTkPair(acc, gyr, a, g, "xsens", &samples, nullptr, &error)) << error;
   SequencerOptions options;
   options.dwell_s = 1.0;
   std::vector<Eigen::Vector3d> down;
