@@ -56,7 +56,7 @@ Eigen::VectorXd ParameterScales(const MeasurementModel& model) {
 namespace {
 
 NamedDirection Name(const Eigen::VectorXd& scaled_in, double relative_singular,
-                    const MeasurementModel& model, const Eigen::VectorXd& scales,
+                    const std::vector<ParameterInfo>& params, const Eigen::VectorXd& scales,
                     const ObservabilityOptions& options) {
   NamedDirection d;
   Eigen::Index largest = 0;
@@ -64,7 +64,6 @@ NamedDirection Name(const Eigen::VectorXd& scaled_in, double relative_singular,
   d.scaled = scaled_in[largest] < 0 ? Eigen::VectorXd(-scaled_in) : scaled_in;
   d.coefficients = scales.cwiseProduct(d.scaled).normalized();
   d.relative_singular_value = relative_singular;
-  const auto& params = model.parameters();
   std::vector<int> order(params.size());
   for (int i = 0; i < static_cast<int>(order.size()); ++i) order[i] = i;
   std::sort(order.begin(), order.end(),
@@ -106,8 +105,12 @@ Eigen::VectorXd OutsideGauge(const MeasurementModel& model, const Eigen::VectorX
 
 RankAnalysis AnalyzeRank(const Eigen::MatrixXd& jacobian, const MeasurementModel& model,
                          const ObservabilityOptions& options) {
-  const int N = model.num_parameters();
-  const Eigen::VectorXd scales = ParameterScales(model);
+  return AnalyzeRank(jacobian, model.parameters(), ParameterScales(model), options);
+}
+
+RankAnalysis AnalyzeRank(const Eigen::MatrixXd& jacobian, const std::vector<ParameterInfo>& model,
+                         const Eigen::VectorXd& scales, const ObservabilityOptions& options) {
+  const int N = static_cast<int>(model.size());
   RankAnalysis out;
   out.columns = N;
   out.relative_singular = Eigen::VectorXd::Zero(N);

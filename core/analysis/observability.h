@@ -63,6 +63,10 @@ struct RankAnalysis {
 
 RankAnalysis AnalyzeRank(const Eigen::MatrixXd& jacobian, const MeasurementModel& model,
                          const ObservabilityOptions& options);
+// The same for any parameter list with the sizes its columns are scaled by (the free models of
+// core/modeling/free_model.h).
+RankAnalysis AnalyzeRank(const Eigen::MatrixXd& jacobian, const std::vector<ParameterInfo>& params,
+                         const Eigen::VectorXd& scales, const ObservabilityOptions& options);
 
 // The seed's test: the Jacobian of theta -> theta^e at `theta`.
 struct StructuralReport {

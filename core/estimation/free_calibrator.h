@@ -1,0 +1,77 @@
+#pragma once
+// A calibration without known poses (issue 22): one free model (core/modeling/free_model.h) fitted
+// to the static intervals of a tumble by maximum likelihood, with the covariance from the Fisher
+// information, the chi^2 fit check, the data-level rank with named weak directions, the tumble's
+// spatial coverage and a gate.
+//
+// The terms are whitened at a parameter point, so the solve is repeated with the terms whitened
+// at its result (three passes; the weights of norm residuals move with the gains by their
+// relative error only). A model built on another's estimate (gyro9 on accel9) holds that estimate
+// fixed and adds its covariance through the sensitivity of the terms to it (the two-step
+// estimator's covariance, Murphy and Topel): C = A^-1 + A^-1 J^T J_u C_u J_u^T J A^-1, A = J^T J.
+// The upstream's noise and this model's are independent to first order: accel9 uses the radial
+// part of each interval's mean, gyro9's direction terms the part across it.
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "core/analysis/observability.h"
+#include "core/analysis/sphere_coverage.h"
+#include "core/estimation/calibrator.h"
+#include "core/modeling/free_model.h"
+
+namespace turncal {
+
+struct FreeCalibratorOptions {
+  int passes = 3;
+  int max_iterations = 200;
+  // chi^2 above its degrees of freedom at this upper-tail p inflates the covariance by chi^2/dof
+  // (as the pose calibrator does; the estimate says so).
+  bool inflate_covariance_by_chi2 = true;
+  double chi2_inflation_p_value = 0.01;
+  double outlier_threshold = 4.0;
+  ObservabilityOptions observability;
+
+  // The gate: the model's parameters all determined (full rank), the weakest direction's
+  // relative singular value above this, and the coverage above min_coverage (a share of the 576
+  // bins; 0 checks none).
+  double min_relative_singular = 1e-3;
+  double min_coverage = 0.0;
+  // A parameter's sigma above this (in its display unit's terms: the gate's per-parameter limit
+  // in parameter units; empty: none) refuses too.
+  std::vector<std::pair<std::string, double>> max_sigma;
+
+  bool IsValid(std::string* error) const;
+};
+
+struct FreeTermResidual {
+  int interval = -1;
+  std::string kind;
+  Eigen::VectorXd whitened;  // 1 (norm, dip), 2 (direction) or 3 (rest) entries
+};
+
+struct FreeEstimate {
+  // Parameters, theta, covariance (with the upstream's part and any chi^2 inflation), sigma (inf
+  // for a parameter in a null direction), rank, condition, chi^2, dof, p-value, fit check,
+  // warnings. `poses` counts the intervals used, `residuals` is empty (see terms).
+  Estimate estimate;
+  RankAnalysis analysis;  // of the whitened Jacobian, columns scaled by FreeModel::Scales
+  std::vector<FreeTermResidual> terms;
+  int intervals = 0;  // static intervals carrying the model's triads
+  int residuals = 0;  // scalar residuals
+  SphereCoverage coverage;
+  std::vector<Eigen::Vector3d> directions;  // per interval used: the corrected triad's mean
+  // Parameters that take part in a null direction (not determined at all) or a weak one.
+  std::vector<std::string> undetermined, weak;
+  bool gate_passed = false;
+  std::vector<std::string> gate_reasons;  // why the gate refused, one line each
+  bool relative_scale = false;            // a magnetometer model without the field's magnitude
+};
+
+// Fits `model` to `data`. !estimate.ok with a message when the model cannot start (too few
+// intervals, no upstream estimate) or the solve fails.
+FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
+                           const FreeCalibratorOptions& options);
+
+}  // namespace turncal

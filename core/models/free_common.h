@@ -1,0 +1,184 @@
+#pragma once
+// What the free models (accel9, gyro9, magellipsoid, magsphere, accmag) share: the triangular
+// and symmetric matrices of their parameters, the algebraic sphere and ellipsoid fits they start
+// from, the norm residual |correct(raw)| = magnitude and its whitening.
+
+#include <ceres/autodiff_cost_function.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <Eigen/SVD>
+#include <cmath>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "core/frames/rotations.h"
+#include "core/modeling/free_model.h"
+
+namespace turncal::free {
+
+// imu_tk's triad correction, x = T K (raw - b), over 9 parameters kx ky kz m_yz m_zy m_zx bx by bz:
+// K = diag(k), T = [1 -m_yz m_zy; 0 1 -m_zx; 0 0 1] (upper triangular, small angles: the triad
+// fixes its own frame, z its axis and y in its y-z plane).
+template <typename T>
+Mat3<T> UpperTK(const T* p) {
+  Mat3<T> m;
+  m << p[0], -p[3] * p[1], p[4] * p[2], T(0), p[1], -p[5] * p[2], T(0), T(0), p[2];
+  return m;
+}
+
+// gyro9's full misalignment, T = [1 -m_yz m_zy; m_xz 1 -m_zx; -m_xy m_yx 1] (imu_tk's), times K:
+// parameters kx ky kz m_yz m_zy m_zx m_xz m_xy m_yx.
+template <typename T>
+Mat3<T> FullTK(const T* p) {
+  Mat3<T> m;
+  m << p[0], -p[3] * p[1], p[4] * p[2], p[6] * p[0], p[1], -p[5] * p[2], -p[7] * p[0], p[8] * p[1],
+      p[2];
+  return m;
+}
+
+// Symmetric S from s11 s12 s13 s22 s23 s33.
+template <typename T>
+Mat3<T> Symmetric(const T* s) {
+  Mat3<T> m;
+  m << s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5];
+  return m;
+}
+
+template <typename T>
+Vec3<T> Vector(const T* v) {
+  return Vec3<T>(v[0], v[1], v[2]);
+}
+
+// The 9 parameters of UpperTK from an upper-triangular C with a positive diagonal.
+inline void UpperTKFromMatrix(const Eigen::Matrix3d& C, double* p) {
+  for (int i = 0; i < 3; ++i) p[i] = C(i, i);
+  p[3] = -C(0, 1) / C(1, 1);
+  p[4] = C(0, 2) / C(2, 2);
+  p[5] = -C(1, 2) / C(2, 2);
+}
+
+// An algebraic fit of the quadric x^T A x + 2 x^T u + c = 0 through the points (the smallest
+// singular vector of [x^2 y^2 z^2 2xy 2xz 2yz 2x 2y 2z 1], the points centred and scaled first),
+// written as (x - center)^T E (x - center) = 1; nullopt when it is not an ellipsoid (too few
+// points, or points that leave it a hyperboloid or a cylinder).
+struct Ellipsoid {
+  Eigen::Vector3d center;
+  Eigen::Matrix3d E;
+};
+inline std::optional<Ellipsoid> FitEllipsoid(const std::vector<Eigen::Vector3d>& points) {
+  const int n = static_cast<int>(points.size());
+  if (n < 9) return std::nullopt;
+  Eigen::Vector3d mu = Eigen::Vector3d::Zero();
+  for (const auto& p : points) mu += p;
+  mu /= n;
+  double s = 0;
+  for (const auto& p : points) s += (p - mu).squaredNorm();
+  s = std::sqrt(s / n);
+  if (!(s > 0)) return std::nullopt;
+  Eigen::MatrixXd D(n, 10);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d x = (points[i] - mu) / s;
+    D.row(i) << x.x() * x.x(), x.y() * x.y(), x.z() * x.z(), 2 * x.x() * x.y(), 2 * x.x() * x.z(),
+        2 * x.y() * x.z(), 2 * x.x(), 2 * x.y(), 2 * x.z(), 1.0;
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(D, Eigen::ComputeFullV);
+  const Eigen::VectorXd v = svd.matrixV().col(9);
+  Eigen::Matrix3d A;
+  A << v[0], v[3], v[4], v[3], v[1], v[5], v[4], v[5], v[2];
+  const Eigen::Vector3d u(v[6], v[7], v[8]);
+  if (std::abs(A.determinant()) < 1e-12) return std::nullopt;
+  const Eigen::Vector3d c = -A.inverse() * u;
+  const double k = c.dot(A * c) - v[9];
+  Eigen::Matrix3d E = A / k;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(E);
+  if (!(eig.eigenvalues().minCoeff() > 0) || !E.allFinite()) return std::nullopt;
+  return Ellipsoid{mu + s * c, E / (s * s)};
+}
+
+// A sphere |x - center| = radius by linear least squares (|x|^2 = 2 x.c + r^2 - |c|^2); nullopt
+// with fewer than 4 points or points on a plane.
+struct Sphere {
+  Eigen::Vector3d center;
+  double radius = 0.0;
+};
+inline std::optional<Sphere> FitSphere(const std::vector<Eigen::Vector3d>& points) {
+  const int n = static_cast<int>(points.size());
+  if (n < 4) return std::nullopt;
+  Eigen::Vector3d mu = Eigen::Vector3d::Zero();
+  for (const auto& p : points) mu += p;
+  mu /= n;
+  Eigen::MatrixXd A(n, 4);
+  Eigen::VectorXd y(n);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d x = points[i] - mu;
+    A.row(i) << 2 * x.x(), 2 * x.y(), 2 * x.z(), 1.0;
+    y[i] = x.squaredNorm();
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  const Eigen::VectorXd& sv = svd.singularValues();
+  if (!(sv[3] > 1e-9 * sv[0])) return std::nullopt;
+  const Eigen::VectorXd x = svd.solve(y);
+  const double r2 = x[3] + x.head<3>().squaredNorm();
+  if (!(r2 > 0)) return std::nullopt;
+  return Sphere{mu + x.head<3>(), std::sqrt(r2)};
+}
+
+// The symmetric square root of a symmetric positive definite matrix.
+inline Eigen::Matrix3d SqrtSymmetric(const Eigen::Matrix3d& E) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(E);
+  return eig.eigenvectors() * eig.eigenvalues().cwiseMax(0).cwiseSqrt().asDiagonal() *
+         eig.eigenvectors().transpose();
+}
+
+// The residual (|Correct(theta, raw)| - magnitude) / sigma, sigma the first-order standard
+// deviation of |x| from the raw mean's covariance at the whitening point. `Correction` provides
+// template <typename T> static Vec3<T> Apply(const T* theta, const Vec3<T>& raw).
+template <class Correction, int N>
+struct NormFunctor {
+  Eigen::Vector3d raw;
+  double magnitude = 1.0;
+  double inv_sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* theta, T* r) const {
+    const Vec3<T> x = Correction::Apply(theta, Vec3<T>(raw.cast<T>()));
+    r[0] = (x.norm() - T(magnitude)) * T(inv_sigma);
+    return true;
+  }
+};
+
+// sigma of |x| for x = L (raw - b) (L the correction's linear part at the whitening point).
+inline double NormSigma(const Eigen::Matrix3d& L, const Eigen::Vector3d& x,
+                        const Eigen::Matrix3d& raw_covariance) {
+  const Eigen::Vector3d n = x.normalized();
+  const Eigen::RowVector3d j = n.transpose() * L;
+  return std::sqrt(std::max(1e-300, double(j * raw_covariance * j.transpose())));
+}
+
+template <class Correction, int N>
+std::unique_ptr<ceres::CostFunction> MakeNormCost(const Eigen::Vector3d& raw, double magnitude,
+                                                  double sigma) {
+  auto* f = new NormFunctor<Correction, N>{raw, magnitude, 1.0 / sigma};
+  return std::make_unique<ceres::AutoDiffCostFunction<NormFunctor<Correction, N>, 1, N>>(f);
+}
+
+// The means of the intervals that carry `triad`, and their covariances.
+inline void Means(const FreeData& data, SensorKind triad, double offset_sigma,
+                  std::vector<Eigen::Vector3d>* means, std::vector<Eigen::Matrix3d>* covariances,
+                  std::vector<int>* index) {
+  for (int i = 0; i < static_cast<int>(data.intervals.size()); ++i) {
+    const TriadStats* s = triad == SensorKind::kAccelerometer
+                              ? (data.intervals[i].acc ? &*data.intervals[i].acc : nullptr)
+                          : triad == SensorKind::kMagnetometer
+                              ? (data.intervals[i].mag ? &*data.intervals[i].mag : nullptr)
+                              : (data.intervals[i].gyr ? &*data.intervals[i].gyr : nullptr);
+    if (!s || s->count <= 0) continue;
+    means->push_back(s->mean);
+    if (covariances) covariances->push_back(MeanCovariance(*s, offset_sigma));
+    if (index) index->push_back(i);
+  }
+}
+
+}  // namespace turncal::free

@@ -1,0 +1,113 @@
+// magellipsoid: a magnetometer without known poses (issue 22; MicroStrain's and ArduPilot's
+// ellipsoid): the field h = S (m - b) has a constant magnitude F in every static interval, hard
+// iron b (3, the device's unit) and a symmetric soft iron S (6: s11 s12 s13 s22 s23 s33). F is the
+// reference's when given (FreeContext::field_magnitude); otherwise it is fixed at 1 and S is only
+// relative: the data cannot tell a larger field from a larger gain. The rotation part of a
+// general soft iron is not in the model: without poses nothing fixes the triad's frame but its
+// own (the joint model accmag finds it against the accelerometer's).
+
+#include <fmt/format.h>
+
+#include "core/models/free_common.h"
+
+namespace turncal {
+namespace {
+
+struct EllipsoidCorrection {
+  template <typename T>
+  static Vec3<T> Apply(const T* p, const Vec3<T>& raw) {
+    return free::Symmetric(p + 3) * (raw - free::Vector(p));
+  }
+};
+
+class MagEllipsoid final : public FreeModel {
+ public:
+  explicit MagEllipsoid(const FreeContext& context) : context_(context) {
+    const auto S = ParameterKind::kSensor;
+    for (const char* b : {"bx", "by", "bz"}) params_.push_back({b, S, ParameterUnit::kField, 0.0});
+    for (const char* s : {"s11", "s12", "s13", "s22", "s23", "s33"}) {
+      params_.push_back({s, S, ParameterUnit::kGain, s[1] == s[2] ? 1.0 : 0.0});
+    }
+  }
+  const std::string& name() const override { return name_; }
+  std::string description() const override {
+    return "magnetometer without poses: hard iron and symmetric soft iron from a constant field "
+           "magnitude (an ellipsoid fit)";
+  }
+  SensorKind sensor() const override { return SensorKind::kMagnetometer; }
+  bool Needs(SensorKind t) const override { return t == SensorKind::kMagnetometer; }
+  const std::vector<ParameterInfo>& parameters() const override { return params_; }
+
+  double magnitude() const { return context_.field_magnitude > 0 ? context_.field_magnitude : 1.0; }
+
+  Eigen::VectorXd Scales(const FreeData&, const Eigen::VectorXd& theta) const override {
+    const double gain = free::Symmetric(theta.data() + 3).norm() / std::sqrt(3.0);
+    Eigen::VectorXd s(9);
+    s.head<3>().setConstant(magnitude() / std::max(gain, 1e-300));
+    s.tail<6>().setConstant(gain);
+    return s;
+  }
+
+  bool Start(const FreeData& data, Eigen::VectorXd* theta, std::string* error) const override {
+    std::vector<Eigen::Vector3d> means;
+    free::Means(data, SensorKind::kMagnetometer, 0, &means, nullptr, nullptr);
+    *theta = Eigen::VectorXd::Zero(9);
+    if (auto e = free::FitEllipsoid(means)) {
+      const Eigen::Matrix3d S = magnitude() * free::SqrtSymmetric(e->E);
+      theta->head<3>() = e->center;
+      const int k[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+      for (int i = 0; i < 6; ++i) (*theta)[3 + i] = S(k[i][0], k[i][1]);
+      return true;
+    }
+    if (auto s = free::FitSphere(means)) {
+      theta->head<3>() = s->center;
+      (*theta)[3] = (*theta)[6] = (*theta)[8] = magnitude() / s->radius;
+      return true;
+    }
+    if (error) {
+      *error = fmt::format(
+          "magellipsoid cannot start: {} static intervals with the magnetometer fit neither an "
+          "ellipsoid nor a sphere",
+          means.size());
+    }
+    return false;
+  }
+
+  std::vector<FreeTerm> Terms(const FreeData& data, const Eigen::VectorXd& theta) const override {
+    std::vector<Eigen::Vector3d> means;
+    std::vector<Eigen::Matrix3d> covariances;
+    std::vector<int> index;
+    free::Means(data, SensorKind::kMagnetometer, context_.mag_offset_sigma, &means, &covariances,
+                &index);
+    const Eigen::Matrix3d L = free::Symmetric(theta.data() + 3);
+    std::vector<FreeTerm> terms;
+    for (std::size_t i = 0; i < means.size(); ++i) {
+      const Eigen::Vector3d h = L * (means[i] - theta.head<3>());
+      FreeTerm t;
+      t.cost = free::MakeNormCost<EllipsoidCorrection, 9>(means[i], magnitude(),
+                                                          free::NormSigma(L, h, covariances[i]));
+      t.interval = index[i];
+      t.kind = "norm";
+      terms.push_back(std::move(t));
+    }
+    return terms;
+  }
+
+  Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
+    return EllipsoidCorrection::Apply(theta.data(), raw);
+  }
+  Eigen::Vector3d Direction(const FreeData&, const Eigen::VectorXd& theta,
+                            const FreeInterval& interval) const override {
+    return interval.mag ? Correct(theta, interval.mag->mean) : Eigen::Vector3d::Zero();
+  }
+
+ private:
+  FreeContext context_;
+  std::string name_ = "magellipsoid";
+  std::vector<ParameterInfo> params_;
+};
+
+}  // namespace
+}  // namespace turncal
+
+TURNCAL_REGISTER_FREE_MODEL(magellipsoid, turncal::MagEllipsoid)
