@@ -4,8 +4,10 @@
 #include <fmt/format.h>
 
 #include <Eigen/SVD>
+#include <algorithm>
 #include <boost/math/special_functions/gamma.hpp>
 #include <cmath>
+#include <memory>
 #include <set>
 
 namespace turncal {
@@ -64,6 +66,25 @@ Evaluated Evaluate(const std::vector<FreeTerm>& terms, const Eigen::VectorXd& th
 }
 
 }  // namespace
+
+Eigen::MatrixXd FreeJacobian(const FreeModel& model, const FreeData& data,
+                             const Eigen::VectorXd& theta) {
+  const std::vector<FreeTerm> terms = model.Terms(data, theta);
+  return Evaluate(terms, theta, data.upstream_theta, nullptr).J;
+}
+
+std::vector<MisfitFigure> SummarizeMisfits(const std::vector<FreeModel::Misfit>& misfits) {
+  std::vector<MisfitFigure> out;
+  for (const auto& m : misfits) {
+    auto it = std::find_if(out.begin(), out.end(), [&](const auto& f) { return f.kind == m.kind; });
+    if (it == out.end()) it = out.insert(out.end(), MisfitFigure{m.kind, 0, 0.0, 0.0});
+    ++it->count;
+    it->rms += m.value * m.value;
+    it->max_abs = std::max(it->max_abs, std::abs(m.value));
+  }
+  for (auto& f : out) f.rms = std::sqrt(f.rms / std::max(1, f.count));
+  return out;
+}
 
 FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
                            const FreeCalibratorOptions& options) {
@@ -224,6 +245,8 @@ FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
     if (d.squaredNorm() > 0) out.directions.push_back(d);
   }
   out.coverage = CoverageOf(out.directions);
+  out.before = SummarizeMisfits(model.Misfits(data, model.Identity(data)));
+  out.after = SummarizeMisfits(model.Misfits(data, theta));
 
   // The gate.
   auto refuse = [&](std::string why) { out.gate_reasons.push_back(std::move(why)); };
@@ -253,6 +276,88 @@ FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
     }
   }
   out.gate_passed = out.gate_reasons.empty();
+  return out;
+}
+
+bool CalibrateFreeModels(const std::vector<std::string>& models,
+                         const std::vector<FreeInterval>& intervals, const FreeContext& context,
+                         const FreeCalibratorOptions& options, std::vector<FreeModelResult>* out,
+                         std::string* error) {
+  std::vector<std::unique_ptr<FreeModel>> made;
+  for (const auto& name : models) {
+    auto m = MakeFreeModel(name, context, error);
+    if (!m) return false;
+    made.push_back(std::move(m));
+  }
+  FreeData data;
+  data.intervals = intervals;
+  data.context = context;
+  auto find = [&](const std::string& name) -> const FreeModelResult* {
+    for (const auto& r : *out) {
+      if (r.model == name && r.estimate.estimate.ok) return &r;
+    }
+    return nullptr;
+  };
+  for (const auto& model : made) {
+    FreeData d = data;
+    const std::string up = model->upstream();
+    if (!up.empty()) {
+      if (!find(up)) {
+        std::vector<FreeModelResult> upstream;
+        if (!CalibrateFreeModels({up}, intervals, context, options, &upstream, error)) return false;
+        for (auto& r : upstream) out->push_back(std::move(r));
+      }
+      if (const FreeModelResult* u = find(up)) {
+        d.upstream_theta = u->estimate.estimate.theta;
+        d.upstream_covariance = u->estimate.estimate.covariance;
+      }
+    }
+    FreeModelResult r;
+    r.requested = r.model = model->name();
+    r.estimate = CalibrateFree(*model, d, options);
+    if (!up.empty() && d.upstream_theta.size() == 0) {
+      r.note = fmt::format("{} could not be fitted, and {} needs its estimate", up, model->name());
+    }
+    if (model->name() == "magellipsoid" &&
+        (!r.estimate.estimate.ok || r.estimate.estimate.rank < model->num_parameters() ||
+         !r.estimate.weak.empty())) {
+      const std::string why = !r.estimate.estimate.ok           ? r.estimate.estimate.error
+                              : r.estimate.gate_reasons.empty() ? std::string("rank loss")
+                                                                : r.estimate.gate_reasons.front();
+      auto sphere = MakeFreeModel("magsphere", context, error);
+      if (!sphere) return false;
+      FreeModelResult s;
+      s.requested = "magellipsoid";
+      s.model = "magsphere";
+      s.estimate = CalibrateFree(*sphere, d, options);
+      s.note = fmt::format(
+          "the data cannot carry an ellipsoid ({}; coverage {:.1f} % of the sphere): fitted a "
+          "sphere (hard iron and one gain) instead",
+          why, 100 * r.estimate.coverage.fraction());
+      if (s.estimate.estimate.ok && !s.estimate.gate_passed && !s.estimate.gate_reasons.empty()) {
+        s.note += "; the sphere is refused too: " + s.estimate.gate_reasons.front();
+      }
+      out->push_back(std::move(s));
+      continue;
+    }
+    out->push_back(std::move(r));
+  }
+  return true;
+}
+
+std::vector<std::string> DefaultFreeModels(const std::vector<FreeInterval>& intervals) {
+  bool acc = false, gyr = false, mag = false, moves = false;
+  for (const auto& iv : intervals) {
+    acc |= iv.acc.has_value();
+    gyr |= iv.gyr.has_value();
+    mag |= iv.mag.has_value();
+    moves |= iv.move_in.has_value();
+  }
+  std::vector<std::string> out;
+  if (acc) out.push_back("accel9");
+  if (acc && gyr && moves) out.push_back("gyro9");
+  if (mag) out.push_back("magellipsoid");
+  if (acc && mag) out.push_back("accmag");
   return out;
 }
 

@@ -51,6 +51,14 @@ struct FreeTermResidual {
   Eigen::VectorXd whitened;  // 1 (norm, dip), 2 (direction) or 3 (rest) entries
 };
 
+// The misfits of one kind (FreeModel::Misfits) over the intervals: RMS and largest magnitude.
+struct MisfitFigure {
+  std::string kind;
+  int count = 0;
+  double rms = 0.0, max_abs = 0.0;
+};
+std::vector<MisfitFigure> SummarizeMisfits(const std::vector<FreeModel::Misfit>& misfits);
+
 struct FreeEstimate {
   // Parameters, theta, covariance (with the upstream's part and any chi^2 inflation), sigma (inf
   // for a parameter in a null direction), rank, condition, chi^2, dof, p-value, fit check,
@@ -67,11 +75,39 @@ struct FreeEstimate {
   bool gate_passed = false;
   std::vector<std::string> gate_reasons;  // why the gate refused, one line each
   bool relative_scale = false;            // a magnetometer model without the field's magnitude
+  // What the raw triad leaves (FreeModel::Identity) and what the calibration leaves, per kind.
+  std::vector<MisfitFigure> before, after;
 };
 
 // Fits `model` to `data`. !estimate.ok with a message when the model cannot start (too few
 // intervals, no upstream estimate) or the solve fails.
 FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
                            const FreeCalibratorOptions& options);
+
+// The whitened Jacobian of `model`'s terms over `data` at theta (rows: the terms' residuals in
+// order; columns: the model's parameters), for the analyses that weigh hypothetical intervals.
+Eigen::MatrixXd FreeJacobian(const FreeModel& model, const FreeData& data,
+                             const Eigen::VectorXd& theta);
+
+// One model's estimate among several (CalibrateFreeModels), with what was chosen and why.
+struct FreeModelResult {
+  std::string requested;  // as asked ("magellipsoid")
+  std::string model;      // as fitted ("magsphere" when the ellipsoid could not be carried)
+  std::string note;       // why another model was fitted, or why none; empty otherwise
+  FreeEstimate estimate;
+};
+
+// Fits each of `models` in order to `intervals`, each model's upstream (accel9 for gyro9) fitted
+// first when it is not in the list before it. A magellipsoid the data cannot carry (refused for
+// rank or a weak direction) falls back to magsphere with the reason in `note`. Models unknown by
+// name fail with a message (nothing fitted).
+bool CalibrateFreeModels(const std::vector<std::string>& models,
+                         const std::vector<FreeInterval>& intervals, const FreeContext& context,
+                         const FreeCalibratorOptions& options, std::vector<FreeModelResult>* out,
+                         std::string* error);
+
+// The models a set of intervals can feed: accel9 with the accelerometer, gyro9 with the gyro and
+// moves, magellipsoid with the magnetometer, accmag with both of the latter two.
+std::vector<std::string> DefaultFreeModels(const std::vector<FreeInterval>& intervals);
 
 }  // namespace turncal

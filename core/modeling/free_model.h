@@ -38,6 +38,9 @@ struct FreeContext {
   // part is known from gravity only with the latitude).
   double earth_rate_radps = kEarthRate_radps;
   double latitude_deg = 45.0;
+  // The field's dip below the horizontal, degrees (from [reference]'s B_NED), for the advice on
+  // which orientation to add; the joint model estimates its own.
+  double dip_deg = 60.0;
   // Variance added to each interval's mean on every axis for what one interval's averaging does
   // not see (bias instability between intervals, a hand's placement), triad units.
   double acc_offset_sigma = 0.0;
@@ -100,6 +103,18 @@ class FreeModel {
   // magnetometer's in the field's unit, or relative when its magnitude is not known).
   virtual Eigen::Vector3d Correct(const Eigen::VectorXd& theta,
                                   const Eigen::Vector3d& raw) const = 0;
+  // What the calibration leaves at theta, in the quantity's own unit, for figures a user can
+  // compare with other tools: per interval (or move) a kind ("norm": |x| - magnitude in the
+  // triad's unit; "direction": the angle, rad, between gravity's direction and the one the gyro
+  // carried it to; "dip": the angle's deviation, rad) and the value.
+  struct Misfit {
+    std::string kind;
+    int interval = -1;
+    double value = 0.0;
+  };
+  virtual std::vector<Misfit> Misfits(const FreeData& data, const Eigen::VectorXd& theta) const = 0;
+  // The parameters that leave the raw triad as it is (gains 1, angles and biases 0): "before".
+  virtual Eigen::VectorXd Identity(const FreeData& data) const = 0;
   // The triad's mean over `interval` corrected, whose direction the coverage counts (the
   // gyroscope's: the specific force's, for which it has the upstream's parameters).
   virtual Eigen::Vector3d Direction(const FreeData& data, const Eigen::VectorXd& theta,

@@ -94,6 +94,20 @@ class Accel9 final : public FreeModel {
     return terms;
   }
 
+  std::vector<Misfit> Misfits(const FreeData& data, const Eigen::VectorXd& theta) const override {
+    std::vector<Misfit> out;
+    for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
+      const auto& iv = data.intervals[k];
+      if (iv.acc)
+        out.push_back({"norm", k, Correct(theta, iv.acc->mean).norm() - context_.gravity_mps2});
+    }
+    return out;
+  }
+  Eigen::VectorXd Identity(const FreeData&) const override {
+    Eigen::VectorXd t = Eigen::VectorXd::Zero(9);
+    t.head<3>().setOnes();
+    return t;
+  }
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
     return Accel9Correction::Apply(theta.data(), raw);
   }

@@ -93,6 +93,19 @@ class MagEllipsoid final : public FreeModel {
     return terms;
   }
 
+  std::vector<Misfit> Misfits(const FreeData& data, const Eigen::VectorXd& theta) const override {
+    std::vector<Misfit> out;
+    for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
+      const auto& iv = data.intervals[k];
+      if (iv.mag) out.push_back({"norm", k, Correct(theta, iv.mag->mean).norm() - magnitude()});
+    }
+    return out;
+  }
+  Eigen::VectorXd Identity(const FreeData&) const override {
+    Eigen::VectorXd t = Eigen::VectorXd::Zero(9);
+    t[3] = t[6] = t[8] = 1.0;
+    return t;
+  }
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
     return EllipsoidCorrection::Apply(theta.data(), raw);
   }

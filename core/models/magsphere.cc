@@ -91,6 +91,20 @@ class MagSphere final : public FreeModel {
     return terms;
   }
 
+  std::vector<Misfit> Misfits(const FreeData& data, const Eigen::VectorXd& theta) const override {
+    std::vector<Misfit> out;
+    for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
+      const auto& iv = data.intervals[k];
+      if (iv.mag) out.push_back({"norm", k, Correct(theta, iv.mag->mean).norm() - magnitude()});
+    }
+    return out;
+  }
+  // No hard iron and the radius that leaves the raw magnitude as it is.
+  Eigen::VectorXd Identity(const FreeData&) const override {
+    Eigen::VectorXd t = Eigen::VectorXd::Zero(4);
+    t[3] = magnitude();
+    return t;
+  }
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
     return SphereDistance::Apply(theta.data(), raw) * (magnitude() / theta[3]);
   }

@@ -147,7 +147,12 @@ void Sequencer::Reject(double t_s, std::string reason) {
 
 void Sequencer::SkipSegment(double t_s, std::string reason) {
   ++skipped_segments_;
-  moves_.Abort("the still segment it led to was skipped");
+  // Free mode: the skipped segment's samples belong to the move to the next interval.
+  if (free_) {
+    moves_.Resume();
+  } else {
+    moves_.Abort("the still segment it led to was skipped");
+  }
   Emit(SequencerEventKind::kSegmentSkipped, t_s, std::move(reason));
   counts_ = SampleCounts{};
   needed_ = 0;

@@ -41,6 +41,17 @@ void MoveTracker::Start(const TablePose& from, const StillSample& last) {
 }
 
 void MoveTracker::Add(const StillSample& s) {
+  if (shadow_) {
+    // The same checks as a tracked move's, silently: a shadow that cannot go on is dropped.
+    const std::uint32_t gap = s.lost_before + s.outliers_before;
+    if (!s.has(kTriadGyr) || s.flagged_before > 0 ||
+        gap > static_cast<std::uint32_t>(options_.max_gap_samples)) {
+      shadow_.reset();
+    } else {
+      shadow_->Add(SensorSeconds(s), s.v[kTriadGyr], Force(s), static_cast<int>(gap) + 1);
+      if (shadow_->duration_s() > options_.max_s) shadow_.reset();
+    }
+  }
   if (!tracking()) return;
   if (!s.has(kTriadGyr)) return Abort("a sample in it lacked the gyro");
   if (s.flagged_before > 0) {
@@ -61,12 +72,26 @@ void MoveTracker::Add(const StillSample& s) {
 void MoveTracker::End(const TablePose& to) {
   if (!tracking()) return;
   if (to.is_rate()) return Abort("a rate segment came between");
+  if (resumable_) shadow_ = *integrator_;
   done_ = integrator_->Finish(from_, to);
   integrator_.reset();
   ended_ = true;
 }
 
+bool MoveTracker::Resume() {
+  if (!shadow_) {
+    Abort("the still segment it led to was skipped");
+    return false;
+  }
+  integrator_ = std::move(shadow_);
+  shadow_.reset();
+  done_.reset();
+  ended_ = false;
+  return true;
+}
+
 std::optional<MoveRecord> MoveTracker::TakeEnded() {
+  shadow_.reset();
   std::optional<MoveRecord> out = std::move(done_);
   done_.reset();
   ended_ = false;
@@ -76,6 +101,7 @@ std::optional<MoveRecord> MoveTracker::TakeEnded() {
 
 void MoveTracker::Abort(const std::string& why) {
   const bool had = integrator_.has_value() || done_.has_value();
+  shadow_.reset();
   integrator_.reset();
   done_.reset();
   ended_ = false;

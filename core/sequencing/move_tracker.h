@@ -49,6 +49,11 @@ class MoveTracker {
   std::optional<MoveRecord> TakeEnded();
   // Drops what is tracked or ended ("" when nothing was: not counted).
   void Abort(const std::string& why);
+  // Free mode: an ended move goes on integrating in the background until it is taken, so that a
+  // dwell which then fails (a still segment skipped) becomes part of the move instead of ending
+  // it. Resume() takes the move up again; false when there is none to resume (then Abort).
+  void SetResumable(bool resumable) { resumable_ = resumable; }
+  bool Resume();
 
   bool tracking() const { return integrator_.has_value() && !ended_; }
   std::int64_t moves() const { return moves_; }      // ended and taken
@@ -62,6 +67,8 @@ class MoveTracker {
   TablePose from_;
   bool ended_ = false;
   std::optional<MoveRecord> done_;
+  bool resumable_ = false;
+  std::optional<MoveIntegrator> shadow_;  // the ended move, integrating on (resumable_)
   std::int64_t moves_ = 0, dropped_ = 0;
   std::string last_drop_;
 };

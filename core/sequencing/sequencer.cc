@@ -29,6 +29,9 @@ bool SequencerOptions::IsValid(std::string* error) const {
     if (error) *error = m;
     return false;
   };
+  if (!(free_max_dwell_s > 0 && free_max_dwell_s <= 3600)) {
+    return fail("the free mode's longest interval must be in (0, 3600] s");
+  }
   if (!(dwell_s > 0 && dwell_s <= 3600) || !(settle_guard_s >= 0 && settle_guard_s <= 60) ||
       !(still_timeout_s > 0 && still_timeout_s <= 86400)) {
     return fail(
@@ -211,9 +214,32 @@ bool Sequencer::SetSchedule(std::vector<TablePose> poses, std::string* error) {
   return true;
 }
 
+bool Sequencer::SetFree(std::string* error) {
+  if (state_ != State::kIdle || scheduled()) {
+    if (error) *error = "free mode needs an idle sequencer without a schedule";
+    return false;
+  }
+  free_ = true;
+  moves_.SetResumable(true);
+  if (!SetSchedule({TablePose{}}, error)) return false;
+  return true;
+}
+
 void Sequencer::NextScheduled(double t_s) {
   counts_ = SampleCounts{};
   needed_ = 0;
+  if (free_) {
+    index_ = static_cast<int>(next_scheduled_);
+    pose_ = TablePose{};
+    has_pose_ = true;
+    t_announce_ns_ = std::numeric_limits<std::int64_t>::min();
+    announced_ = false;
+    dwell_s_ = options_.dwell_s;
+    state_ = State::kWaiting;
+    Emit(SequencerEventKind::kPoseStarted, t_s,
+         fmt::format("free: interval {}, at least {:.2f} s still", index_ + 1, dwell_s_));
+    return;
+  }
   if (next_scheduled_ >= schedule_.size()) {
     state_ = State::kScheduleDone;
     return;
@@ -302,14 +328,16 @@ void Sequencer::Feed(const StillSample& in) {
             "motion during the dwell after {:.2f} of {:.2f} s: {}",
             static_cast<double>(counts_.used + counts_.bad()) / detector_->profile().rate_hz,
             dwell_s_, detector_->finding().Describe());
-        if (scheduled()) {
+        if (free_ && counts_.used + counts_.bad() >= needed_) {
+          Complete(t_s);  // the segment ended after at least the dwell: all of it is the record
+        } else if (scheduled()) {
           SkipSegment(t_s, "still segment shorter than the dwell; " + why);
         } else {
           Reject(t_s, why);
         }
       } else if (has_evicted) {
         Commit(evicted);
-        if (counts_.used + counts_.bad() >= needed_) Complete(t_s);
+        if (counts_.used + counts_.bad() >= (free_ ? free_max_needed_ : needed_)) Complete(t_s);
       }
       break;
     case State::kSegmentDone:
@@ -366,6 +394,9 @@ void Sequencer::StartCollecting(const StillSample& first) {
     needed_ =
         std::max<std::int64_t>(2, std::llround(turns * turn_s * detector_->profile().rate_hz));
   }
+  free_max_needed_ = std::max<std::int64_t>(
+      needed_, static_cast<std::int64_t>(
+                   std::ceil(options_.free_max_dwell_s * detector_->profile().rate_hz - 1e-9)));
   next_progress_ = static_cast<std::int64_t>(std::ceil(options_.progress_step * needed_));
   t_first_ns_ = first.t_host_ns;
   t_first_sensor_s_ = first.t_sensor_s;
@@ -453,6 +484,11 @@ void Sequencer::Tick(std::int64_t now_ns) { CheckTimeout(now_ns); }
 
 void Sequencer::Finish(std::int64_t now_ns) {
   const double t_s = static_cast<double>(now_ns) * 1e-9;
+  // Free mode: a segment still at the end, at least the dwell long, is an interval (with the move
+  // that led to it, before the move in progress is dropped).
+  if (free_ && state_ == State::kCollecting && counts_.used + counts_.bad() >= needed_) {
+    Complete(t_s);
+  }
   moves_.Abort("");  // the input ended: a move in progress leads nowhere
   if (jumped_) {
     // No successor to vouch for its jump.
@@ -482,7 +518,12 @@ void Sequencer::Finish(std::int64_t now_ns) {
   }
   const auto total = schedule_.size();
   std::string why;
-  if (next_scheduled_ >= total) {
+  if (free_) {
+    why = fmt::format(
+        "free mode: {} intervals captured, {} still segments skipped (shorter than the {:.2f} s "
+        "dwell, or not still enough)",
+        next_scheduled_, skipped_segments_, options_.dwell_s);
+  } else if (next_scheduled_ >= total) {
     why = fmt::format(
         "all {} scheduled poses captured; {} still segments skipped, {} further "
         "still segments after the last pose",

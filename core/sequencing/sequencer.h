@@ -62,6 +62,9 @@ struct SequencerOptions {
   double max_lost_fraction = 0.5;  // lost over the dwell (counter or device-clock gaps)
   double pose_check_false_alarm = 1e-6;
   double progress_step = 0.1;  // a progress event every this fraction of the dwell
+  // Free mode (SetFree): an interval averages its whole still segment, at least dwell_s and at
+  // most this long ([sequencer] free_max_dwell_s).
+  double free_max_dwell_s = 60.0;
   StillnessOptions stillness;
   // Rate segments (an announced pose with a rate axis): the steadiness of the gyro's rate.
   RateSteadyOptions rate_steady;
@@ -135,6 +138,12 @@ class Sequencer {
   bool Announce(const Announcement& announcement, std::string* error);
   // Schedule mode; only before the first announcement.
   bool SetSchedule(std::vector<TablePose> poses, std::string* error);
+  // Free mode (issue 22, a tumble without a table): no poses at all; every still segment of at
+  // least the dwell becomes a record (its pose left at TablePose{}, index counting up), averaged
+  // over the whole segment up to free_max_dwell_s, with the move from the previous one. Only
+  // before the first announcement.
+  bool SetFree(std::string* error);
+  bool free_mode() const { return free_; }
   void SetPredictor(PosePredictor predictor) { predictor_ = std::move(predictor); }
   void SetExclusionObserver(ExclusionObserver observer) { excluded_ = std::move(observer); }
 
@@ -200,6 +209,8 @@ class Sequencer {
   State state_ = State::kIdle;
   std::vector<TablePose> schedule_;
   std::size_t next_scheduled_ = 0;
+  bool free_ = false;
+  std::int64_t free_max_needed_ = 0;
   std::int64_t extra_segments_ = 0, skipped_segments_ = 0;
   int index_ = -1;
   TablePose pose_;

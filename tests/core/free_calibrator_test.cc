@@ -4,6 +4,8 @@
 
 #include "core/estimation/free_calibrator.h"
 
+#include "core/analysis/free_advice.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -34,9 +36,16 @@ Eigen::VectorXd ZScores(const FreeEstimate& e, const Eigen::VectorXd& truth) {
   return (e.estimate.theta - truth).cwiseQuotient(e.estimate.sigma);
 }
 
+// The joint model's truth: accel9's, the magnetometer's, the rotation and the dip.
+Eigen::VectorXd AccMagTruth(const sim::TumbleTruth& t) {
+  Eigen::VectorXd v(22);
+  v << t.accel9, t.mag, t.mag_to_acc_rad, t.dip_rad;
+  return v;
+}
+
 TEST(FreeModels, AreRegisteredByTheirFiles) {
   const auto names = FreeModelNames();
-  for (const char* n : {"accel9", "gyro9", "magellipsoid", "magsphere"}) {
+  for (const char* n : {"accel9", "gyro9", "magellipsoid", "magsphere", "accmag"}) {
     EXPECT_NE(std::find(names.begin(), names.end(), n), names.end()) << n;
   }
   std::string error;
@@ -90,21 +99,32 @@ TEST(FreeCalibrator, MagEllipsoidWithAndWithoutTheFieldsMagnitude) {
 // Monte Carlo with its [0.9, 1.1] window is `turncal montecarlo --free`, docs/ACCURACY.md).
 TEST(FreeCalibrator, ZScoresOverRepeatedTumblesHaveUnitSpread) {
   const sim::TumbleTruth truth;
-  for (const std::string name : {"accel9", "magellipsoid"}) {
+  for (const std::string name : {"accel9", "magellipsoid", "accmag", "gyro9"}) {
     std::mt19937_64 rng(7);
     const int runs = 100;
-    Eigen::VectorXd sum = Eigen::VectorXd::Zero(9), sum2 = Eigen::VectorXd::Zero(9);
+    const Eigen::VectorXd truth_theta = name == "accel9"         ? truth.accel9
+                                        : name == "magellipsoid" ? truth.mag
+                                        : name == "accmag"       ? AccMagTruth(truth)
+                                                                 : truth.gyro9;
+    const int n = static_cast<int>(truth_theta.size());
+    Eigen::VectorXd sum = Eigen::VectorXd::Zero(n), sum2 = Eigen::VectorXd::Zero(n);
     for (int run = 0; run < runs; ++run) {
-      const FreeData data = Data(sim::SimulateTumble(truth, sim::TumbleOptions{}, &rng),
-                                 name == "accel9" ? 0.0 : truth.field);
+      FreeData data = Data(sim::SimulateTumble(truth, sim::TumbleOptions{}, &rng),
+                           name == "accel9" ? 0.0 : truth.field);
+      if (name == "gyro9") {
+        const FreeEstimate a = CalibrateFree(*Model("accel9", data.context), data, {});
+        ASSERT_TRUE(a.estimate.ok) << a.estimate.error;
+        data.upstream_theta = a.estimate.theta;
+        data.upstream_covariance = a.estimate.covariance;
+      }
       auto model = Model(name, data.context);
       const FreeEstimate e = CalibrateFree(*model, data, FreeCalibratorOptions{});
       ASSERT_TRUE(e.estimate.ok) << e.estimate.error;
-      const Eigen::VectorXd z = ZScores(e, name == "accel9" ? truth.accel9 : truth.mag);
+      const Eigen::VectorXd z = ZScores(e, truth_theta);
       sum += z;
       sum2 += z.cwiseAbs2();
     }
-    for (int i = 0; i < 9; ++i) {
+    for (int i = 0; i < n; ++i) {
       const double mean = sum[i] / runs;
       const double sd = std::sqrt(sum2[i] / runs - mean * mean);
       EXPECT_GT(sd, 0.8) << name << " " << i;
@@ -130,6 +150,22 @@ TEST(FreeCalibrator, Gyro9OnAccel9RecoversItsTruthWithinFourSigma) {
   const Eigen::VectorXd z = ZScores(g, truth.gyro9);
   for (int i = 0; i < 12; ++i) EXPECT_LT(std::abs(z[i]), 4.0) << gyro->parameters()[i].name;
   EXPECT_GT(g.estimate.p_value, 1e-3) << g.estimate.chi2 << " / " << g.estimate.dof;
+}
+
+TEST(FreeCalibrator, AccMagFindsTheRotationBetweenTheTriadsFromTheDip) {
+  std::mt19937_64 rng(6);
+  const sim::TumbleTruth truth;
+  const FreeData data = Data(sim::SimulateTumble(truth, sim::TumbleOptions{}, &rng), truth.field);
+  auto model = Model("accmag", data.context);
+  const FreeEstimate e = CalibrateFree(*model, data, FreeCalibratorOptions{});
+  ASSERT_TRUE(e.estimate.ok) << e.estimate.error;
+  EXPECT_EQ(e.estimate.rank, 22);
+  EXPECT_TRUE(e.gate_passed) << (e.gate_reasons.empty() ? "" : e.gate_reasons[0]);
+  const Eigen::VectorXd z = ZScores(e, AccMagTruth(truth));
+  for (int i = 0; i < 22; ++i) EXPECT_LT(std::abs(z[i]), 4.0) << model->parameters()[i].name;
+  // The rotation to a few 1e-4 rad from 30 intervals.
+  EXPECT_LT(e.estimate.sigma_of("r_z"), 1e-3);
+  EXPECT_GT(e.estimate.p_value, 1e-3) << e.estimate.chi2 << " / " << e.estimate.dof;
 }
 
 TEST(FreeCalibrator, Gyro9WithoutAccel9SaysSo) {
@@ -166,7 +202,32 @@ TEST(FreeCalibrator, ALowCoverageTumbleNamesItsWeakDirectionsAndIsRefused) {
       EXPECT_TRUE(has("bz") && has("s33")) << e.gate_reasons[0];
     }
     EXPECT_LT(e.coverage.fraction(), 0.06) << name;
+    // The advice points away from the cap: a direction well below +z, and it would shrink the
+    // weakest direction's sigma by more than half.
+    const auto advice = NextOrientation(*model, data, e);
+    ASSERT_TRUE(advice) << name;
+    EXPECT_LT(advice->axis.z(), 0.5) << advice->text;
+    EXPECT_LT(advice->sigma_ratio, 0.5) << advice->text;
   }
+}
+
+TEST(FreeAdvice, TheGyroscopeIsToldToTurnAboutALevelAxis) {
+  std::mt19937_64 rng(8);
+  const sim::TumbleTruth truth;
+  sim::TumbleOptions o;
+  o.orientations = 12;
+  FreeData data = Data(sim::SimulateTumble(truth, o, &rng));
+  const FreeEstimate a = CalibrateFree(*Model("accel9", data.context), data, {});
+  ASSERT_TRUE(a.estimate.ok);
+  data.upstream_theta = a.estimate.theta;
+  data.upstream_covariance = a.estimate.covariance;
+  auto gyro = Model("gyro9", data.context);
+  const FreeEstimate g = CalibrateFree(*gyro, data, {});
+  ASSERT_TRUE(g.estimate.ok) << g.estimate.error;
+  const auto advice = NextOrientation(*gyro, data, g);
+  ASSERT_TRUE(advice);
+  EXPECT_NE(advice->text.find("turn 90 deg about"), std::string::npos) << advice->text;
+  EXPECT_LT(advice->sigma_ratio, 1.0) << advice->text;
 }
 
 }  // namespace
