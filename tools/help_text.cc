@@ -145,6 +145,38 @@ const std::map<std::string, Manual>& Manuals() {
         "|mean z| > 0.15, chi^2 p-values not uniform, a run without an estimate); 2 a "
         "command-line mistake",
         "docs/ACCURACY.md"}},
+      {"free",
+       {"Calibrates without a turntable: a tumble by hand or on a fixture with unknown angles. "
+        "The sequencer finds the static intervals itself (free mode: its stillness thresholds "
+        "from the noise it measures, or from --sensor-class), then fits the free models -- "
+        "accel9 (|f| = g), gyro9 (the gyro's turn between intervals against gravity's direction; "
+        "gyro9g adds the g-sensitivity), magellipsoid (hard and soft iron; magsphere when the "
+        "data cannot carry an ellipsoid, with the reason), accmag (the rotation between the "
+        "magnetometer and the accelerometer from the constant dip) -- each with 1 sigma, the "
+        "chi^2 fit check, the rank and its weakest direction, the spatial coverage (MicroStrain's "
+        "18 x 32 bins), the gate and the next orientation to add. Inputs: a .tcap capture (its "
+        "pose events ignored), a raw device stream (--protocol; --rate when it carries no "
+        "clock), a text or CSV log (--columns, per-triad --*-offset and --*-scale), or imu_tk's "
+        "two .mat files.",
+        "turncal free tumble.tcap --intervals\n"
+        "turncal free xsens_acc.mat xsens_gyro.mat --acc-offset 32768 --acc-scale 0.0026391 "
+        "--gyr-offset 32768 --gyr-scale 0.0001598 --gravity 9.81744 --models accel9,gyro9g\n"
+        "turncal free log.csv --columns t,ax,ay,az,mx,my,mz --field 0.5 --html report.html\n"
+        "turncal free compass.bin --protocol mip --rate 50 --sensor-class consumer",
+        "0 every model fitted and passed its gate; 1 a model was refused or could not be fitted; "
+        "2 the input cannot be read or a command-line mistake",
+        "docs/FREE.md, docs/ACCURACY.md (\"Without a turntable\")"}},
+      {"free-montecarlo",
+       {"Repeats simulated tumbles (random orientations of a three-axis table, as bytes, the "
+        "announced poses ignored) through free mode, and checks a free model's sigma against "
+        "its errors: mean and std of z per parameter, the count beyond 3 sigma, the chi^2 "
+        "p-values against uniform, the gate.",
+        "turncal free-montecarlo --model accel9 --runs 200\n"
+        "turncal free-montecarlo --model gyro9 --class consumer --runs 200\n"
+        "turncal free-montecarlo --model magellipsoid --cap 20 --runs 50   # low coverage",
+        "0 every parameter's std z in [0.9, 1.1] with |mean z| <= 0.15; 1 otherwise, or no run "
+        "gave an estimate; 2 a command-line mistake",
+        "docs/ACCURACY.md (\"Without a turntable\")"}},
       {"noise",
        {"The overlapping Allan deviation of a static recording, per triad and axis, and the noise "
         "model fitted to it: white-noise density N, a Gauss-Markov bias instability (sigma, tau), "

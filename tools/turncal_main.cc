@@ -5,6 +5,8 @@
 #include "tools/capture_command.h"
 #include "tools/client_commands.h"
 #include "tools/decode_command.h"
+#include "tools/free_command.h"
+#include "tools/free_montecarlo.h"
 #include "tools/help_text.h"
 #include "tools/models_command.h"
 #include "tools/noise_command.h"
@@ -25,6 +27,8 @@ int main(int argc, char** argv) {
   turncal::tools::AddModelsCommand(&app);
   turncal::tools::AddSimFitCommands(&app);
   turncal::tools::AddNoiseCommand(&app);
+  turncal::tools::AddFreeCommand(&app);
+  turncal::tools::AddFreeMonteCarloCommand(&app);
   turncal::tools::AddSimCommand(&app);
   turncal::tools::AddObservabilityCommands(&app);
   turncal::tools::AddPlanCompareCommand(&app);

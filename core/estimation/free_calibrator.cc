@@ -333,7 +333,7 @@ bool CalibrateFreeModels(const std::vector<std::string>& models,
       s.note = fmt::format(
           "the data cannot carry an ellipsoid ({}; coverage {:.1f} % of the sphere): fitted a "
           "sphere (hard iron and one gain) instead",
-          why, 100 * r.estimate.coverage.fraction());
+          why, 100 * s.estimate.coverage.fraction());
       if (s.estimate.estimate.ok && !s.estimate.gate_passed && !s.estimate.gate_reasons.empty()) {
         s.note += "; the sphere is refused too: " + s.estimate.gate_reasons.front();
       }

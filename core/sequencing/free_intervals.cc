@@ -14,6 +14,10 @@ FreeIntervalCollector::FreeIntervalCollector(const SequencerOptions& options)
             ++out_.skipped;
             out_.skip_reasons.push_back(fmt::format("at {:.2f} s: {}", e.t_s, e.reason));
             break;
+          case SequencerEventKind::kNoiseRetry:
+            ++out_.noise_retries;
+            out_.last_noise_failure = e.reason;
+            break;
           case SequencerEventKind::kScheduleEnd:
             out_.summary = e.reason;
             break;

@@ -21,6 +21,10 @@ struct FreeIntervals {
   std::vector<std::string> skip_reasons;  // "at 170.3 s: ..." for each skipped still segment
   std::string summary;                    // the sequencer's closing line
   std::optional<NoiseProfile> noise;      // the profile the stillness tests used
+  // Start-up noise measurements that failed (the stream was not still at first), and the last
+  // one's reason: with no profile at all, no interval can be found.
+  std::int64_t noise_retries = 0;
+  std::string last_noise_failure;
   SampleCounts totals;
 };
 

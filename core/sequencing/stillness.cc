@@ -67,8 +67,8 @@ bool NoiseProfile::IsValid(std::string* error) const {
     return false;
   };
   if (!(rate_hz > 0) || !std::isfinite(rate_hz)) return fail("the sample rate must be > 0");
-  if (!sigma[kTriadAcc] && !sigma[kTriadGyr]) {
-    return fail("stillness needs the accelerometer or the gyro noise");
+  if (!sigma[kTriadAcc] && !sigma[kTriadGyr] && !sigma[kTriadMag]) {
+    return fail("stillness needs the noise of at least one triad");
   }
   for (int t = 0; t < 3; ++t) {
     if (sigma[t] && !(sigma[t]->minCoeff() > 0 && sigma[t]->allFinite())) {
@@ -159,8 +159,12 @@ NoiseMeter::Status NoiseMeter::Finish() {
     if (2 * with > samples_.size()) present |= static_cast<std::uint8_t>(1u << t);
   }
   if (!options_.use_mag) present &= static_cast<std::uint8_t>(~(1u << kTriadMag));
-  if (!(present & (1u << kTriadAcc)) && !(present & (1u << kTriadGyr))) {
-    return reject("the samples carry neither accelerometer nor gyro");
+  // A magnetometer alone (a compass module, MIP 0x80/0x06 only) is still when its field is: it
+  // cannot see a turn about the field's direction, which leaves its reading as it was anyway.
+  if (!(present & (1u << kTriadAcc)) && !(present & (1u << kTriadGyr)) &&
+      !(present & (1u << kTriadMag))) {
+    return reject(options_.use_mag ? "the samples carry no triad"
+                                   : "the samples carry neither accelerometer nor gyro");
   }
   std::vector<char> keep(samples_.size(), 1);
   for (std::size_t i = 0; i < samples_.size(); ++i) {

@@ -1,0 +1,34 @@
+#pragma once
+// The report of a calibration without a turntable (issue 22, `turncal free`): the intervals
+// found, and per free model its parameters with 1 sigma, the fit check, the rank and weakest
+// direction, the misfits before and after, the spatial coverage (MicroStrain's 18 x 32 bins) with
+// a coverage sphere, the gate and the next orientation to add -- as text, JSON and HTML.
+
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/analysis/free_advice.h"
+#include "core/estimation/free_calibrator.h"
+#include "core/sequencing/free_intervals.h"
+
+namespace turncal::report {
+
+struct FreeReportInput {
+  std::string source;  // where the samples came from, one line
+  FreeIntervals found;
+  FreeContext context;
+  std::vector<FreeModelResult> results;
+  std::vector<std::optional<OrientationAdvice>> advice;  // per result
+};
+
+// `list_intervals`: a line per interval.
+std::string FreeReportText(const FreeReportInput& input, bool list_intervals);
+nlohmann::json FreeReportJson(const FreeReportInput& input);
+std::string FreeReportHtml(const FreeReportInput& input);
+// The coverage sphere: the 18 x 32 bins as a latitude-longitude map and the directions seen from
+// above (+z) and below, as inline SVG.
+std::string CoverageSphereSvg(const FreeEstimate& estimate, const std::string& id);
+
+}  // namespace turncal::report

@@ -1,0 +1,401 @@
+#include "tools/free_command.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "core/analysis/free_advice.h"
+#include "core/estimation/free_calibrator.h"
+#include "core/estimation/sensor_class.h"
+#include "core/sequencing/free_intervals.h"
+#include "daemon/atomic_file.h"
+#include "daemon/capture_replay.h"
+#include "drivers/capture/tcap.h"
+#include "drivers/capture/text_log.h"
+#include "drivers/decoder_factory.h"
+#include "report/free_report.h"
+
+namespace turncal::tools {
+namespace {
+
+struct FreeArgs {
+  std::vector<std::string> files;
+  std::string format = "auto";
+  std::string protocol;
+  std::string device;
+  std::string columns = "t,ax,ay,az,gx,gy,gz";
+  double time_scale = 1.0;
+  double rate_hz = 0.0;
+  std::string sensor_class;
+  drivers::TriadColumns acc, gyr, mag;  // offsets and scales only
+  std::string models;
+  FreeContext context;
+  double dwell_s = 1.0;
+  double max_dwell_s = 60.0;
+  double min_coverage_percent = 0.0;
+  bool intervals = false;
+  bool json = false;
+  std::string html;
+};
+
+// Samples of one device in time order.
+class Collector : public daemon::ReplayTarget, public drivers::DecoderSink {
+ public:
+  explicit Collector(int device) : device_(device) {}
+  void OnSample(int device, const Sample& s) override {
+    if (device == device_) samples.push_back(s);
+  }
+  bool OnAnnounce(const Announcement&, const std::vector<int>&, std::string*) override {
+    return true;
+  }
+  void OnTick(std::int64_t) override {}
+  void OnFinish(std::int64_t) override {}
+  void OnFrame(const drivers::FrameView&) override {}
+  void OnSample(const Sample& s) override { samples.push_back(s); }
+  std::vector<Sample> samples;
+
+ private:
+  int device_;
+};
+
+bool EndsWith(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// Applies the per-triad offset and scale to decoded samples (text logs have their own).
+void Rescale(const FreeArgs& a, std::vector<Sample>* samples) {
+  for (Sample& s : *samples) {
+    if (s.acc_mps2)
+      s.acc_mps2 = (*s.acc_mps2 - Eigen::Vector3d::Constant(a.acc.offset)) * a.acc.scale;
+    if (s.gyr_radps) {
+      s.gyr_radps = (*s.gyr_radps - Eigen::Vector3d::Constant(a.gyr.offset)) * a.gyr.scale;
+    }
+    if (s.mag) s.mag = (*s.mag - Eigen::Vector3d::Constant(a.mag.offset)) * a.mag.scale;
+  }
+}
+
+// A raw stream's samples get host times from the device's clock, else from --rate.
+bool TimeRawSamples(const FreeArgs& a, std::vector<Sample>* samples, std::string* error) {
+  if (samples->empty()) return true;
+  const bool clocked = samples->front().t_device_s.has_value();
+  if (!clocked && !(a.rate_hz > 0)) {
+    *error = "the stream's samples carry no time: give their rate with --rate HZ";
+    return false;
+  }
+  const double t0 = clocked ? *samples->front().t_device_s : 0.0;
+  for (std::size_t i = 0; i < samples->size(); ++i) {
+    Sample& s = (*samples)[i];
+    const double t =
+        s.t_device_s && clocked ? *s.t_device_s - t0 : static_cast<double>(i) / a.rate_hz;
+    s.t_host_ns = static_cast<std::int64_t>(std::llround(t * 1e9));
+  }
+  return true;
+}
+
+bool ReadSamples(const FreeArgs& a, std::vector<Sample>* out, std::string* source,
+                 std::string* error) {
+  std::string format = a.format;
+  if (format == "auto") {
+    format = a.files.size() == 2             ? "imu_tk"
+             : EndsWith(a.files[0], ".tcap") ? "tcap"
+             : !a.protocol.empty()           ? "raw"
+                                             : "text";
+  }
+  if (format == "imu_tk") {
+    if (a.files.size() != 2) {
+      *error = "imu_tk's format is two files: the accelerometer's and the gyro's";
+      return false;
+    }
+    drivers::TriadColumns acc = a.acc, gyr = a.gyr;
+    drivers::TextLogStats stats;
+    if (!drivers::ReadImuTkPair(a.files[0], a.files[1], acc, gyr, "imu_tk", out, &stats, error)) {
+      return false;
+    }
+    *source = fmt::format(
+        "imu_tk pair, {} samples at {:.1f} Hz{}", stats.samples, stats.rate_hz(),
+        stats.skipped ? fmt::format(", {} lines skipped ({})", stats.skipped, stats.first_skipped)
+                      : "");
+    return true;
+  }
+  if (a.files.size() != 1) {
+    *error = fmt::format("the {} format reads one file", format);
+    return false;
+  }
+  if (format == "text") {
+    drivers::TextLogLayout layout;
+    if (!drivers::ParseColumnSpec(a.columns, &layout, error)) return false;
+    layout.time_scale = a.time_scale;
+    for (auto [t, from] :
+         {std::pair{&layout.acc, &a.acc}, {&layout.gyr, &a.gyr}, {&layout.mag, &a.mag}}) {
+      t->offset = from->offset;
+      t->scale = from->scale;
+    }
+    drivers::TextLogStats stats;
+    if (!drivers::ReadTextLogFile(a.files[0], layout, "text", out, &stats, error)) return false;
+    *source = fmt::format(
+        "text log, {} samples at {:.1f} Hz{}{}", stats.samples, stats.rate_hz(),
+        stats.skipped
+            ? fmt::format(", {} lines skipped (first: {})", stats.skipped, stats.first_skipped)
+            : "",
+        stats.backwards ? fmt::format(", {} going back in time dropped", stats.backwards) : "");
+    return true;
+  }
+  Collector collector(0);
+  if (format == "tcap") {
+    drivers::CaptureReader reader;
+    if (!reader.Open(a.files[0], error)) return false;
+    int device = 0;
+    if (!a.device.empty()) {
+      device = -1;
+      for (std::size_t i = 0; i < reader.header().devices.size(); ++i) {
+        if (reader.header().devices[i].name == a.device) device = static_cast<int>(i);
+      }
+      if (device < 0) {
+        *error = fmt::format("the capture has no device '{}'", a.device);
+        return false;
+      }
+    }
+    collector = Collector(device);
+    daemon::ReplayStats stats;
+    if (!daemon::ReplayInto(&reader, &collector, false, {}, &stats, error)) return false;
+    *source = fmt::format("capture, device {}, {} samples ({} pose events ignored: free mode)",
+                          reader.header().devices.empty()
+                              ? std::string("?")
+                              : reader.header().devices[static_cast<std::size_t>(device)].name,
+                          collector.samples.size(), stats.pose_commands);
+  } else if (format == "raw") {
+    const auto protocol = drivers::ParseProtocol(a.protocol);
+    if (!protocol) {
+      *error = fmt::format("unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)", a.protocol);
+      return false;
+    }
+    auto decoder = drivers::MakeDecoder(*protocol, drivers::DecoderOptions{}, &collector, error);
+    if (!decoder) return false;
+    std::ifstream in(a.files[0], std::ios::binary);
+    if (!in) {
+      *error = fmt::format("cannot open '{}'", a.files[0]);
+      return false;
+    }
+    drivers::DecodeStream(in, decoder.get());
+    if (!TimeRawSamples(a, &collector.samples, error)) return false;
+    const auto& c = decoder->counters();
+    *source = fmt::format("{} stream, {} samples, {} bad frames", a.protocol,
+                          collector.samples.size(), c.bad_checksums + c.bad_structure);
+  } else {
+    *error = fmt::format("unknown format '{}' (auto, tcap, raw, text, imu_tk)", format);
+    return false;
+  }
+  Rescale(a, &collector.samples);
+  *out = std::move(collector.samples);
+  return true;
+}
+
+// A device that sends a triad faster than it samples it repeats the last value (sample and hold:
+// the MIP fixture's magnetometer, ~20 Hz in a 50 Hz stream): those repeats are not new
+// measurements, and their correlation breaks the stillness tests' white noise. In a stream of
+// that triad alone, samples repeating the previous value exactly are dropped when they are more
+// than a third of the stream. Returns how many were dropped.
+std::int64_t DropHeldRepeats(std::vector<Sample>* samples) {
+  auto only_mag = [](const Sample& s) { return s.mag && !s.acc_mps2 && !s.gyr_radps; };
+  std::int64_t repeats = 0, n = 0;
+  for (std::size_t i = 1; i < samples->size(); ++i) {
+    const Sample &a = (*samples)[i - 1], &b = (*samples)[i];
+    if (!only_mag(a) || !only_mag(b)) return 0;
+    ++n;
+    repeats += *a.mag == *b.mag;
+  }
+  if (n == 0 || 3 * repeats <= n) return 0;
+  std::vector<Sample> kept;
+  kept.reserve(samples->size() - static_cast<std::size_t>(repeats));
+  for (std::size_t i = 0; i < samples->size(); ++i) {
+    if (i == 0 || *(*samples)[i].mag != *(*samples)[i - 1].mag) kept.push_back((*samples)[i]);
+  }
+  const auto dropped = static_cast<std::int64_t>(samples->size() - kept.size());
+  *samples = std::move(kept);
+  return dropped;
+}
+
+std::vector<std::string> Split(const std::string& list) {
+  std::vector<std::string> out;
+  std::stringstream ss(list);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+int Run(const FreeArgs& a) {
+  std::string error, source;
+  std::vector<Sample> samples;
+  if (!ReadSamples(a, &samples, &source, &error)) {
+    fmt::print(stderr, "turncal free: {}\n", error);
+    return 2;
+  }
+  if (samples.size() < 2) {
+    fmt::print(stderr, "turncal free: {} samples: nothing to calibrate\n", samples.size());
+    return 2;
+  }
+  if (const std::int64_t held = DropHeldRepeats(&samples)) {
+    source += fmt::format(
+        "; {} repeated magnetometer values dropped (the device holds its field "
+        "between updates: {} new values remain)",
+        held, samples.size());
+  }
+  SequencerOptions so;
+  so.dwell_s = a.dwell_s;
+  so.free_max_dwell_s = a.max_dwell_s;
+  if (!a.sensor_class.empty()) {
+    SensorClass sensor;
+    if (!SensorClassByName(a.sensor_class, &sensor)) {
+      fmt::print(stderr, "turncal free: unknown sensor class '{}' (industrial, consumer)\n",
+                 a.sensor_class);
+      return 2;
+    }
+    const double span = static_cast<double>(samples.back().t_host_ns - samples.front().t_host_ns);
+    const double rate = span > 0 ? 1e9 * static_cast<double>(samples.size() - 1) / span : 0.0;
+    so.noise = NoiseProfileForClass(sensor, rate, true);
+    // The class's profile holds every triad; the stillness tests use those the stream carries.
+    const Sample& first = samples.front();
+    if (!first.acc_mps2) so.noise->sigma[kTriadAcc].reset();
+    if (!first.gyr_radps) so.noise->sigma[kTriadGyr].reset();
+    if (!first.mag) so.noise->sigma[kTriadMag].reset();
+  }
+  if (!so.IsValid(&error)) {
+    fmt::print(stderr, "turncal free: {}\n", error);
+    return 2;
+  }
+  FreeIntervalCollector collector(so);
+  for (const Sample& s : samples) collector.Push(s);
+  FreeIntervals found = collector.Finish(samples.back().t_host_ns);
+
+  const std::vector<std::string> models =
+      a.models.empty() ? DefaultFreeModels(found.intervals) : Split(a.models);
+  FreeCalibratorOptions co;
+  co.min_coverage = a.min_coverage_percent / 100;
+  std::vector<FreeModelResult> results;
+  if (!CalibrateFreeModels(models, found.intervals, a.context, co, &results, &error)) {
+    fmt::print(stderr, "turncal free: {}\n", error);
+    return 2;
+  }
+  report::FreeReportInput input{source, found, a.context, results, {}};
+  for (const auto& r : results) {
+    std::optional<OrientationAdvice> advice;
+    if (r.estimate.estimate.ok) {
+      auto model = MakeFreeModel(r.model, a.context, &error);
+      FreeData data;
+      data.intervals = found.intervals;
+      data.context = a.context;
+      for (const auto& u : results) {
+        if (model && u.model == model->upstream() && u.estimate.estimate.ok) {
+          data.upstream_theta = u.estimate.estimate.theta;
+          data.upstream_covariance = u.estimate.estimate.covariance;
+        }
+      }
+      if (model) advice = NextOrientation(*model, data, r.estimate);
+    }
+    input.advice.push_back(advice);
+  }
+  bool all_passed = !results.empty();
+  for (const auto& r : results) all_passed &= r.estimate.estimate.ok && r.estimate.gate_passed;
+  if (!a.html.empty() &&
+      !daemon::WriteFileAtomically(a.html, report::FreeReportHtml(input), &error)) {
+    fmt::print(stderr, "turncal free: {}\n", error);
+    return 2;
+  }
+  if (a.json) {
+    fmt::print("{}\n", report::FreeReportJson(input).dump(2));
+  } else {
+    fmt::print("{}", report::FreeReportText(input, a.intervals));
+    if (!a.html.empty()) fmt::print("report: {}\n", a.html);
+  }
+  return all_passed ? 0 : 1;
+}
+
+void AddTriadOptions(CLI::App* cmd, const char* name, drivers::TriadColumns* t, const char* unit) {
+  cmd->add_option(fmt::format("--{}-offset", name), t->offset,
+                  fmt::format("subtracted from the {} first (raw counts: the mid-scale)", name))
+      ->capture_default_str();
+  cmd->add_option(fmt::format("--{}-scale", name), t->scale,
+                  fmt::format("then multiplied, to {}", unit))
+      ->capture_default_str();
+}
+
+}  // namespace
+
+void AddFreeCommand(CLI::App* app) {
+  auto a = std::make_shared<FreeArgs>();
+  auto* cmd = app->add_subcommand(
+      "free",
+      "Calibrate without a turntable (a tumble by hand or on a fixture): the static intervals, "
+      "then accel9, gyro9, magellipsoid, accmag with sigma, coverage, gate and advice");
+  cmd->add_option("files", a->files,
+                  "a .tcap capture, a raw device stream (--protocol), a text/CSV log (--columns), "
+                  "or imu_tk's two .mat files (accelerometer then gyro)")
+      ->required()
+      ->expected(1, 2);
+  cmd->add_option("--format", a->format, "auto | tcap | raw | text | imu_tk")
+      ->check(CLI::IsMember({"auto", "tcap", "raw", "text", "imu_tk"}))
+      ->capture_default_str();
+  cmd->add_option("--protocol", a->protocol, "raw streams: mip | gx2 | xbus | xbus-legacy");
+  cmd->add_option("--device", a->device, "captures: the device (default: the first)");
+  cmd->add_option("--rate", a->rate_hz, "raw streams without a device clock: samples per second")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--columns", a->columns,
+                  "text logs: one name per column, t for the time, ax ay az / gx gy gz / mx my mz, "
+                  "- to ignore")
+      ->capture_default_str();
+  cmd->add_option("--time-scale", a->time_scale, "text logs: the time column to seconds (1e-3: ms)")
+      ->capture_default_str();
+  AddTriadOptions(cmd, "acc", &a->acc, "m/s^2");
+  AddTriadOptions(cmd, "gyr", &a->gyr, "rad/s");
+  AddTriadOptions(cmd, "mag", &a->mag, "the field's unit");
+  cmd->add_option("--models", a->models,
+                  "comma-separated: accel9, gyro9, gyro9g, magellipsoid, magsphere, accmag "
+                  "(default: what the data carry)");
+  cmd->add_option("--gravity", a->context.gravity_mps2, "the local gravity, m/s^2")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--field", a->context.field_magnitude,
+                  "the field's magnitude in the magnetometer's unit (0: unknown, the soft iron is "
+                  "then relative)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--dip", a->context.dip_deg, "the field's dip, degrees (for the advice)")
+      ->capture_default_str();
+  cmd->add_option("--latitude", a->context.latitude_deg, "degrees north (the Earth's rate)")
+      ->check(CLI::Range(-90.0, 90.0))
+      ->capture_default_str();
+  cmd->add_option("--acc-offset-sigma", a->context.acc_offset_sigma,
+                  "m/s^2 added to each interval's mean per axis (bias instability between them)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--gyr-offset-sigma", a->context.gyr_offset_sigma, "rad/s, likewise")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--mag-offset-sigma", a->context.mag_offset_sigma, "the field's unit, likewise")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--sensor-class", a->sensor_class,
+                  "the stillness tests' noise from a sensor class (industrial, consumer; "
+                  "SENSORS.md) instead of measuring it over the stream's first still second")
+      ->check(CLI::IsMember({"industrial", "consumer"}));
+  cmd->add_option("--dwell", a->dwell_s, "the shortest still segment taken, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--max-dwell", a->max_dwell_s, "the longest interval averaged, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--min-coverage", a->min_coverage_percent,
+                  "the gate: the share of the 576 latitude-longitude bins required, percent")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  cmd->add_flag("--intervals", a->intervals, "list the static intervals found");
+  cmd->add_flag("--json", a->json, "the result as JSON on stdout");
+  cmd->add_option("--html", a->html, "write the report (with the coverage sphere) here");
+  cmd->callback([a] { throw CLI::RuntimeError(Run(*a)); });
+}
+
+}  // namespace turncal::tools

@@ -1,0 +1,296 @@
+#include "tools/free_montecarlo.h"
+
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <thread>
+
+#include "core/estimation/free_calibrator.h"
+#include "core/estimation/sensor_class.h"
+#include "core/sequencing/free_intervals.h"
+#include "daemon/capture_replay.h"
+#include "drivers/capture/tcap.h"
+#include "sim/capture.h"
+#include "sim/free_truth.h"
+
+namespace turncal::tools {
+namespace {
+
+// The samples of the capture's first device, decoded from its bytes.
+class Collector : public daemon::ReplayTarget {
+ public:
+  void OnSample(int device, const Sample& s) override {
+    if (device == 0) samples.push_back(s);
+  }
+  bool OnAnnounce(const Announcement&, const std::vector<int>&, std::string*) override {
+    return true;
+  }
+  void OnTick(std::int64_t) override {}
+  void OnFinish(std::int64_t) override {}
+  std::vector<Sample> samples;
+};
+
+// Orientations of a tumble: "down" uniform on the sphere (or within cap_deg of the table's -z,
+// "up" near +z), turned about the vertical at random.
+std::vector<TablePose> TumblePoses(int n, double cap_deg, std::mt19937_64* rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const double cos_cap = std::cos(cap_deg * M_PI / 180);
+  std::vector<TablePose> poses;
+  for (int k = 0; k < n; ++k) {
+    const double z = cos_cap + (1 - cos_cap) * u(*rng);
+    const double az = 2 * M_PI * u(*rng);
+    const double rho = std::sqrt(std::max(0.0, 1 - z * z));
+    const Eigen::Vector3d down(rho * std::cos(az), rho * std::sin(az), -z);
+    poses.push_back(PoseWithDownAlong(down, 2 * M_PI * u(*rng) - M_PI));
+  }
+  return poses;
+}
+
+std::pair<double, double> KsUniform(std::vector<double> p) {
+  std::sort(p.begin(), p.end());
+  const double n = static_cast<double>(p.size());
+  double d = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    d = std::max({d, (static_cast<double>(i) + 1) / n - p[i], p[i] - static_cast<double>(i) / n});
+  }
+  const double lambda = (std::sqrt(n) + 0.12 + 0.11 / std::sqrt(n)) * d;
+  double q = 0;
+  for (int k = 1; k <= 100; ++k) {
+    q += 2 * ((k % 2) ? 1.0 : -1.0) * std::exp(-2.0 * k * k * lambda * lambda);
+  }
+  return {d, std::clamp(q, 0.0, 1.0)};
+}
+
+struct Outcome {
+  bool ok = false;
+  std::string error;
+  Eigen::VectorXd z;
+  double p_value = 1.0;
+  bool gate = false;
+  int intervals = 0;
+};
+
+}  // namespace
+
+int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
+  std::string error;
+  const auto protocol = drivers::ParseProtocol(args.protocol);
+  SensorClass sensor;
+  FreeContext context;
+  ModelContext mc;
+  context.gravity_mps2 = mc.reference.g_ned.norm();
+  context.field_magnitude = args.field_known ? mc.reference.B_ned.norm() : 0.0;
+  context.latitude_deg = mc.reference.latitude_deg;
+  auto model = MakeFreeModel(args.model, context, &error);
+  if (!protocol || !model || !SensorClassByName(args.sensor_class, &sensor)) {
+    fmt::print(stderr, "turncal free-montecarlo: {}\n",
+               !protocol ? "unknown protocol '" + args.protocol + "'"
+               : !model  ? error
+                         : "unknown class '" + args.sensor_class + "'");
+    return 2;
+  }
+  if (model->name() == "magsphere") {
+    fmt::print(stderr, "turncal free-montecarlo: the simulator's magnetometer is an ellipsoid\n");
+    return 2;
+  }
+  // Each interval's offset from the bias's wander: the class's bias instability.
+  context.acc_offset_sigma = args.offset_sigma * sensor.acc_bias_instability;
+  context.mag_offset_sigma = args.offset_sigma * sensor.mag_bias_instability;
+  context.gyr_offset_sigma = args.offset_sigma * sensor.gyr_bias_instability;
+  const bool gyro = model->sensor() == SensorKind::kGyroscope;
+  const int N = model->num_parameters();
+  const auto dir = std::filesystem::temp_directory_path() /
+                   fmt::format("turncal-free-montecarlo-{}", static_cast<long>(::getpid()));
+  std::filesystem::create_directories(dir);
+
+  std::vector<Outcome> outcomes(static_cast<std::size_t>(args.runs));
+  std::atomic<int> next{0}, done{0};
+  std::mutex print_mutex;
+  auto worker = [&] {
+    for (int run = next++; run < args.runs; run = next++) {
+      Outcome& out = outcomes[static_cast<std::size_t>(run)];
+      const std::uint64_t seed = args.seed * 1000003 + static_cast<std::uint64_t>(run);
+      std::mt19937_64 rng(seed ^ 0x7u);
+      sim::SimCaptureOptions o;
+      o.protocol = *protocol;
+      o.accel_model = "accel13";
+      o.mag_model = "mag13";
+      if (gyro) o.gyro_model = "gyro12";
+      o.poses = TumblePoses(args.orientations, args.cap_deg, &rng);
+      o.session.sensor = sensor;
+      o.session.dwell_s = args.dwell_s;
+      o.session.seed = seed;
+      sim::SimCapture capture;
+      std::string e;
+      const std::string path = (dir / fmt::format("run-{}.tcap", run)).string();
+      drivers::CaptureReader reader;
+      Collector collector;
+      daemon::ReplayStats stats;
+      const bool read = sim::BuildSimCapture(o, &capture, &e) &&
+                        sim::WriteSimCapture(capture, path, &e) && reader.Open(path, &e) &&
+                        daemon::ReplayInto(&reader, &collector, false, {}, &stats, &e);
+      std::filesystem::remove(path);
+      if (!read) {
+        out.error = e;
+        continue;
+      }
+      SequencerOptions so;
+      so.dwell_s = 1.0;
+      FreeIntervalCollector intervals(so);
+      for (const Sample& s : collector.samples) intervals.Push(s);
+      const FreeIntervals found = intervals.Finish(collector.samples.back().t_host_ns);
+      out.intervals = static_cast<int>(found.intervals.size());
+      std::vector<FreeModelResult> results;
+      if (!CalibrateFreeModels({args.model}, found.intervals, context, FreeCalibratorOptions{},
+                               &results, &e)) {
+        out.error = e;
+        continue;
+      }
+      const FreeModelResult& r = results.back();
+      Eigen::VectorXd truth;
+      if (r.model != args.model || !r.estimate.estimate.ok ||
+          !sim::FreeTruth(capture, args.model, context, &truth, &e)) {
+        out.error = r.model != args.model     ? "fitted " + r.model + ": " + r.note
+                    : !r.estimate.estimate.ok ? r.estimate.estimate.error
+                                              : e;
+        continue;
+      }
+      const Estimate& est = r.estimate.estimate;
+      out.z = (est.theta - truth).cwiseQuotient(est.sigma);
+      out.p_value = est.p_value;
+      out.gate = r.estimate.gate_passed;
+      out.ok = out.z.allFinite();
+      if (!out.ok) out.error = "a sigma is not finite";
+      const int d = ++done;
+      if (!args.json && d % std::max(1, args.runs / 10) == 0) {
+        std::lock_guard<std::mutex> lock(print_mutex);
+        fmt::print(stderr, "  {} of {} runs\n", d, args.runs);
+      }
+    }
+  };
+  std::vector<std::thread> threads;
+  for (int j = 0; j < std::max(1, args.jobs); ++j) threads.emplace_back(worker);
+  for (auto& t : threads) t.join();
+  std::filesystem::remove_all(dir);
+
+  Eigen::VectorXd s1 = Eigen::VectorXd::Zero(N), s2 = Eigen::VectorXd::Zero(N);
+  Eigen::VectorXi beyond3 = Eigen::VectorXi::Zero(N);
+  std::vector<double> p_values;
+  int ok = 0, gates = 0;
+  double intervals = 0;
+  std::string first_error;
+  for (const auto& out : outcomes) {
+    if (!out.ok) {
+      if (first_error.empty()) first_error = out.error;
+      continue;
+    }
+    ++ok;
+    s1 += out.z;
+    s2 += out.z.cwiseAbs2();
+    for (int i = 0; i < N; ++i) beyond3[i] += std::abs(out.z[i]) > 3;
+    p_values.push_back(out.p_value);
+    gates += out.gate;
+    intervals += out.intervals;
+  }
+  if (ok < 2) {
+    fmt::print(stderr, "turncal free-montecarlo: {} of {} runs gave an estimate ({})\n", ok,
+               args.runs, first_error);
+    return 1;
+  }
+  const Eigen::VectorXd mean = s1 / ok;
+  const Eigen::VectorXd std_z = (s2 / ok - mean.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
+  const auto [ks_d, ks_p] = KsUniform(p_values);
+  int bad = 0;
+  nlohmann::json rows = nlohmann::json::array();
+  std::string table =
+      "| param | mean z | std z | beyond 3 sigma | verdict |\n|---|---|---|---|---|\n";
+  for (int i = 0; i < N; ++i) {
+    const bool honest = std_z[i] >= 0.9 && std_z[i] <= 1.1 && std::abs(mean[i]) <= 0.15;
+    bad += !honest;
+    const std::string& name = model->parameters()[static_cast<std::size_t>(i)].name;
+    rows.push_back({{"name", name},
+                    {"mean_z", mean[i]},
+                    {"std_z", std_z[i]},
+                    {"beyond_3_sigma", beyond3[i]},
+                    {"honest", honest}});
+    table += fmt::format("| {} | {:+.3f} | {:.3f} | {} | {} |\n", name, mean[i], std_z[i],
+                         beyond3[i], honest ? "ok" : "NOT HONEST");
+  }
+  if (args.json) {
+    fmt::print("{}\n", nlohmann::json{{"model", args.model},
+                                      {"class", args.sensor_class},
+                                      {"protocol", args.protocol},
+                                      {"runs", args.runs},
+                                      {"ok", ok},
+                                      {"orientations", args.orientations},
+                                      {"cap_deg", args.cap_deg},
+                                      {"mean_intervals", intervals / ok},
+                                      {"gate_passed", gates},
+                                      {"ks_d", ks_d},
+                                      {"ks_p", ks_p},
+                                      {"params", rows}}
+                           .dump());
+  } else {
+    fmt::print(
+        "free {} ({} class, {}), {} tumbles of {} orientations (up within {:.0f} deg of +z), "
+        "each as bytes through free mode: {} estimated ({} failed{}), {:.1f} intervals on "
+        "average, gate passed {}\n\n{}\nchi^2 p-values against uniform: KS D = {:.3f}, p = "
+        "{:.3g}\nCriteria: std z in [0.9, 1.1] and |mean z| <= 0.15; {} of {} parameters fail.\n",
+        args.model, args.sensor_class, args.protocol, args.runs, args.orientations, args.cap_deg,
+        ok, args.runs - ok, first_error.empty() ? "" : ", the first: " + first_error,
+        intervals / ok, gates, table, ks_d, ks_p, bad, N);
+  }
+  return bad == 0 ? 0 : 1;
+}
+
+void AddFreeMonteCarloCommand(CLI::App* app) {
+  auto a = std::make_shared<FreeMonteCarloArgs>();
+  auto* cmd = app->add_subcommand(
+      "free-montecarlo",
+      "repeat simulated tumbles as bytes through free mode and check the free models' sigma");
+  cmd->add_option("--model", a->model, "accel9 | gyro9 | gyro9g | magellipsoid | accmag")
+      ->check(CLI::IsMember({"accel9", "gyro9", "gyro9g", "magellipsoid", "accmag"}))
+      ->capture_default_str();
+  cmd->add_option("--class", a->sensor_class, "industrial | consumer (SENSORS.md)")
+      ->check(CLI::IsMember({"industrial", "consumer"}))
+      ->capture_default_str();
+  cmd->add_option("--protocol", a->protocol, "mip | gx2 | xbus | xbus-legacy")
+      ->capture_default_str();
+  cmd->add_option("--runs", a->runs, "tumbles")
+      ->check(CLI::Range(2, 100000))
+      ->capture_default_str();
+  cmd->add_option("--seed", a->seed, "the first run's seed")->capture_default_str();
+  cmd->add_option("--jobs", a->jobs, "runs in parallel")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  cmd->add_option("--orientations", a->orientations, "static orientations per tumble")
+      ->check(CLI::Range(4, 1000))
+      ->capture_default_str();
+  cmd->add_option("--dwell", a->dwell_s, "seconds still per orientation")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--cap", a->cap_deg,
+                  "up within this many degrees of the table's +z (180: anywhere; small: low "
+                  "coverage)")
+      ->check(CLI::Range(0.0, 180.0))
+      ->capture_default_str();
+  cmd->add_flag(
+      "--field-unknown", [a](std::int64_t) { a->field_known = false; },
+      "the magnetometer models without the field's magnitude (relative scale)");
+  cmd->add_option("--offset-sigma", a->offset_sigma,
+                  "each interval's offset allowance (FreeContext's *_offset_sigma) in units of the "
+                  "class's bias instability")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_flag("--json", a->json, "one JSON object");
+  cmd->callback([a] { throw CLI::RuntimeError(RunFreeMonteCarlo(*a)); });
+}
+
+}  // namespace turncal::tools
