@@ -4,6 +4,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <algorithm>
 
 #include "core/models/accel_common.h"
 
@@ -16,7 +17,13 @@ Eigen::Matrix3d InverseSqrt(const Eigen::Matrix3d& A) {
          eig.eigenvectors().transpose();
 }
 
-Eigen::Vector3d MeanWander(const SimulatedSession& s, int triad) {
+Eigen::Vector3d MeanWander(const SimulatedSession& s, int triad,
+                           const std::optional<TimeWindow>& window) {
+  if (window) {
+    return triad == 0   ? s.AccDriftMean(window->t0_s, window->t1_s)
+           : triad == 1 ? s.MagDriftMean(window->t0_s, window->t1_s)
+                        : s.GyrDriftMean(window->t0_s, window->t1_s);
+  }
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   for (const auto& e : s.events) {
     sum += triad == 0 ? e.acc_wander_mean : triad == 1 ? e.mag_wander_mean : e.gyr_wander_mean;
@@ -27,7 +34,8 @@ Eigen::Vector3d MeanWander(const SimulatedSession& s, int triad) {
 }  // namespace
 
 bool FreeTruth(const SimCapture& capture, const std::string& free_model, const FreeContext& context,
-               Eigen::VectorXd* truth, std::string* error) {
+               const std::optional<TimeWindow>& bias_window, Eigen::VectorXd* truth,
+               std::string* error) {
   auto fail = [&](const std::string& why) {
     if (error) *error = why;
     return false;
@@ -49,7 +57,7 @@ bool FreeTruth(const SimCapture& capture, const std::string& free_model, const F
   a9[3] = -C(0, 1) / C(1, 1);
   a9[4] = C(0, 2) / C(2, 2);
   a9[5] = -C(1, 2) / C(2, 2);
-  a9.tail<3>() = s.accel_truth.tail<3>() + MeanWander(s, 0);
+  a9.tail<3>() = s.accel_truth.tail<3>() + MeanWander(s, 0, bias_window);
   if (free_model == "accel9") {
     *truth = a9;
     return true;
@@ -80,7 +88,7 @@ bool FreeTruth(const SimCapture& capture, const std::string& free_model, const F
     g[6] = T(1, 0);
     g[7] = -T(2, 0);
     g[8] = T(2, 1);
-    g.segment<3>(9) = b + MeanWander(s, 2);
+    g.segment<3>(9) = b + MeanWander(s, 2, bias_window);
     if (with_g) {
       const Eigen::Matrix3d Bf = B * Qa.transpose();
       for (int i = 0; i < 9; ++i) g[12 + i] = Bf(i / 3, i % 3);
@@ -95,7 +103,7 @@ bool FreeTruth(const SimCapture& capture, const std::string& free_model, const F
   const double F = context.field_magnitude > 0 ? context.field_magnitude : 1.0;
   const Eigen::Matrix3d S = (F / field) * InverseSqrt(Gm * Gm.transpose());
   Eigen::VectorXd m9(9);
-  m9.head<3>() = s.mag_truth.tail<3>() + MeanWander(s, 1);
+  m9.head<3>() = s.mag_truth.tail<3>() + MeanWander(s, 1, bias_window);
   m9.tail<6>() << S(0, 0), S(0, 1), S(0, 2), S(1, 1), S(1, 2), S(2, 2);
   if (free_model == "magellipsoid") {
     *truth = m9;
@@ -104,9 +112,19 @@ bool FreeTruth(const SimCapture& capture, const std::string& free_model, const F
   if (free_model == "accmag") {
     const Eigen::Matrix3d U = S * Gm * (field / F);
     const Eigen::AngleAxisd R(Eigen::Matrix3d(Qa * U.transpose()));
-    const Eigen::Vector3d g_hat = mc.reference.g_ned.normalized();
+    // The dip as the simulated sensors see it: the specific force and the field in the table's
+    // frame at a pose, from the models' own predictions (each model turns its reference vector by
+    // its own heading beta, so the angle between them is not quite the reference's).
+    auto mag = MakeModel(capture.mag_model, mc, &e);
+    if (!mag) return fail(e);
+    const TablePose level;
+    const Eigen::Vector3d f_q =
+        Ga.inverse() * (accel->Predict(s.accel_truth, level) - s.accel_truth.tail<3>());
+    const Eigen::Vector3d h_q =
+        Gm.inverse() * (mag->Predict(s.mag_truth, level) - s.mag_truth.tail<3>());
     Eigen::VectorXd j(22);
-    j << a9, m9, R.angle() * R.axis(), std::asin(g_hat.dot(mc.reference.B_ned.normalized()));
+    j << a9, m9, R.angle() * R.axis(),
+        std::asin(std::clamp(-f_q.normalized().dot(h_q.normalized()), -1.0, 1.0));
     *truth = j;
     return true;
   }

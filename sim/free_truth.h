@@ -9,10 +9,12 @@
 //   magellipsoid: S = (F / |B|) (G G^T)^-1/2, F the magnitude the calibration assumes (the
 //   reference's, or 1 when not known);
 //   accmag: accel9's and magellipsoid's, R = Q_a (S G |B| / F)^T and the reference's dip.
-// The biases are the turn-on biases plus the wander averaged over the dwells (what a calibration
-// that takes each interval's offset as independent finds).
+// The biases are the turn-on biases plus the wander averaged over `bias_window` (session time:
+// a calibration with a drift model estimates the bias over its latest interval), or without one
+// over the dwells (what a calibration that takes each interval's offset as independent finds).
 
 #include <Eigen/Core>
+#include <optional>
 #include <string>
 
 #include "core/modeling/free_model.h"
@@ -23,6 +25,7 @@ namespace turncal::sim {
 // False with a message for a free model the capture's truths cannot describe (mag22, a gyro
 // model without a gyro truth).
 bool FreeTruth(const SimCapture& capture, const std::string& free_model, const FreeContext& context,
-               Eigen::VectorXd* truth, std::string* error);
+               const std::optional<TimeWindow>& bias_window, Eigen::VectorXd* truth,
+               std::string* error);
 
 }  // namespace turncal::sim

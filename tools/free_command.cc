@@ -31,6 +31,7 @@ struct FreeArgs {
   double time_scale = 1.0;
   double rate_hz = 0.0;
   std::string sensor_class;
+  std::string drift_class;
   drivers::TriadColumns acc, gyr, mag;  // offsets and scales only
   std::string models;
   FreeContext context;
@@ -250,6 +251,18 @@ int Run(const FreeArgs& a) {
   SequencerOptions so;
   so.dwell_s = a.dwell_s;
   so.free_max_dwell_s = a.max_dwell_s;
+  FreeContext context = a.context;
+  if (!a.drift_class.empty()) {
+    SensorClass sensor;
+    if (!SensorClassByName(a.drift_class, &sensor)) {
+      fmt::print(stderr, "turncal free: unknown sensor class '{}' (industrial, consumer)\n",
+                 a.drift_class);
+      return 2;
+    }
+    context.acc_drift = DriftForClass(sensor, SensorKind::kAccelerometer);
+    context.mag_drift = DriftForClass(sensor, SensorKind::kMagnetometer);
+    context.gyr_drift = DriftForClass(sensor, SensorKind::kGyroscope);
+  }
   if (!a.sensor_class.empty()) {
     SensorClass sensor;
     if (!SensorClassByName(a.sensor_class, &sensor)) {
@@ -279,18 +292,18 @@ int Run(const FreeArgs& a) {
   FreeCalibratorOptions co;
   co.min_coverage = a.min_coverage_percent / 100;
   std::vector<FreeModelResult> results;
-  if (!CalibrateFreeModels(models, found.intervals, a.context, co, &results, &error)) {
+  if (!CalibrateFreeModels(models, found.intervals, context, co, &results, &error)) {
     fmt::print(stderr, "turncal free: {}\n", error);
     return 2;
   }
-  report::FreeReportInput input{source, found, a.context, results, {}};
+  report::FreeReportInput input{source, found, context, results, {}};
   for (const auto& r : results) {
     std::optional<OrientationAdvice> advice;
     if (r.estimate.estimate.ok) {
-      auto model = MakeFreeModel(r.model, a.context, &error);
+      auto model = MakeFreeModel(r.model, context, &error);
       FreeData data;
       data.intervals = found.intervals;
-      data.context = a.context;
+      data.context = context;
       for (const auto& u : results) {
         if (model && u.model == model->upstream() && u.estimate.estimate.ok) {
           data.upstream_theta = u.estimate.estimate.theta;
@@ -371,6 +384,11 @@ void AddFreeCommand(CLI::App* app) {
   cmd->add_option("--latitude", a->context.latitude_deg, "degrees north (the Earth's rate)")
       ->check(CLI::Range(-90.0, 90.0))
       ->capture_default_str();
+  cmd->add_option("--drift", a->drift_class,
+                  "each triad's bias drift as a process in time from a sensor class (industrial, "
+                  "consumer; SENSORS.md): the terms correlated through it (generalised least "
+                  "squares), the biases those over the latest interval")
+      ->check(CLI::IsMember({"industrial", "consumer"}));
   cmd->add_option("--acc-offset-sigma", a->context.acc_offset_sigma,
                   "m/s^2 added to each interval's mean per axis (bias instability between them)")
       ->check(CLI::NonNegativeNumber);

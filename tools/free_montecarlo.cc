@@ -101,9 +101,20 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
     return 2;
   }
   // Each interval's offset from the bias's wander: the class's bias instability.
-  context.acc_offset_sigma = args.offset_sigma * sensor.acc_bias_instability;
-  context.mag_offset_sigma = args.offset_sigma * sensor.mag_bias_instability;
-  context.gyr_offset_sigma = args.offset_sigma * sensor.gyr_bias_instability;
+  if (args.drift == "gauss-markov") {
+    // The class's drift as a process in time: generalised least squares over the terms.
+    context.acc_drift = DriftForClass(sensor, SensorKind::kAccelerometer);
+    context.mag_drift = DriftForClass(sensor, SensorKind::kMagnetometer);
+    context.gyr_drift = DriftForClass(sensor, SensorKind::kGyroscope);
+    // The simulated sensors have no warm-up (the class's drift allows for one).
+    for (BiasDrift* d : {&context.acc_drift, &context.mag_drift, &context.gyr_drift}) {
+      d->warmup_sigma.setZero();
+    }
+  } else if (args.drift == "independent") {
+    context.acc_offset_sigma = args.offset_sigma * sensor.acc_bias_instability;
+    context.mag_offset_sigma = args.offset_sigma * sensor.mag_bias_instability;
+    context.gyr_offset_sigma = args.offset_sigma * sensor.gyr_bias_instability;
+  }
   const bool gyro = model->sensor() == SensorKind::kGyroscope;
   const int N = model->num_parameters();
   const auto dir = std::filesystem::temp_directory_path() /
@@ -155,8 +166,15 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
       }
       const FreeModelResult& r = results.back();
       Eigen::VectorXd truth;
+      // The bias window on the session's clock (host time = capture time).
+      std::optional<TimeWindow> window;
+      if (r.estimate.bias_window_host) {
+        const double offset_s = static_cast<double>(capture.offset_ns) * 1e-9;
+        window = TimeWindow{r.estimate.bias_window_host->t0_s - offset_s,
+                            r.estimate.bias_window_host->t1_s - offset_s};
+      }
       if (r.model != args.model || !r.estimate.estimate.ok ||
-          !sim::FreeTruth(capture, args.model, context, &truth, &e)) {
+          !sim::FreeTruth(capture, args.model, context, window, &truth, &e)) {
         out.error = r.model != args.model     ? "fitted " + r.model + ": " + r.note
                     : !r.estimate.estimate.ok ? r.estimate.estimate.error
                                               : e;
@@ -164,6 +182,14 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
       }
       const Estimate& est = r.estimate.estimate;
       out.z = (est.theta - truth).cwiseQuotient(est.sigma);
+      if (args.verbose) {
+        std::lock_guard<std::mutex> lock(print_mutex);
+        for (int i = 0; i < N; ++i) {
+          fmt::print(stderr, "run {} {} est {:.9g} truth {:.9g} sigma {:.3g} z {:+.2f}\n", run,
+                     model->parameters()[static_cast<std::size_t>(i)].name, est.theta[i], truth[i],
+                     est.sigma[i], out.z[i]);
+        }
+      }
       out.p_value = est.p_value;
       out.gate = r.estimate.gate_passed;
       out.ok = out.z.allFinite();
@@ -227,6 +253,7 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
     fmt::print("{}\n", nlohmann::json{{"model", args.model},
                                       {"class", args.sensor_class},
                                       {"protocol", args.protocol},
+                                      {"drift", args.drift},
                                       {"runs", args.runs},
                                       {"ok", ok},
                                       {"orientations", args.orientations},
@@ -239,12 +266,13 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
                            .dump());
   } else {
     fmt::print(
-        "free {} ({} class, {}), {} tumbles of {} orientations (up within {:.0f} deg of +z), "
+        "free {} ({} class, {}, drift {}), {} tumbles of {} orientations (up within {:.0f} deg of "
+        "+z), "
         "each as bytes through free mode: {} estimated ({} failed{}), {:.1f} intervals on "
         "average, gate passed {}\n\n{}\nchi^2 p-values against uniform: KS D = {:.3f}, p = "
         "{:.3g}\nCriteria: std z in [0.9, 1.1] and |mean z| <= 0.15; {} of {} parameters fail.\n",
-        args.model, args.sensor_class, args.protocol, args.runs, args.orientations, args.cap_deg,
-        ok, args.runs - ok, first_error.empty() ? "" : ", the first: " + first_error,
+        args.model, args.sensor_class, args.protocol, args.drift, args.runs, args.orientations,
+        args.cap_deg, ok, args.runs - ok, first_error.empty() ? "" : ", the first: " + first_error,
         intervals / ok, gates, table, ks_d, ks_p, bad, N);
   }
   return bad == 0 ? 0 : 1;
@@ -284,11 +312,18 @@ void AddFreeMonteCarloCommand(CLI::App* app) {
   cmd->add_flag(
       "--field-unknown", [a](std::int64_t) { a->field_known = false; },
       "the magnetometer models without the field's magnitude (relative scale)");
+  cmd->add_option("--drift", a->drift,
+                  "the calibration's model of the bias wander: gauss-markov (the class's, a "
+                  "process in time), independent (an offset per interval, --offset-sigma) or none")
+      ->check(CLI::IsMember({"gauss-markov", "independent", "none"}))
+      ->capture_default_str();
   cmd->add_option("--offset-sigma", a->offset_sigma,
                   "each interval's offset allowance (FreeContext's *_offset_sigma) in units of the "
                   "class's bias instability")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd->add_flag("--verbose", a->verbose,
+                "every run's estimate, truth, sigma and z per parameter on standard error");
   cmd->add_flag("--json", a->json, "one JSON object");
   cmd->callback([a] { throw CLI::RuntimeError(RunFreeMonteCarlo(*a)); });
 }

@@ -24,7 +24,12 @@ struct FreeMonteCarloArgs {
   double dwell_s = 4.0;
   double cap_deg = 180.0;
   bool field_known = true;
+  // The calibration's model of the bias wander: "gauss-markov" (the class's drift, generalised
+  // least squares), "independent" (offset_sigma x the class's bias instability per interval) or
+  // "none".
+  std::string drift = "gauss-markov";
   double offset_sigma = 1.0;  // the intervals' offset allowance, in the class's bias instability
+  bool verbose = false;
   bool json = false;
 };
 

@@ -1,5 +1,7 @@
 #include "core/estimation/free_calibrator.h"
 
+#include "core/estimation/free_drift.h"
+
 #include <ceres/ceres.h>
 #include <fmt/format.h>
 
@@ -111,8 +113,49 @@ FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
   if (!model.Start(data, &theta, &est.error)) return out;
   const Eigen::VectorXd upstream = data.upstream_theta;
 
+  // The drift of the triads whose bias the model carries, and the reference window: the latest
+  // interval's (on the sensor's clock; the bias parameters are then the bias over it).
+  // Every triad with a drift model: with the model's bias column for it, or none (its drift
+  // still reaches terms through their extra_drift: gyro9's accelerometer).
+  std::vector<FreeDriftTriad> drifts;
+  for (SensorKind kind :
+       {SensorKind::kAccelerometer, SensorKind::kGyroscope, SensorKind::kMagnetometer}) {
+    const BiasDrift& d = kind == SensorKind::kAccelerometer  ? data.context.acc_drift
+                         : kind == SensorKind::kMagnetometer ? data.context.mag_drift
+                                                             : data.context.gyr_drift;
+    if (!d.enabled() || !model.Needs(kind)) continue;
+    int column = -1;
+    for (const auto& [k, c] : model.BiasColumns()) {
+      if (k == kind) column = c;
+    }
+    drifts.push_back({kind, column, d});
+  }
+  TimeWindow reference;
+  double origin_s = INFINITY;
+  const FreeInterval* latest = nullptr;
+  for (const auto& iv : data.intervals) {
+    origin_s = std::min(origin_s, iv.sensor_start_s());
+    if (!latest || iv.sensor_end_s() > latest->sensor_end_s()) latest = &iv;
+  }
+  if (!drifts.empty() && latest) {
+    reference = TimeWindow{latest->sensor_start_s(), latest->sensor_end_s()};
+    out.bias_window = reference;
+    out.bias_window_host = TimeWindow{latest->t_start_s, latest->t_end_s};
+  } else {
+    drifts.clear();
+  }
+  // The terms are whitened together when a drift correlates them or they share noise.
+  bool joint = !drifts.empty();
+  for (const auto& t : model.Terms(data, theta)) joint |= !t.shared.empty();
+  auto whitener = [&](const std::vector<FreeTerm>& t, const Eigen::VectorXd& at) {
+    const Evaluated e = Evaluate(t, at, upstream, nullptr);
+    for (const auto& term : t) origin_s = std::min(origin_s, term.window.t0_s);
+    return FreeDriftWhitener(t, e.J, drifts, reference, origin_s);
+  };
+
   // Solve, re-whitening at each result.
   std::vector<FreeTerm> terms;
+  std::unique_ptr<StackedFreeCost> stacked;
   for (int pass = 0; pass < options.passes; ++pass) {
     terms = model.Terms(data, theta);
     if (terms.empty()) {
@@ -123,11 +166,21 @@ FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
     po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     ceres::Problem problem(po);
     Eigen::VectorXd up = upstream;
-    for (const auto& t : terms) {
-      if (t.upstream) {
-        problem.AddResidualBlock(t.cost.get(), nullptr, theta.data(), up.data());
+    if (joint) {
+      stacked = std::make_unique<StackedFreeCost>(
+          terms, whitener(terms, theta), model.num_parameters(), static_cast<int>(upstream.size()));
+      if (stacked->uses_upstream()) {
+        problem.AddResidualBlock(stacked.get(), nullptr, theta.data(), up.data());
       } else {
-        problem.AddResidualBlock(t.cost.get(), nullptr, theta.data());
+        problem.AddResidualBlock(stacked.get(), nullptr, theta.data());
+      }
+    } else {
+      for (const auto& t : terms) {
+        if (t.upstream) {
+          problem.AddResidualBlock(t.cost.get(), nullptr, theta.data(), up.data());
+        } else {
+          problem.AddResidualBlock(t.cost.get(), nullptr, theta.data());
+        }
       }
     }
     if (up.size() > 0 && problem.HasParameterBlock(up.data())) {
@@ -151,7 +204,20 @@ FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
     }
   }
   terms = model.Terms(data, theta);
-  const Evaluated ev = Evaluate(terms, theta, upstream, &out.terms);
+  Evaluated ev = Evaluate(terms, theta, upstream, &out.terms);
+  if (joint && ev.r.allFinite()) {
+    // The innovations: the terms whitened together.
+    const Eigen::MatrixXd W = whitener(terms, theta);
+    ev.r = W * ev.r;
+    ev.J = W * ev.J;
+    if (ev.Ju.cols() > 0) ev.Ju = W * ev.Ju;
+    int row = 0;
+    for (auto& t : out.terms) {
+      const auto k = t.whitened.size();
+      t.whitened = ev.r.segment(row, k);
+      row += static_cast<int>(k);
+    }
+  }
   if (!ev.r.allFinite()) {
     est.error = fmt::format("{}: a residual is not finite at the solution", model.name());
     return out;

@@ -13,6 +13,7 @@
 // part of each interval's mean, gyro9's direction terms the part across it.
 
 #include <Eigen/Core>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -75,6 +76,9 @@ struct FreeEstimate {
   bool gate_passed = false;
   std::vector<std::string> gate_reasons;  // why the gate refused, one line each
   bool relative_scale = false;            // a magnetometer model without the field's magnitude
+  // With a drift model (FreeContext's *_drift): the latest interval's window, which the bias
+  // parameters are the bias over, on the sensor's clock and on the host's.
+  std::optional<TimeWindow> bias_window, bias_window_host;
   // What the raw triad leaves (FreeModel::Identity) and what the calibration leaves, per kind.
   std::vector<MisfitFigure> before, after;
 };

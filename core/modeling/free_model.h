@@ -22,6 +22,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/estimation/bias_drift.h"
 #include "core/estimation/pose_record.h"
 #include "core/modeling/measurement_model.h"
 #include "core/modeling/parameter.h"
@@ -42,10 +43,16 @@ struct FreeContext {
   // which orientation to add; the joint model estimates its own.
   double dip_deg = 60.0;
   // Variance added to each interval's mean on every axis for what one interval's averaging does
-  // not see (bias instability between intervals, a hand's placement), triad units.
+  // not see (a hand's placement, anything independent from one interval to the next), triad
+  // units.
   double acc_offset_sigma = 0.0;
   double mag_offset_sigma = 0.0;
   double gyr_offset_sigma = 0.0;
+  // Each triad's bias drift as a process in time (core/estimation/bias_drift.h; disabled by
+  // default). When enabled, the calibrator correlates every term through it -- the intervals'
+  // means and, for the gyro, the moves' integrals -- by generalised least squares, and the bias
+  // parameters are the bias over the latest interval (FreeEstimate::bias_window).
+  BiasDrift acc_drift, mag_drift, gyr_drift;
 
   bool IsValid(std::string* error) const;
 };
@@ -73,6 +80,28 @@ struct FreeTerm {
   bool upstream = false;
   int interval = -1;  // the interval it belongs to (a move's: its destination)
   std::string kind;   // "norm", "direction", "rest", "dip"
+  // The time it averages over on the sensor's clock (an interval's window, a move's span): the
+  // bias drift of the triads whose bias the model carries (FreeModel::BiasColumns) correlates
+  // terms through it.
+  TimeWindow window;
+  // Other triads' readings the term depends on over other windows, with the (whitened) residual's
+  // sensitivity to an offset of each (rows: the residuals, 3 columns): gyro9's direction term and
+  // the accelerometer at both of its ends, whose drift moves gravity's measured direction.
+  struct DriftInput {
+    SensorKind triad = SensorKind::kAccelerometer;
+    TimeWindow window;
+    Eigen::MatrixXd sensitivity;
+  };
+  std::vector<DriftInput> extra_drift;
+  // Random vectors several terms share, one per key, zero-mean with `covariance`, and the
+  // (whitened) residual's sensitivity to it: the Earth's horizontal rate in an interval's frame,
+  // which its rest and the move into it both see (its direction is the unknown heading).
+  struct SharedNoise {
+    int key = -1;
+    Eigen::MatrixXd sensitivity;  // rows: the residuals, 3 columns
+    Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  };
+  std::vector<SharedNoise> shared;
 };
 
 class FreeModel {
@@ -89,6 +118,10 @@ class FreeModel {
   virtual std::string upstream() const { return {}; }
   virtual const std::vector<ParameterInfo>& parameters() const = 0;
   int num_parameters() const { return static_cast<int>(parameters().size()); }
+  // Where each triad's bias (three parameters, x y z) starts in theta. A term's sensitivity to an
+  // offset of that triad's raw reading is minus its sensitivity to the bias, which the drift's
+  // generalised least squares uses.
+  virtual std::vector<std::pair<SensorKind, int>> BiasColumns() const = 0;
   int index_of(std::string_view name) const;
 
   // The sizes the rank test scales the columns by at theta (1 for gains and angles, the

@@ -39,6 +39,9 @@ class Accel9 final : public FreeModel {
   SensorKind sensor() const override { return SensorKind::kAccelerometer; }
   bool Needs(SensorKind t) const override { return t == SensorKind::kAccelerometer; }
   const std::vector<ParameterInfo>& parameters() const override { return params_; }
+  std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
+    return {{SensorKind::kAccelerometer, 6}};
+  }
 
   Eigen::VectorXd Scales(const FreeData& data, const Eigen::VectorXd&) const override {
     Eigen::VectorXd s = Eigen::VectorXd::Ones(9);
@@ -78,8 +81,8 @@ class Accel9 final : public FreeModel {
     std::vector<Eigen::Vector3d> means;
     std::vector<Eigen::Matrix3d> covariances;
     std::vector<int> index;
-    free::Means(data, SensorKind::kAccelerometer, context_.acc_offset_sigma, &means, &covariances,
-                &index);
+    free::Means(data, SensorKind::kAccelerometer, data.context.acc_offset_sigma, &means,
+                &covariances, &index);
     const Eigen::Matrix3d L = free::UpperTK(theta.data());
     std::vector<FreeTerm> terms;
     for (std::size_t i = 0; i < means.size(); ++i) {
@@ -89,6 +92,7 @@ class Accel9 final : public FreeModel {
                                                        free::NormSigma(L, f, covariances[i]));
       t.interval = index[i];
       t.kind = "norm";
+      t.window = free::Window(data.intervals[index[i]]);
       terms.push_back(std::move(t));
     }
     return terms;

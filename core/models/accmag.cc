@@ -86,6 +86,9 @@ class AccMag final : public FreeModel {
     return t == SensorKind::kAccelerometer || t == SensorKind::kMagnetometer;
   }
   const std::vector<ParameterInfo>& parameters() const override { return params_; }
+  std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
+    return {{SensorKind::kAccelerometer, kA + 6}, {SensorKind::kMagnetometer, kM}};
+  }
   double magnitude() const { return context_.field_magnitude > 0 ? context_.field_magnitude : 1.0; }
 
   Eigen::VectorXd Scales(const FreeData& data, const Eigen::VectorXd& theta) const override {
@@ -153,8 +156,8 @@ class AccMag final : public FreeModel {
     for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
       const FreeInterval& iv = data.intervals[k];
       if (!iv.acc || !iv.mag) continue;
-      const Eigen::Matrix3d ca = MeanCovariance(*iv.acc, context_.acc_offset_sigma);
-      const Eigen::Matrix3d cm = MeanCovariance(*iv.mag, context_.mag_offset_sigma);
+      const Eigen::Matrix3d ca = MeanCovariance(*iv.acc, data.context.acc_offset_sigma);
+      const Eigen::Matrix3d cm = MeanCovariance(*iv.mag, data.context.mag_offset_sigma);
       const Eigen::Vector3d f = La * (iv.acc->mean - theta.segment<3>(kA + 6));
       const Eigen::Vector3d h = R * Lm * (iv.mag->mean - theta.segment<3>(kM));
       auto add = [&](std::unique_ptr<ceres::CostFunction> cost, const char* kind) {
@@ -162,6 +165,7 @@ class AccMag final : public FreeModel {
         t.cost = std::move(cost);
         t.interval = k;
         t.kind = kind;
+        t.window = free::Window(iv);
         terms.push_back(std::move(t));
       };
       add(free::MakeNormCost<AccPart, kN>(iv.acc->mean, context_.gravity_mps2,

@@ -164,6 +164,11 @@ std::unique_ptr<ceres::CostFunction> MakeNormCost(const Eigen::Vector3d& raw, do
   return std::make_unique<ceres::AutoDiffCostFunction<NormFunctor<Correction, N>, 1, N>>(f);
 }
 
+// An interval's window on the sensor's clock.
+inline TimeWindow Window(const FreeInterval& interval) {
+  return TimeWindow{interval.sensor_start_s(), interval.sensor_end_s()};
+}
+
 // The means of the intervals that carry `triad`, and their covariances.
 inline void Means(const FreeData& data, SensorKind triad, double offset_sigma,
                   std::vector<Eigen::Vector3d>* means, std::vector<Eigen::Matrix3d>* covariances,

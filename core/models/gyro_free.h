@@ -17,12 +17,15 @@
 //    Exp(-[phi x]) with phi = T K (increment - tau (b + B f_block)), E a basis of the plane normal
 //    to u_k. Its covariance: both ends' accelerometer noise across u, the gyro's angle random walk
 //    over the move (the white variance per sample times the period times the move's seconds, from
-//    the intervals' own sample covariance), and the Earth's turn over the move, Omega T in an
-//    unknown direction (Omega^2 T^2 / 3 per axis): the integral is inertial, gravity turns with
-//    the Earth.
+//    the intervals' own sample covariance), and the Earth's turn over the move: the integral is
+//    inertial, gravity turns with the Earth, by T e x u, e the Earth's horizontal rate in the
+//    second interval's frame (Omega cos L, pointing where the unknown heading puts it) -- the same
+//    e its rest sees, so the two terms share it (FreeTerm::shared) and are whitened together. The
+//    accelerometer's drift at both ends moves u (FreeTerm::extra_drift).
 //  - rest (3 per interval): T K (w_mean - b - B f) - Omega sin(latitude) u, the Earth's rate's
-//    vertical part known from gravity, the horizontal part, (Omega cos L)^2 / 2 across u, in an
-//    unknown azimuth that a hand's placement draws afresh for each interval.
+//    vertical part known from gravity, the horizontal part e, (Omega cos L)^2 / 2 across u, in an
+//    unknown azimuth that a hand's placement draws afresh for each interval (shared with the move
+//    into the interval).
 
 #include <ceres/rotation.h>
 #include <fmt/format.h>
@@ -139,6 +142,9 @@ class GyroFree final : public FreeModel {
   }
   std::string upstream() const override { return "accel9"; }
   const std::vector<ParameterInfo>& parameters() const override { return params_; }
+  std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
+    return {{SensorKind::kGyroscope, 9}};
+  }
 
   Eigen::VectorXd Scales(const FreeData& data, const Eigen::VectorXd&) const override {
     Eigen::VectorXd s = Eigen::VectorXd::Ones(kGyr);
@@ -179,6 +185,7 @@ class GyroFree final : public FreeModel {
     const Eigen::Vector3d ba = data.upstream_theta.tail<3>();
     const double omega = context_.earth_rate_radps;
     const double lat = context_.latitude_deg * M_PI / 180;
+    const double earth_h = omega * std::cos(lat);  // the Earth's rate's horizontal part
     // The gyro's white variance per sample and the sample period, from the intervals: medians.
     std::vector<double> var, period;
     for (const auto& iv : data.intervals) {
@@ -197,7 +204,7 @@ class GyroFree final : public FreeModel {
       const Eigen::Vector3d f = La * (s.mean - ba);
       *u = f.normalized();
       const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - *u * u->transpose();
-      return Eigen::Matrix3d(P * La * MeanCovariance(s, context_.acc_offset_sigma) *
+      return Eigen::Matrix3d(P * La * MeanCovariance(s, data.context.acc_offset_sigma) *
                              La.transpose() * P / f.squaredNorm());
     };
     const FreeInterval* prev = nullptr;
@@ -217,15 +224,17 @@ class GyroFree final : public FreeModel {
         const double h = omega * std::cos(lat);
         const Eigen::Matrix3d across = Eigen::Matrix3d::Identity() - u1 * u1.transpose();
         const Eigen::Matrix3d c =
-            Lg * MeanCovariance(*iv.gyr, context_.gyr_offset_sigma) * Lg.transpose() +
-            h * h / 2 * across;
+            Lg * MeanCovariance(*iv.gyr, data.context.gyr_offset_sigma) * Lg.transpose();
         f->W = Whitener<3>(c);
         FreeTerm t;
+        // The Earth's horizontal rate in this interval's frame, shared with the move into it.
+        t.shared.push_back({k, f->W, h * h / 2 * across});
         t.cost =
             std::make_unique<ceres::AutoDiffCostFunction<RestFunctor<kWithG>, 3, kGyr, kAcc>>(f);
         t.upstream = true;
         t.interval = k;
         t.kind = "rest";
+        t.window = free::Window(iv);
         terms.push_back(std::move(t));
       }
       if (prev && iv.move_in && !iv.move_in->increment_rad.empty()) {
@@ -245,8 +254,7 @@ class GyroFree final : public FreeModel {
         }
         const double T = m.duration_s();
         const Eigen::Matrix3d across = Eigen::Matrix3d::Identity() - u1 * u1.transpose();
-        const Eigen::Matrix3d c =
-            cov1 + P * cov0 * P.transpose() + (arw_per_s * T + omega * omega * T * T / 3) * across;
+        const Eigen::Matrix3d c = cov1 + P * cov0 * P.transpose() + arw_per_s * T * across;
         auto* f = new DirectionFunctor<kWithG>;
         f->acc_from = prev->acc->mean;
         f->acc_to = iv.acc->mean;
@@ -271,6 +279,25 @@ class GyroFree final : public FreeModel {
         t.upstream = true;
         t.interval = k;
         t.kind = "direction";
+        t.window = TimeWindow{m.t_start_s, m.t_end_s};
+        // The integral is inertial: over the move the Earth turns gravity by T e x u against it,
+        // e the Earth's horizontal rate in this interval's frame (shared with its rest; the
+        // vertical part leaves u as it is), the residual by -T [u x] e.
+        Eigen::Matrix3d ux;
+        ux << 0, -u1.z(), u1.y(), u1.z(), 0, -u1.x(), -u1.y(), u1.x(), 0;
+        t.shared.push_back({k, Eigen::MatrixXd(f->W * f->E.transpose() * (-T) * ux),
+                            earth_h * earth_h / 2 * across});
+        // The accelerometer's drift at both ends moves gravity's measured direction:
+        // d u / d a = (I - u u^T) L_a / |f|.
+        const Eigen::Matrix<double, 2, 3> WE = f->W * f->E.transpose();
+        const double f1 = (La * (iv.acc->mean - ba)).norm();
+        const double f0 = (La * (prev->acc->mean - ba)).norm();
+        t.extra_drift.push_back(
+            {SensorKind::kAccelerometer, free::Window(iv),
+             WE * (Eigen::Matrix3d::Identity() - u1 * u1.transpose()) * La / f1});
+        t.extra_drift.push_back(
+            {SensorKind::kAccelerometer, free::Window(*prev),
+             -WE * P * (Eigen::Matrix3d::Identity() - u0 * u0.transpose()) * La / f0});
         terms.push_back(std::move(t));
       }
       prev = &iv;

@@ -37,6 +37,9 @@ class MagEllipsoid final : public FreeModel {
   SensorKind sensor() const override { return SensorKind::kMagnetometer; }
   bool Needs(SensorKind t) const override { return t == SensorKind::kMagnetometer; }
   const std::vector<ParameterInfo>& parameters() const override { return params_; }
+  std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
+    return {{SensorKind::kMagnetometer, 0}};
+  }
 
   double magnitude() const { return context_.field_magnitude > 0 ? context_.field_magnitude : 1.0; }
 
@@ -77,8 +80,8 @@ class MagEllipsoid final : public FreeModel {
     std::vector<Eigen::Vector3d> means;
     std::vector<Eigen::Matrix3d> covariances;
     std::vector<int> index;
-    free::Means(data, SensorKind::kMagnetometer, context_.mag_offset_sigma, &means, &covariances,
-                &index);
+    free::Means(data, SensorKind::kMagnetometer, data.context.mag_offset_sigma, &means,
+                &covariances, &index);
     const Eigen::Matrix3d L = free::Symmetric(theta.data() + 3);
     std::vector<FreeTerm> terms;
     for (std::size_t i = 0; i < means.size(); ++i) {
@@ -88,6 +91,7 @@ class MagEllipsoid final : public FreeModel {
                                                           free::NormSigma(L, h, covariances[i]));
       t.interval = index[i];
       t.kind = "norm";
+      t.window = free::Window(data.intervals[index[i]]);
       terms.push_back(std::move(t));
     }
     return terms;

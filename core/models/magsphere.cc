@@ -44,6 +44,9 @@ class MagSphere final : public FreeModel {
   SensorKind sensor() const override { return SensorKind::kMagnetometer; }
   bool Needs(SensorKind t) const override { return t == SensorKind::kMagnetometer; }
   const std::vector<ParameterInfo>& parameters() const override { return params_; }
+  std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
+    return {{SensorKind::kMagnetometer, 0}};
+  }
   double magnitude() const { return context_.field_magnitude > 0 ? context_.field_magnitude : 1.0; }
 
   Eigen::VectorXd Scales(const FreeData&, const Eigen::VectorXd& theta) const override {
@@ -75,8 +78,8 @@ class MagSphere final : public FreeModel {
     std::vector<Eigen::Vector3d> means;
     std::vector<Eigen::Matrix3d> covariances;
     std::vector<int> index;
-    free::Means(data, SensorKind::kMagnetometer, context_.mag_offset_sigma, &means, &covariances,
-                &index);
+    free::Means(data, SensorKind::kMagnetometer, data.context.mag_offset_sigma, &means,
+                &covariances, &index);
     std::vector<FreeTerm> terms;
     for (std::size_t i = 0; i < means.size(); ++i) {
       const Eigen::Vector3d d = means[i] - theta.head<3>();
@@ -86,6 +89,7 @@ class MagSphere final : public FreeModel {
       t.cost = std::make_unique<ceres::AutoDiffCostFunction<SphereFunctor, 1, 4>>(f);
       t.interval = index[i];
       t.kind = "norm";
+      t.window = free::Window(data.intervals[index[i]]);
       terms.push_back(std::move(t));
     }
     return terms;
