@@ -237,7 +237,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   Config c;
   if (!OnlyKeys(root,
                 {"socket", "socket_group", "control_users", "state_dir", "station", "sequencer",
-                 "table", "gate", "reference", "device"},
+                 "table", "free", "gate", "reference", "device"},
                 "the file", source, error)) {
     return false;
   }
@@ -283,11 +283,12 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   }
   StationOptions& st = c.station;
   if (const toml::table* t = root["station"].as_table()) {
-    if (!OnlyKeys(*t,
-                  {"models", "sensor_class", "drift_model", "identify_drift", "bias_tau_s",
-                   "warmup", "warmup_tau_s", "acc_noise_density", "acc_bias_instability",
-                   "mag_noise_rms", "mag_bias_instability", "acc_random_walk", "mag_random_walk"},
-                  "[station]", source, error)) {
+    if (!OnlyKeys(
+            *t,
+            {"models", "pose_source", "sensor_class", "drift_model", "identify_drift", "bias_tau_s",
+             "warmup", "warmup_tau_s", "acc_noise_density", "acc_bias_instability", "mag_noise_rms",
+             "mag_bias_instability", "acc_random_walk", "mag_random_walk"},
+            "[station]", source, error)) {
       return false;
     }
     if (!GetString(*t, "sensor_class", &st.sensor_class, source, error)) return false;
@@ -337,6 +338,13 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
         return false;
       }
     }
+    std::string pose_source = "announced";
+    if (!GetString(*t, "pose_source", &pose_source, source, error)) return false;
+    if (!ParsePoseSource(pose_source, &st.pose_source)) {
+      *error = fmt::format("{}: [station] pose_source must be \"announced\" or \"free\"", source);
+      return false;
+    }
+    c.models_set = t->contains("models");
     if (!GetModels(*t, &st.models, source, error)) return false;
   }
   if (const toml::table* t = root["sequencer"].as_table()) {
@@ -344,11 +352,12 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
                   {"dwell_s", "window_s", "settle_guard_s", "still_timeout_s", "startup_s",
                    "max_bad_fraction", "max_lost_fraction", "false_alarm", "outlier_k",
                    "gyr_bias_drift_radps", "pose_check_false_alarm", "moves", "move_block_s",
-                   "move_max_s"},
+                   "move_max_s", "free_max_dwell_s"},
                   "[sequencer]", source, error)) {
       return false;
     }
     SequencerOptions& q = st.sequencer;
+    c.dwell_set = t->contains("dwell_s");
     if (!GetNumber(*t, "dwell_s", &q.dwell_s, source, error) ||
         !GetNumber(*t, "window_s", &q.stillness.window_s, source, error) ||
         !GetNumber(*t, "settle_guard_s", &q.settle_guard_s, source, error) ||
@@ -361,7 +370,8 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
         !GetNumber(*t, "gyr_bias_drift_radps", &q.stillness.gyr_bias_drift_radps, source, error) ||
         !GetNumber(*t, "pose_check_false_alarm", &q.pose_check_false_alarm, source, error) ||
         !GetNumber(*t, "move_block_s", &q.moves.block_s, source, error) ||
-        !GetNumber(*t, "move_max_s", &q.moves.max_s, source, error)) {
+        !GetNumber(*t, "move_max_s", &q.moves.max_s, source, error) ||
+        !GetNumber(*t, "free_max_dwell_s", &q.free_max_dwell_s, source, error)) {
       return false;
     }
     if (const toml::node* n = t->get("moves")) {
@@ -376,6 +386,20 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   if (const toml::table* t = root["table"].as_table()) {
     if (!ParseTable(*t, source, &st, error)) return false;
   }
+  if (const toml::table* t = root["free"].as_table()) {
+    if (!OnlyKeys(*t, {"min_coverage_percent", "field"}, "[free]", source, error) ||
+        !GetNumber(*t, "min_coverage_percent", &st.free.min_coverage_percent, source, error)) {
+      return false;
+    }
+    std::string field = "reference";
+    if (!GetString(*t, "field", &field, source, error)) return false;
+    if (field != "reference" && field != "unknown") {
+      *error = fmt::format("{}: [free] field must be \"reference\" or \"unknown\"", source);
+      return false;
+    }
+    st.free.field_known = field == "reference";
+  }
+  if (st.pose_source == PoseSource::kFree) ApplyPoseSource(PoseSource::kFree, c, &st);
   GateDefaultsForClass(st.sensor_class, &st.gate);
   if (const toml::table* t = root["gate"].as_table()) {
     if (!ParseGate(*t, "[gate]", source, &st.gate, error)) return false;
@@ -496,6 +520,13 @@ bool LoadConfig(const std::string& path, Config* out, std::string* error) {
   std::stringstream text;
   text << in.rdbuf();
   return ParseConfig(text.str(), path, out, error);
+}
+
+void ApplyPoseSource(PoseSource source, const Config& config, StationOptions* station) {
+  station->pose_source = source;
+  if (source != PoseSource::kFree) return;
+  if (!config.models_set) station->models.clear();
+  if (!config.dwell_set) station->sequencer.dwell_s = kFreeDwellS;
 }
 
 }  // namespace turncal::daemon

@@ -22,11 +22,20 @@ struct Config {
   std::vector<drivers::DeviceSpec> devices;
   std::map<std::string, DeviceSettings> device_settings;  // by device name: rate_hz, configure
   StationOptions station;
+  bool models_set = false;  // [station] models was given (else the pose source's default)
+  bool dwell_set = false;   // [sequencer] dwell_s was given
 };
 
 // Parses `text` (named `source` in messages). False with a message on any error.
 bool ParseConfig(const std::string& text, const std::string& source, Config* out,
                  std::string* error);
 bool LoadConfig(const std::string& path, Config* out, std::string* error);
+
+// The pose source (the file's [station] pose_source, or turncald --pose-source over it). Free mode
+// without a configured model list estimates what the data carry (the pose models' default list is
+// dropped), and without a configured [sequencer] dwell_s takes every still segment of at least
+// kFreeDwellS (a hand's rest is short; the table's default dwell is 3 s).
+void ApplyPoseSource(PoseSource source, const Config& config, StationOptions* station);
+inline constexpr double kFreeDwellS = 1.0;
 
 }  // namespace turncal::daemon

@@ -156,7 +156,15 @@ nlohmann::json DevicePipeline::StatusJson() const {
   nlohmann::json model_status = nlohmann::json::object();
   for (const ModelPipeline& m : models) model_status[m.model->name()] = m.StatusJson();
   const SampleCounts& t = sequencer->totals();
+  nlohmann::json free_status;
+  if (free) {
+    free_status = free->StatusJson(records_used.size());
+    model_status = free_status["models"];
+    free_status.erase("models");
+  }
   return {{"poses", poses},
+          {"pose_source", free ? "free" : "announced"},
+          {"free", free_status},
           {"captured", sequencer->captured()},
           {"rejected", sequencer->rejected()},
           {"busy", sequencer->busy()},
@@ -173,7 +181,15 @@ nlohmann::json DevicePipeline::StatusJson() const {
 nlohmann::json DevicePipeline::ResultJson() const {
   nlohmann::json model_results = nlohmann::json::object();
   for (const ModelPipeline& m : models) model_results[m.model->name()] = m.ResultJson();
+  nlohmann::json free_result;
+  if (free) {
+    free_result = free->ResultJson(records_used.size());
+    model_results = free_result["models"];
+    free_result.erase("models");
+  }
   return {{"poses", poses},
+          {"pose_source", free ? "free" : "announced"},
+          {"free", free_result},
           {"samples",
            {{"used", sequencer->totals().used},
             {"flagged", sequencer->totals().flagged},

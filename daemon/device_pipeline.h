@@ -14,6 +14,7 @@
 #include "core/analysis/publish_gate.h"
 #include "core/planning/pose_planner.h"
 #include "core/sequencing/sequencer.h"
+#include "daemon/free_pipeline.h"
 #include "daemon/model_pipeline.h"
 
 namespace turncal::daemon {
@@ -21,7 +22,9 @@ namespace turncal::daemon {
 struct DevicePipeline {
   std::string name;
   std::unique_ptr<Sequencer> sequencer;
-  std::vector<ModelPipeline> models;
+  std::vector<ModelPipeline> models;  // empty with the free pose source
+  // The free pose source's models (daemon/free_pipeline.h); null otherwise.
+  std::unique_ptr<FreeDevice> free;
   std::vector<TablePose> poses_used;
   std::vector<PoseRecord> records_used;  // the same poses' records (a calibration's evidence)
   int poses = 0;

@@ -59,6 +59,11 @@ void AddCommandLine(CLI::App* app, Options* options) {
          },
          "protocol of a raw .bin replay: mip|gx2|xbus|xbus-legacy")
       ->type_name("P");
+  app->add_option("--pose-source", options->pose_source,
+                  "announced (a controller announces each pose) or free (no table: the static "
+                  "intervals of a tumble, calibrated with the free models accel9, gyro9, "
+                  "magellipsoid, accmag); over [station] pose_source")
+      ->check(CLI::IsMember({"announced", "free"}));
   app->add_flag("--once", options->once, "with --replay: process the whole capture, then exit");
   app->add_option("--result-out", options->result_out, "with --once: write the RESULT JSON here");
   app->add_option("--record", options->record_path,

@@ -20,6 +20,9 @@ struct Options {
   bool once = false;                                 // --once: run the capture, then exit
   std::string result_out;                            // --result-out FILE
   std::string record_path;  // --record FILE.tcap: every device's bytes and the pose commands
+  // --pose-source announced|free: over [station] pose_source ("free": no table, the sequencer
+  // finds the static intervals itself and the free models calibrate, docs/FREE.md).
+  std::string pose_source;
 
   // False with a message when the combination of flags cannot run.
   bool IsValid(std::string* error) const;

@@ -22,10 +22,14 @@ bool ReplayOnce(const std::string& path, const StationOptions& options,
     if (on_event) on_event(j);
   });
   ReplayStats stats;
-  if (!ReplayInto(&reader, &station, true, {}, &stats, error)) return false;
+  // Free mode takes no poses: a capture's pose events are counted and left out.
+  const bool free = options.pose_source == PoseSource::kFree;
+  if (!ReplayInto(&reader, &station, !free, {}, &stats, error)) return false;
   outcome->result = station.Result();
   outcome->result["source"] = path;
   outcome->result["pose_commands"] = stats.pose_commands;
+  outcome->result["pose_source"] = ToString(options.pose_source);
+  if (free) outcome->result["pose_commands_ignored"] = stats.pose_commands;
   outcome->result["warnings"] = stats.warnings;
   for (std::size_t i = 0; i < names.size() && i < stats.decoders.size(); ++i) {
     const auto& c = stats.decoders[i];

@@ -1,6 +1,7 @@
 #include "daemon/station.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <chrono>
@@ -12,6 +13,7 @@
 #include "daemon/persistence.h"
 #include "drivers/transport/transport.h"
 #include "protocol/calibration_json.h"
+#include "protocol/free_json.h"
 #include "protocol/observability_json.h"
 #include "protocol/sequencer_json.h"
 #include "turncal/version.h"
@@ -20,6 +22,7 @@ namespace turncal::daemon {
 
 bool StationOptions::IsValid(std::string* error) const {
   if (!sequencer.IsValid(error) || !gate.IsValid(error) || !table.IsValid(error)) return false;
+  if (!context.IsValid(error)) return false;
   if (!(rate_accuracy >= 0 && rate_accuracy < 0.1)) {
     if (error) *error = "[table] rate_accuracy must be in [0, 0.1) (relative 1 sigma)";
     return false;
@@ -29,22 +32,53 @@ bool StationOptions::IsValid(std::string* error) const {
     if (error) *error = "unknown sensor class '" + sensor_class + "' (industrial, consumer)";
     return false;
   }
-  if (models.empty()) {
+  const bool free_source = pose_source == PoseSource::kFree;
+  if (!(free.min_coverage_percent >= 0 && free.min_coverage_percent <= 100)) {
+    if (error) *error = "[free] min_coverage_percent must be in [0, 100]";
+    return false;
+  }
+  // A model of the pose source: a free model without poses, a pose model with them.
+  auto known = [&](const std::string& m) {
+    if (!free_source) return MakeModel(m, context, error) != nullptr;
+    if (MakeFreeModel(m, FreeContext{}, error)) return true;
+    if (error && MakeModel(m, context, nullptr)) {
+      *error = fmt::format(
+          "'{}' needs known poses; with pose_source = \"free\" the models are free models ({})", m,
+          fmt::join(FreeModelNames(), ", "));
+    }
+    return false;
+  };
+  if (models.empty() && !free_source) {
     if (error) *error = "no model to estimate";
     return false;
   }
   for (const auto& m : models) {
-    if (!MakeModel(m, context, error)) return false;
+    if (!known(m)) return false;
   }
   for (const auto& [name, own] : per_device) {
-    if (own.models && own.models->empty()) {
+    if (own.models && own.models->empty() && !free_source) {
       if (error) *error = "device '" + name + "': no model to estimate";
       return false;
     }
     for (const auto& m : own.models.value_or(std::vector<std::string>{})) {
-      if (!MakeModel(m, context, error)) return false;
+      if (!known(m)) return false;
     }
     if (own.gate && !own.gate->IsValid(error)) return false;
+  }
+  return true;
+}
+
+const char* ToString(PoseSource source) {
+  return source == PoseSource::kFree ? "free" : "announced";
+}
+
+bool ParsePoseSource(const std::string& text, PoseSource* out) {
+  if (text == "announced") {
+    *out = PoseSource::kAnnounced;
+  } else if (text == "free") {
+    *out = PoseSource::kFree;
+  } else {
+    return false;
   }
   return true;
 }
@@ -87,16 +121,36 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
       if (it->second.gate) d->gate = *it->second.gate;
     }
     bool gyro = false;
-    for (const auto& name : models) {
-      d->models.push_back(ModelPipeline::Make(name, options_, sensor_));
-      const auto& model = d->models.back().model;
-      gyro = gyro || (model && model->sensor() == SensorKind::kGyroscope);
+    if (free_mode()) {
+      d->free = std::make_unique<FreeDevice>();
+      d->free->configured = models;
+      d->free->context = FreeContextFor(options_, sensor_);
+      d->free->options = FreeOptionsFor(options_, d->gate);
+      // What the data carry may include a gyroscope: its moves are then its evidence.
+      gyro = models.empty();
+      std::string error;
+      for (const auto& name : models) {
+        auto model = MakeFreeModel(name, d->free->context, &error);
+        gyro = gyro || (model && model->Needs(SensorKind::kGyroscope));
+        d->free->Get(name);
+      }
+    } else {
+      for (const auto& name : models) {
+        d->models.push_back(ModelPipeline::Make(name, options_, sensor_));
+        const auto& model = d->models.back().model;
+        gyro = gyro || (model && model->sensor() == SensorKind::kGyroscope);
+      }
     }
     // The moves between poses are a gyroscope model's evidence: tracked only for one.
     so.moves.enabled = so.moves.enabled && gyro;
     d->sequencer = std::make_unique<Sequencer>(
         so, [this, i](const SequencerEvent& e) { OnSequencerEvent(i, e); });
     devices_.push_back(std::move(d));
+    // After the device is in place: SetFree announces the first interval it waits for.
+    if (devices_.back()->free) {
+      std::string error;
+      devices_.back()->sequencer->SetFree(&error);  // a new sequencer is idle, unscheduled
+    }
   }
   if (!options_.state_dir.empty()) {
     LoadApplied();
@@ -108,6 +162,27 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
 // a restarted daemon corrects with what it published before.
 void Station::LoadApplied() {
   for (auto& d : devices_) {
+    if (d->free) {
+      // Every free model stored for the device (with models from the data, any of them).
+      const std::vector<std::string> names =
+          d->free->configured.empty() ? FreeModelNames() : d->free->configured;
+      for (const auto& name : names) {
+        nlohmann::json stored;
+        if (!ReadActiveCalibration(options_.state_dir, d->name, name, &stored)) continue;
+        std::string error;
+        FreeModelState& m = d->free->Get(name);
+        if (!m.ApplyStored(stored, &error)) {
+          Publish(
+              {{"class", "ERROR"},
+               {"device", d->name},
+               {"model", name},
+               {"message", "the stored calibration is unreadable and is not applied: " + error}});
+          continue;
+        }
+        m.active_version = m.applied_version;
+      }
+      continue;
+    }
     for (ModelState& m : d->models) {
       nlohmann::json stored;
       if (!ReadActiveCalibration(options_.state_dir, d->name, m.model->name(), &stored)) continue;
@@ -130,49 +205,6 @@ int Station::DeviceIndex(const std::string& name) const {
 
 void Station::SetDeviceIdentity(int device, nlohmann::json identity) {
   devices_[static_cast<std::size_t>(device)]->identity = std::move(identity);
-}
-
-bool Station::HasAppliedCalibration(int device) const {
-  for (const ModelState& m : devices_[static_cast<std::size_t>(device)]->models) {
-    if (m.applied_version > 0) return true;
-  }
-  return false;
-}
-
-bool Station::Correct(int device, const Sample& sample, Corrected* out, bool with_sigma) const {
-  *out = Corrected{};
-  for (const ModelState& m : devices_[static_cast<std::size_t>(device)]->models) {
-    if (m.applied_version <= 0) continue;
-    const int triad = m.triad();
-    const std::optional<Eigen::Vector3d>& raw = triad == kTriadAcc   ? sample.acc_mps2
-                                                : triad == kTriadGyr ? sample.gyr_radps
-                                                                     : sample.mag;
-    if (!raw) continue;
-    std::optional<Eigen::Vector3d>& target = triad == kTriadAcc   ? out->acc_mps2
-                                             : triad == kTriadGyr ? out->gyr_radps
-                                                                  : out->mag;
-    if (target) continue;  // the first model of a sensor in the configured order wins
-    std::optional<Eigen::Vector3d>& sigma = triad == kTriadAcc   ? out->acc_sigma
-                                            : triad == kTriadGyr ? out->gyr_sigma
-                                                                 : out->mag_sigma;
-    // A gyro's g-sensitivity sees the specific force in the table frame: the raw accelerometer
-    // turned back by the nominal mounting (its own errors, ~1e-3, are far below what B_g needs).
-    std::optional<Eigen::Vector3d> f_q;
-    if (triad == kTriadGyr && sample.acc_mps2) {
-      f_q = m.model->context().mounting.transpose() * *sample.acc_mps2;
-    }
-    target = m.Correct(*raw, static_cast<double>(sample.t_host_ns) * 1e-9,
-                       with_sigma ? &sigma : nullptr, f_q ? &*f_q : nullptr);
-    (triad == kTriadAcc   ? out->acc_frame
-     : triad == kTriadGyr ? out->gyr_frame
-                          : out->mag_frame) = ToString(m.model->corrected_frame());
-    out->versions.emplace_back(m.model->name(), m.applied_version);
-  }
-  return !out->versions.empty();
-}
-
-nlohmann::json Station::Status(int device) const {
-  return devices_[static_cast<std::size_t>(device)]->StatusJson();
 }
 
 Station::~Station() { *alive_ = false; }
@@ -208,6 +240,14 @@ void Station::Resume() {
       if (devices_[i]->name != e.device) continue;
       Update(i, e.record, e.record.t_end_s);
       ++resumed[i];
+    }
+  }
+  // A free device's resumed intervals are fitted once, all together.
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    DeviceState& d = *devices_[i];
+    if (d.free && d.free->refit_due) {
+      d.free->refit_due = false;
+      QueueFreeFit(i, d.records_used.empty() ? 0.0 : d.records_used.back().t_end_s);
     }
   }
   resuming_ = false;
@@ -277,6 +317,11 @@ void Station::WriteReport(std::size_t device, std::int64_t now_ns, bool now) {
   std::vector<std::string> models;
   for (const auto& m : d.models) {
     if (m.active_version > 0) models.push_back(m.model->name());
+  }
+  if (d.free) {
+    for (const auto& m : d.free->models) {
+      if (m->active_version > 0) models.push_back(m->requested);
+    }
   }
   auto error = std::make_shared<std::string>();
   Defer([dir = options_.state_dir, name = d.name, models,
@@ -352,6 +397,9 @@ void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) 
     }
     if (sink_) sink_(j);
   }
+  if (e.kind == SequencerEventKind::kSegmentSkipped && devices_[device]->free) {
+    devices_[device]->free->NoteSkipped(fmt::format("at {:.2f} s: {}", e.t_s, e.reason));
+  }
   if (e.kind == SequencerEventKind::kNoiseMeasured && !options_.state_dir.empty() &&
       devices_[device]->sequencer->noise()) {
     auto error = std::make_shared<std::string>();
@@ -391,6 +439,14 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   ++d.poses;
   d.poses_used.push_back(record.pose);
   d.records_used.push_back(record);
+  if (d.free) {
+    if (resuming_) {
+      d.free->refit_due = true;  // once, at the end of the resume
+    } else {
+      QueueFreeFit(device, t_s);
+    }
+    return;
+  }
   for (std::size_t mi = 0; mi < d.models.size(); ++mi) {
     ModelState& m = d.models[mi];
     if (!m.TriadOf(record)) continue;  // e.g. a rate segment holds the gyro only
@@ -475,19 +531,28 @@ void Station::Activate(DeviceState& d, ModelState& m, double t_s,
                           {"poses", m.estimate.poses},
                           {"moves", m.estimate.moves}};
   if (!override_who.is_null()) event["override"] = override_who;
+  PersistCalibration(
+      d, m.model->name(), std::move(calibration), std::move(event),
+      [&m, version = m.active_version, theta = m.estimate.theta, covariance = m.estimate.covariance,
+       window = m.estimate.bias_window, drift = m.estimate.drift] {
+        if (version > m.applied_version) m.Apply(version, theta, covariance, window, drift);
+      });
+}
+
+void Station::PersistCalibration(DeviceState& d, const std::string& model,
+                                 nlohmann::json calibration, nlohmann::json event,
+                                 std::function<void()> apply) {
   // Persisted (atomically, fsynced: off the loop), then applied and announced.
   auto write_error = std::make_shared<std::string>();
   Defer(
-      [dir = options_.state_dir, device = d.name, model = m.model->name(), calibration,
+      [dir = options_.state_dir, device = d.name, model, calibration = std::move(calibration),
        write_error] {
         if (!dir.empty())
           WriteActiveCalibration(dir, device, model, calibration, write_error.get());
       },
-      [this, &d, &m, event, write_error, version = m.active_version, theta = m.estimate.theta,
-       covariance = m.estimate.covariance, window = m.estimate.bias_window,
-       drift = m.estimate.drift] {
+      [this, &d, event = std::move(event), write_error, apply = std::move(apply)] {
         if (!options_.state_dir.empty()) NoteWrite(d.name, *write_error);
-        if (version > m.applied_version) m.Apply(version, theta, covariance, window, drift);
+        apply();
         if (write_error->empty()) d.report_due = true;  // TickDevice/OnTick write it
         // Claimed saved only when calibrations/DEVICE/MODEL.json holds it (renamed, fsynced).
         nlohmann::json announced = event;
@@ -507,59 +572,6 @@ void Station::Defer(std::function<void()> work, std::function<void()> done) {
     work();
     guarded();
   }
-}
-
-bool Station::PublishOverride(const std::string& device, const std::string& model,
-                              const nlohmann::json& who, std::string* error) {
-  const int i = DeviceIndex(device);
-  if (i < 0) {
-    *error = "no device '" + device + "'";
-    return false;
-  }
-  DeviceState& d = *devices_[static_cast<std::size_t>(i)];
-  for (ModelState& m : d.models) {
-    if (m.model->name() != model) continue;
-    if (!m.estimate.ok) {
-      *error = fmt::format("{} {} has no estimate to publish{}", device, model,
-                           m.estimate.error.empty() ? "" : ": " + m.estimate.error);
-      return false;
-    }
-    nlohmann::json record = who;
-    record["gate_pass"] = m.gate.pass;
-    record["gate_reasons"] = m.gate.reasons;
-    Activate(d, m, 0.0, record);
-    return true;
-  }
-  *error = fmt::format("device '{}' estimates no model '{}'", device, model);
-  return false;
-}
-
-nlohmann::json Station::NextPose(const std::string& device) const {
-  const int i = DeviceIndex(device);
-  if (i < 0)
-    return {{"class", "NEXT_POSE"}, {"ok", false}, {"error", "no device '" + device + "'"}};
-  const DeviceState& d = *devices_[static_cast<std::size_t>(i)];
-  const std::vector<PlanningTarget> targets = d.PlanningTargets(options_.sequencer.dwell_s);
-  PlannerOptions planner;
-  planner.motion = options_.table;
-  planner.objective = options_.plan_objective;
-  planner.dwell_s = options_.sequencer.dwell_s;
-  planner.rates = options_.plan_rates;
-  planner.moves = options_.sequencer.moves.enabled;
-  // From where the table was last announced; the move into the next pose counts when the
-  // sequencer tracks one (a static pose captured there, no rate segment since).
-  if (const auto at = d.sequencer->announced()) planner.table_at = *at;
-  planner.move_from_table_at = d.sequencer->moves().tracking();
-  planner.move_rest_s = d.MoveRestSeconds(options_.table, planner.move_rest_s);
-  nlohmann::json j = ToJson(PlanNextPose(targets, planner));
-  j["device"] = device;
-  return j;
-}
-
-nlohmann::json Station::Result() const {
-  nlohmann::json devices = nlohmann::json::object();
-  for (const auto& d : devices_) devices[d->name] = d->ResultJson();
-  return {{"class", "RESULT"}, {"devices", devices}};
 }
 
 }  // namespace turncal::daemon

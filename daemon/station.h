@@ -27,6 +27,7 @@
 #include "core/sequencing/sequencer.h"
 #include "daemon/capture_replay.h"
 #include "daemon/device_pipeline.h"
+#include "daemon/free_pipeline.h"
 #include "daemon/model_pipeline.h"
 
 namespace turncal::daemon {
@@ -38,9 +39,32 @@ struct DeviceModelOptions {
   std::optional<GateOptions> gate;
 };
 
+// Where a station's poses come from (DESIGN.md "Pose sources"): announced by the controller
+// (schedule files and a capture's pose events go the same way), or none at all ("free", issue
+// 22): the sequencer finds the static intervals of a tumble itself and the free models (accel9,
+// gyro9, magellipsoid, accmag, ...: core/modeling/free_model.h) calibrate from them
+// (daemon/free_pipeline.h, docs/FREE.md "In the daemon").
+enum class PoseSource { kAnnounced, kFree };
+const char* ToString(PoseSource source);
+bool ParsePoseSource(const std::string& text, PoseSource* out);
+
+// [free]: the free pose source's own settings.
+struct FreeStationOptions {
+  // The gate: the share of MicroStrain's 576 latitude-longitude bins the corrected triad's
+  // directions must fill, percent (0: not checked).
+  double min_coverage_percent = 0.0;
+  // The field's magnitude from [reference] (true), or unknown (false: the magnetometer models'
+  // soft iron is then relative, |h| = 1, and the result says so).
+  bool field_known = true;
+};
+
 struct StationOptions {
   SequencerOptions sequencer;
-  // Models to estimate per device; a magnetometer model only where the records carry mag.
+  PoseSource pose_source = PoseSource::kAnnounced;
+  FreeStationOptions free;
+  // Models to estimate per device; a magnetometer model only where the records carry mag. With
+  // the free pose source these are free models, and an empty list means what the data carry
+  // (DefaultFreeModels: accel9, gyro9 with moves, magellipsoid, accmag).
   std::vector<std::string> models = {"accel13", "mag13"};
   // Noise and tolerance class (SENSORS.md): the calibrator's noise floor and pose-to-pose offset,
   // and the gate's default tolerances.
@@ -177,6 +201,17 @@ class Station : public ReplayTarget {
   void HandleSequencerEvent(std::size_t device, const SequencerEvent& event);
   void WriteReport(std::size_t device, std::int64_t now_ns, bool now);
   void Update(std::size_t device, const PoseRecord& record, double t_s);
+  // The free pose source (daemon/free_pipeline.h): every free model of the device fitted again to
+  // all of its intervals, then gated and activated.
+  void QueueFreeFit(std::size_t device, double t_s);
+  void ApplyFree(std::size_t device, const FreeUpdate& job, double t_s, bool resuming);
+  void ActivateFree(DeviceState& d, FreeModelState& m, double t_s,
+                    const nlohmann::json& override_who);
+  // Writes a calibration document (calibrations/DEVICE.MODEL.json, off the loop), then runs
+  // `apply` and publishes `event` with "saved" (the write's outcome).
+  void PersistCalibration(DeviceState& d, const std::string& model, nlohmann::json calibration,
+                          nlohmann::json event, std::function<void()> apply);
+  bool free_mode() const { return options_.pose_source == PoseSource::kFree; }
   // `work` on the executor (inline without one), then `done` unless the station is gone.
   void Defer(std::function<void()> work, std::function<void()> done);
   void RecordIdentifiedDrift(std::size_t device, const ModelState& m);

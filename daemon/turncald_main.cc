@@ -27,6 +27,10 @@ DESCRIPTION
   override the configuration file; SIGHUP reloads it; SIGTERM stops cleanly. Under systemd it
   is Type=notify with a watchdog (systemd/turncald.service).
   --replay FILE --once runs the same pipeline on a capture at full speed and exits.
+  --pose-source free (or [station] pose_source = "free") needs no table and no controller: the
+  sequencer finds the static intervals of a tumble by hand or on a fixture itself, and the free
+  models (accel9, gyro9, gyro9g, magellipsoid, magsphere, accmag) calibrate from them
+  (docs/FREE.md); pose events in a capture are then ignored.
 
 EXAMPLES
   $ turncald --config /etc/turncal/turncald.toml
@@ -35,6 +39,7 @@ EXAMPLES
   $ turncald --replay session.tcap --once --result-out result.json
   $ turncald --replay session.tcap --once --state-dir /tmp/replayed && \
     turncal report --state-dir /tmp/replayed -o report.html
+  $ turncald --replay tumble.tcap --once --pose-source free --result-out result.json
 
 EXIT STATUS
   0 stopped by SIGTERM/SIGINT, or --once finished; 1 the service could not start (socket,
@@ -76,6 +81,11 @@ SEE ALSO
     // The whole pipeline on a capture at full speed: events to stderr, the result to
     // --result-out (and a summary line per model).
     turncal::daemon::StationOptions station = config.station;
+    if (!options.pose_source.empty()) {
+      turncal::daemon::PoseSource source;
+      turncal::daemon::ParsePoseSource(options.pose_source, &source);  // checked by CLI11
+      turncal::daemon::ApplyPoseSource(source, config, &station);
+    }
     // An explicit --state-dir makes the replay persist like the service (journal, noise, active
     // calibrations: what `turncal report --state-dir` reads); the configuration's state_dir and
     // the default are not used, so a replay never writes into the service's directory unasked.
@@ -121,6 +131,11 @@ SEE ALSO
       return false;
     }
     out->station = c.station;
+    if (!flags.pose_source.empty()) {
+      turncal::daemon::PoseSource source;
+      turncal::daemon::ParsePoseSource(flags.pose_source, &source);  // checked by CLI11
+      turncal::daemon::ApplyPoseSource(source, c, &out->station);
+    }
     out->state_dir = c.state_dir && !state_flag ? *c.state_dir : flags.state_dir;
     out->socket.path = c.socket_path && !socket_flag ? *c.socket_path : flags.socket_path;
     out->socket.group = c.socket_group.value_or("");

@@ -2,8 +2,10 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 
+#include "protocol/free_json.h"
 #include "report/svg.h"
 
 namespace turncal::report {
@@ -269,14 +271,27 @@ std::string CoverageSphereSvg(const FreeEstimate& fe, const std::string& id) {
 }
 
 std::string FreeReportHtml(const FreeReportInput& in) {
-  std::string o =
-      "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>turncal free "
-      "calibration</title><style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}"
-      "table{border-collapse:collapse}td,th{padding:2px 8px;border-bottom:1px solid #ddd;"
-      "text-align:right}th:first-child,td:first-child{text-align:left}.refused{color:#b00}"
-      ".passed{color:#070}pre{background:#f6f6f6;padding:8px}</style></head><body>\n";
-  o += "<h1>Calibration without a turntable</h1>\n";
+  std::string o = fmt::format(
+      "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>turncal: {}"
+      "</title><style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto}}"
+      "table{{border-collapse:collapse}}td,th{{padding:2px 8px;border-bottom:1px solid #ddd;"
+      "text-align:right}}th:first-child,td:first-child{{text-align:left}}.refused{{color:#b00}}"
+      ".passed{{color:#070}}pre{{background:#f6f6f6;padding:8px}}</style></head><body>\n",
+      svg::Escape(in.title));
+  o += "<h1>" + svg::Escape(in.title) + "</h1>\n";
+  o += FreeReportBody(in);
+  o += "</body></html>\n";
+  return o;
+}
+
+std::string FreeReportBody(const FreeReportInput& in) {
+  std::string o;
   o += fmt::format("<p>{}<br>{}</p>\n", svg::Escape(in.source), svg::Escape(in.found.summary));
+  if (!in.lines.empty()) {
+    o += "<ul class=\"small\">";
+    for (const auto& line : in.lines) o += "<li>" + svg::Escape(line) + "</li>";
+    o += "</ul>\n";
+  }
   for (std::size_t i = 0; i < in.results.size(); ++i) {
     const FreeModelResult& r = in.results[i];
     const FreeEstimate& fe = r.estimate;
@@ -334,8 +349,79 @@ std::string FreeReportHtml(const FreeReportInput& in) {
     }
     o += CoverageSphereSvg(fe, "coverage-" + r.model);
   }
-  o += "</body></html>\n";
   return o;
+}
+
+bool FreeCalibrationsReport(const std::vector<nlohmann::json>& calibrations,
+                            const std::string& source, FreeReportInput* out, std::string* error) {
+  *out = FreeReportInput{};
+  std::vector<protocol::FreeCalibrationDocument> docs(calibrations.size());
+  std::size_t most = 0;
+  for (std::size_t i = 0; i < calibrations.size(); ++i) {
+    if (!protocol::ParseFreeCalibration(calibrations[i], &docs[i], error)) return false;
+    if (docs[i].intervals.empty()) {
+      *error = fmt::format("{} {}: the calibration holds no intervals to re-fit", docs[i].device,
+                           docs[i].requested);
+      return false;
+    }
+    if (docs[i].intervals.size() > docs[most].intervals.size()) most = i;
+  }
+  if (docs.empty()) {
+    *error = "no calibration to report";
+    return false;
+  }
+  out->title = docs[0].device + ": calibration without a turntable";
+  out->source = fmt::format("{}, the active calibrations of {}", source, docs[0].device);
+  out->context = docs[most].context;
+  out->found.intervals = docs[most].intervals;
+  out->found.summary = fmt::format("free mode: {} static intervals", docs[most].intervals.size());
+  for (const auto& doc : docs) {
+    std::vector<FreeModelResult> results;
+    if (!CalibrateFreeModels({doc.requested}, doc.intervals, doc.context, doc.options, &results,
+                             error)) {
+      return false;
+    }
+    const auto advice = NextOrientations(results, doc.intervals, doc.context);
+    for (std::size_t k = 0; k < results.size(); ++k) {
+      // An upstream fitted for this model is shown once (the requested model's own document wins).
+      const bool requested = results[k].requested == doc.requested;
+      bool shown = false;
+      for (const auto& r : out->results) shown = shown || r.model == results[k].model;
+      if (!requested && shown) continue;
+      if (!requested) {
+        bool has_own = false;
+        for (const auto& d : docs) has_own = has_own || d.requested == results[k].model;
+        if (has_own) continue;
+      }
+      if (requested) {
+        const Estimate& e = results[k].estimate.estimate;
+        double worst = 0.0;
+        const bool same_model =
+            results[k].model == doc.model && e.ok && e.theta.size() == doc.theta.size();
+        for (Eigen::Index p = 0; same_model && p < e.theta.size(); ++p) {
+          const double s = e.sigma[p] > 0 && std::isfinite(e.sigma[p]) ? e.sigma[p] : 1.0;
+          worst = std::max(worst, std::abs(e.theta[p] - doc.theta[p]) / s);
+        }
+        out->lines.push_back(fmt::format(
+            "{}: version {}{}, turncal {}, {}; {} intervals; {}", doc.requested, doc.version,
+            doc.model != doc.requested ? " (fitted as " + doc.model + ")" : "", doc.software,
+            doc.time, doc.intervals.size(),
+            !same_model ? std::string("the re-fit no longer gives this model's estimate")
+            : worst < 1e-6
+                ? std::string("re-fitted from them: the stored values agree")
+                : fmt::format("re-fitted from them: the stored values differ by up to {:.2g} "
+                              "sigma (shown: the re-fit)",
+                              worst)));
+        if (!doc.override_who.is_null()) {
+          out->lines.push_back(fmt::format("{}: published by operator override: {}", doc.requested,
+                                           doc.override_who.dump()));
+        }
+      }
+      out->results.push_back(results[k]);
+      out->advice.push_back(k < advice.size() ? advice[k] : std::nullopt);
+    }
+  }
+  return true;
 }
 
 }  // namespace turncal::report

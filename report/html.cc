@@ -6,7 +6,9 @@
 #include <cmath>
 
 #include "protocol/calibration_json.h"
+#include "protocol/free_json.h"
 #include "report/analysis.h"
+#include "report/free_report.h"
 #include "report/plots.h"
 #include "report/sections.h"
 #include "report/svg.h"
@@ -232,9 +234,45 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
     if (error) *error = "no calibration to report";
     return false;
   }
-  std::vector<protocol::CalibrationDocument> docs(calibrations.size());
-  for (std::size_t i = 0; i < calibrations.size(); ++i) {
-    if (!protocol::ParseCalibrationDocument(calibrations[i], &docs[i], error)) return false;
+  // Calibrations without a turntable (protocol/free_json.h) are re-fitted and shown as `turncal
+  // free` shows them: alone, or after the turntable's.
+  std::vector<nlohmann::json> pose_docs, free_docs;
+  for (const auto& c : calibrations) {
+    (protocol::IsFreeCalibration(c) ? free_docs : pose_docs).push_back(c);
+  }
+  std::string free_body;
+  if (!free_docs.empty()) {
+    FreeReportInput in;
+    std::string why;
+    if (!FreeCalibrationsReport(free_docs, options.source, &in, &why)) {
+      if (error) *error = why;
+      return false;
+    }
+    const std::string device = free_docs[0].value("device", "");
+    for (const auto& c : pose_docs) {
+      if (c.value("device", "") != device) {
+        if (error) {
+          *error = fmt::format(
+              "the calibrations are of two devices, '{}' and '{}': one report is "
+              "for one device",
+              device, c.value("device", ""));
+        }
+        return false;
+      }
+    }
+    if (pose_docs.empty()) {
+      if (!options.generated_utc.empty()) {
+        in.lines.insert(in.lines.begin(), "generated " + options.generated_utc);
+      }
+      *html = FreeReportHtml(in);
+      return true;
+    }
+    free_body =
+        "<section><h2>" + Escape(in.title) + "</h2>\n" + FreeReportBody(in) + "</section>\n";
+  }
+  std::vector<protocol::CalibrationDocument> docs(pose_docs.size());
+  for (std::size_t i = 0; i < pose_docs.size(); ++i) {
+    if (!protocol::ParseCalibrationDocument(pose_docs[i], &docs[i], error)) return false;
     if (docs[i].device != docs[0].device) {
       if (error) {
         *error = fmt::format(
@@ -271,6 +309,7 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   o += "</header>\n";
   for (const auto& d : docs) o += ModelSection(d);
   o += TriadAngleHtml(docs);
+  o += free_body;
   o += "</body>\n</html>\n";
   *html = std::move(o);
   return true;

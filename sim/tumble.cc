@@ -125,4 +125,18 @@ std::vector<FreeInterval> SimulateTumble(const TumbleTruth& truth, const TumbleO
   return out;
 }
 
+std::vector<TablePose> TumbleTablePoses(int n, double cap_deg, std::mt19937_64* rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const double cos_cap = std::cos(cap_deg * M_PI / 180);
+  std::vector<TablePose> poses;
+  for (int k = 0; k < n; ++k) {
+    const double z = cos_cap + (1 - cos_cap) * u(*rng);
+    const double az = 2 * M_PI * u(*rng);
+    const double rho = std::sqrt(std::max(0.0, 1 - z * z));
+    const Eigen::Vector3d down(rho * std::cos(az), rho * std::sin(az), -z);
+    poses.push_back(PoseWithDownAlong(down, 2 * M_PI * u(*rng) - M_PI));
+  }
+  return poses;
+}
+
 }  // namespace turncal::sim

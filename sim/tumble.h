@@ -12,6 +12,7 @@
 #include <random>
 #include <vector>
 
+#include "core/frames/table_pose.h"
 #include "core/modeling/free_model.h"
 
 namespace turncal::sim {
@@ -50,6 +51,11 @@ struct TumbleOptions {
   double gravity_mps2 = 9.80665;
   bool with_moves = true;
 };
+
+// The orientations of a byte-level tumble on a three-axis table (turncal sim's session, whose pose
+// events free mode ignores): "down" uniform on the sphere, or within cap_deg of the table's -z
+// ("up" near +z: low coverage), turned about the vertical at random.
+std::vector<TablePose> TumbleTablePoses(int n, double cap_deg, std::mt19937_64* rng);
 
 // The intervals of one tumble; `rng` draws orientations and noise.
 std::vector<FreeInterval> SimulateTumble(const TumbleTruth& truth, const TumbleOptions& options,

@@ -80,8 +80,17 @@ void PrintStatus(const nlohmann::json& s) {
                k.value("skipped_bytes", 0), k.value("lost_samples", 0));
     if (!d.contains("station")) continue;
     const auto& st = d["station"];
-    fmt::print("  poses captured {}  rejected {}  noise {}\n", st.value("captured", 0),
-               st.value("rejected", 0), st.value("noise", "?"));
+    const bool free = st.value("pose_source", "") == "free";
+    if (free) {
+      const auto f = st.value("free", nlohmann::json::object());
+      fmt::print(
+          "  free mode: intervals {}  skipped {}  noise {}{}\n", st.value("captured", 0),
+          f.value("skipped", 0), st.value("noise", "?"),
+          f.value("last_skip", "").empty() ? "" : "  (last skip " + f.value("last_skip", "") + ")");
+    } else {
+      fmt::print("  poses captured {}  rejected {}  noise {}\n", st.value("captured", 0),
+                 st.value("rejected", 0), st.value("noise", "?"));
+    }
     if (st["current"].is_object()) {
       const auto& cur = st["current"];
       const double needed = std::max(1.0, cur.value("needed", 1.0));
@@ -90,22 +99,36 @@ void PrintStatus(const nlohmann::json& s) {
     }
     for (const auto& [model, m] : st["models"].items()) {
       const auto& g = m["gate"];
+      const std::string fitted = m.value("model", model);
       fmt::print(
-          "  {:8} gate {}  active v{}{}\n", model, g.value("pass", false) ? "PASS" : "fail",
-          m.value("active_version", 0),
+          "  {:8} gate {}  active v{}{}{}\n", model, g.value("pass", false) ? "PASS" : "fail",
+          m.value("active_version", 0), fitted != model ? "  (fitted as " + fitted + ")" : "",
           g["reasons"].empty() ? std::string() : "  (" + g["reasons"][0].get<std::string>() + ")");
+      if (free && m.contains("advice") && m["advice"].is_string()) {
+        fmt::print("           next: {}\n", m["advice"].get<std::string>());
+      }
     }
   }
 }
 
 void PrintResult(const nlohmann::json& r) {
   for (const auto& [name, d] : r["devices"].items()) {
-    fmt::print("{}: {} poses\n", name, d.value("poses", 0));
+    const bool free = d.value("pose_source", "") == "free";
+    fmt::print("{}: {} {}\n", name, d.value("poses", 0),
+               free ? "static intervals (free mode: no table)" : "poses");
     for (const auto& [model, m] : d["models"].items()) {
       const auto& g = m["gate"];
-      fmt::print("  {} (rank {}, chi2 {:.1f} / {} dof): gate {}, active v{}\n", model,
-                 m.value("rank", 0), m.value("chi2", 0.0), m.value("dof", 0),
-                 g.value("pass", false) ? "PASS" : "fail", m.value("active_version", 0));
+      const std::string fitted = m.value("model", model);
+      fmt::print("  {}{} (rank {}, chi2 {:.1f} / {} dof): gate {}, active v{}\n", model,
+                 fitted != model ? " fitted as " + fitted : "", m.value("rank", 0),
+                 m.value("chi2", 0.0), m.value("dof", 0), g.value("pass", false) ? "PASS" : "fail",
+                 m.value("active_version", 0));
+      if (free && m.value("ok", false)) {
+        fmt::print(
+            "    coverage {:.1f} % of the sphere{}\n", 100 * m["coverage"].value("fraction", 0.0),
+            m.value("relative_scale", false) ? "; the field's magnitude not known: relative" : "");
+        if (!m.value("note", "").empty()) fmt::print("    note: {}\n", m.value("note", ""));
+      }
       for (const auto& [p, v] : m["params"].items()) {
         if (v["sigma"].is_null()) {
           fmt::print("    {:14} {:>14.7g}   (undetermined)\n", p, v.value("value", 0.0));
@@ -115,6 +138,9 @@ void PrintResult(const nlohmann::json& r) {
         }
       }
       for (const auto& reason : g["reasons"]) fmt::print("    - {}\n", reason.get<std::string>());
+      if (free && m.contains("advice") && m["advice"].is_object()) {
+        fmt::print("    next orientation: {}\n", m["advice"].value("text", ""));
+      }
     }
   }
 }
@@ -122,6 +148,16 @@ void PrintResult(const nlohmann::json& r) {
 void PrintNextPose(const nlohmann::json& a) {
   if (!a.value("ok", false)) {
     fmt::print("no recommendation: {}\n", a.value("error", "?"));
+    return;
+  }
+  if (a.value("pose_source", "") == "free") {
+    fmt::print("next orientation for {} (free mode; gates {}):\n", a.value("device", "?"),
+               a.value("gates_pass", false) ? "all pass" : "not all pass");
+    for (const auto& m : a.value("advice", nlohmann::json::array())) {
+      fmt::print("  {}: {}{}\n", m.value("model", "?"),
+                 m["text"].is_string() ? m["text"].get<std::string>() : "no candidate",
+                 m.value("gate_pass", false) ? "  (gate passes)" : "");
+    }
     return;
   }
   fmt::print("next pose for {}: {}\n", a.value("device", "?"), PoseText(a["pose"]));
@@ -189,8 +225,9 @@ struct WatchView {
     if (kind == "ESTIMATE") {
       const nlohmann::json gate = e.value("gate", nlohmann::json::object());
       std::string line =
-          fmt::format("{}: {} after {} poses: gate {}", name, e.value("model", ""),
-                      e.value("poses", 0), gate.value("pass", false) ? "PASS" : "fail");
+          fmt::format("{}: {} after {} {}: gate {}", name, e.value("model", ""),
+                      e.value("poses", 0), e.contains("intervals") ? "intervals" : "poses",
+                      gate.value("pass", false) ? "PASS" : "fail");
       const auto reasons = gate.value("reasons", nlohmann::json::array());
       if (!reasons.empty() && reasons[0].is_string()) {
         line += " (" + reasons[0].get<std::string>();
@@ -230,7 +267,8 @@ struct WatchView {
                            Bar(collected / needed, 30), 100 * collected / needed);
       }
       for (const auto& [model, e] : d.estimates) {
-        out += fmt::format("  {} after {} poses: gate {}\n", model, e.value("poses", 0),
+        out += fmt::format("  {} after {} {}: gate {}\n", model, e.value("poses", 0),
+                           e.contains("intervals") ? "intervals" : "poses",
                            e["gate"].value("pass", false) ? "PASS" : "fail");
         if (!e.contains("precision")) continue;
         for (const auto& [p, v] : e["precision"].items()) {

@@ -296,24 +296,12 @@ int Run(const FreeArgs& a) {
     fmt::print(stderr, "turncal free: {}\n", error);
     return 2;
   }
-  report::FreeReportInput input{source, found, context, results, {}};
-  for (const auto& r : results) {
-    std::optional<OrientationAdvice> advice;
-    if (r.estimate.estimate.ok) {
-      auto model = MakeFreeModel(r.model, context, &error);
-      FreeData data;
-      data.intervals = found.intervals;
-      data.context = context;
-      for (const auto& u : results) {
-        if (model && u.model == model->upstream() && u.estimate.estimate.ok) {
-          data.upstream_theta = u.estimate.estimate.theta;
-          data.upstream_covariance = u.estimate.estimate.covariance;
-        }
-      }
-      if (model) advice = NextOrientation(*model, data, r.estimate);
-    }
-    input.advice.push_back(advice);
-  }
+  report::FreeReportInput input;
+  input.source = source;
+  input.found = found;
+  input.context = context;
+  input.results = results;
+  input.advice = NextOrientations(results, found.intervals, context);
   bool all_passed = !results.empty();
   for (const auto& r : results) all_passed &= r.estimate.estimate.ok && r.estimate.gate_passed;
   if (!a.html.empty() &&

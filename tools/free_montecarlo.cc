@@ -14,44 +14,15 @@
 
 #include "core/estimation/free_calibrator.h"
 #include "core/estimation/sensor_class.h"
-#include "core/sequencing/free_intervals.h"
-#include "daemon/capture_replay.h"
-#include "drivers/capture/tcap.h"
+#include "daemon/free_pipeline.h"
+#include "daemon/replay_once.h"
+#include "protocol/calibration_json.h"
 #include "sim/capture.h"
 #include "sim/free_truth.h"
+#include "sim/tumble.h"
 
 namespace turncal::tools {
 namespace {
-
-// The samples of the capture's first device, decoded from its bytes.
-class Collector : public daemon::ReplayTarget {
- public:
-  void OnSample(int device, const Sample& s) override {
-    if (device == 0) samples.push_back(s);
-  }
-  bool OnAnnounce(const Announcement&, const std::vector<int>&, std::string*) override {
-    return true;
-  }
-  void OnTick(std::int64_t) override {}
-  void OnFinish(std::int64_t) override {}
-  std::vector<Sample> samples;
-};
-
-// Orientations of a tumble: "down" uniform on the sphere (or within cap_deg of the table's -z,
-// "up" near +z), turned about the vertical at random.
-std::vector<TablePose> TumblePoses(int n, double cap_deg, std::mt19937_64* rng) {
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  const double cos_cap = std::cos(cap_deg * M_PI / 180);
-  std::vector<TablePose> poses;
-  for (int k = 0; k < n; ++k) {
-    const double z = cos_cap + (1 - cos_cap) * u(*rng);
-    const double az = 2 * M_PI * u(*rng);
-    const double rho = std::sqrt(std::max(0.0, 1 - z * z));
-    const Eigen::Vector3d down(rho * std::cos(az), rho * std::sin(az), -z);
-    poses.push_back(PoseWithDownAlong(down, 2 * M_PI * u(*rng) - M_PI));
-  }
-  return poses;
-}
 
 std::pair<double, double> KsUniform(std::vector<double> p) {
   std::sort(p.begin(), p.end());
@@ -83,13 +54,19 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
   std::string error;
   const auto protocol = drivers::ParseProtocol(args.protocol);
   SensorClass sensor;
-  FreeContext context;
-  ModelContext mc;
-  context.gravity_mps2 = mc.reference.g_ned.norm();
-  context.field_magnitude = args.field_known ? mc.reference.B_ned.norm() : 0.0;
-  context.latitude_deg = mc.reference.latitude_deg;
+  // The station turncald --replay FILE --once --pose-source free runs, with this one model.
+  daemon::StationOptions station;
+  station.pose_source = daemon::PoseSource::kFree;
+  station.models = {args.model};
+  station.sensor_class = args.sensor_class;
+  station.sequencer.dwell_s = 1.0;
+  station.free.field_known = args.field_known;
+  station.drift_model = args.drift == "gauss-markov";
+  const bool known_class = SensorClassByName(args.sensor_class, &sensor);
+  // The free models' context as the station makes it: what the truth is expressed in.
+  const FreeContext context = daemon::FreeContextFor(station, sensor);
   auto model = MakeFreeModel(args.model, context, &error);
-  if (!protocol || !model || !SensorClassByName(args.sensor_class, &sensor)) {
+  if (!protocol || !model || !known_class) {
     fmt::print(stderr, "turncal free-montecarlo: {}\n",
                !protocol ? "unknown protocol '" + args.protocol + "'"
                : !model  ? error
@@ -100,20 +77,9 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
     fmt::print(stderr, "turncal free-montecarlo: the simulator's magnetometer is an ellipsoid\n");
     return 2;
   }
-  // Each interval's offset from the bias's wander: the class's bias instability.
-  if (args.drift == "gauss-markov") {
-    // The class's drift as a process in time: generalised least squares over the terms.
-    context.acc_drift = DriftForClass(sensor, SensorKind::kAccelerometer);
-    context.mag_drift = DriftForClass(sensor, SensorKind::kMagnetometer);
-    context.gyr_drift = DriftForClass(sensor, SensorKind::kGyroscope);
-    // The simulated sensors have no warm-up (the class's drift allows for one).
-    for (BiasDrift* d : {&context.acc_drift, &context.mag_drift, &context.gyr_drift}) {
-      d->warmup_sigma.setZero();
-    }
-  } else if (args.drift == "independent") {
-    context.acc_offset_sigma = args.offset_sigma * sensor.acc_bias_instability;
-    context.mag_offset_sigma = args.offset_sigma * sensor.mag_bias_instability;
-    context.gyr_offset_sigma = args.offset_sigma * sensor.gyr_bias_instability;
+  if (!station.IsValid(&error)) {
+    fmt::print(stderr, "turncal free-montecarlo: {}\n", error);
+    return 2;
   }
   const bool gyro = model->sensor() == SensorKind::kGyroscope;
   const int N = model->num_parameters();
@@ -134,64 +100,63 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
       o.accel_model = "accel13";
       o.mag_model = "mag13";
       if (gyro) o.gyro_model = "gyro12";
-      o.poses = TumblePoses(args.orientations, args.cap_deg, &rng);
+      o.poses = sim::TumbleTablePoses(args.orientations, args.cap_deg, &rng);
       o.session.sensor = sensor;
       o.session.dwell_s = args.dwell_s;
       o.session.seed = seed;
       sim::SimCapture capture;
       std::string e;
       const std::string path = (dir / fmt::format("run-{}.tcap", run)).string();
-      drivers::CaptureReader reader;
-      Collector collector;
-      daemon::ReplayStats stats;
+      daemon::ReplayOnceOutcome replay;
       const bool read = sim::BuildSimCapture(o, &capture, &e) &&
-                        sim::WriteSimCapture(capture, path, &e) && reader.Open(path, &e) &&
-                        daemon::ReplayInto(&reader, &collector, false, {}, &stats, &e);
+                        sim::WriteSimCapture(capture, path, &e) &&
+                        daemon::ReplayOnce(path, station, "", {}, &replay, &e);
       std::filesystem::remove(path);
       if (!read) {
         out.error = e;
         continue;
       }
-      SequencerOptions so;
-      so.dwell_s = 1.0;
-      FreeIntervalCollector intervals(so);
-      for (const Sample& s : collector.samples) intervals.Push(s);
-      const FreeIntervals found = intervals.Finish(collector.samples.back().t_host_ns);
-      out.intervals = static_cast<int>(found.intervals.size());
-      std::vector<FreeModelResult> results;
-      if (!CalibrateFreeModels({args.model}, found.intervals, context, FreeCalibratorOptions{},
-                               &results, &e)) {
-        out.error = e;
+      const nlohmann::json& device = replay.result["devices"].begin().value();
+      out.intervals = device.value("poses", 0);
+      const auto it = device["models"].find(args.model);
+      if (it == device["models"].end()) {
+        out.error = "no result for the model";
         continue;
       }
-      const FreeModelResult& r = results.back();
-      Eigen::VectorXd truth;
+      const nlohmann::json& r = *it;
       // The bias window on the session's clock (host time = capture time).
       std::optional<TimeWindow> window;
-      if (r.estimate.bias_window_host) {
+      TimeWindow host;
+      if (r.contains("bias_window") && protocol::ParseTimeWindow(r["bias_window"], &host)) {
         const double offset_s = static_cast<double>(capture.offset_ns) * 1e-9;
-        window = TimeWindow{r.estimate.bias_window_host->t0_s - offset_s,
-                            r.estimate.bias_window_host->t1_s - offset_s};
+        window = TimeWindow{host.t0_s - offset_s, host.t1_s - offset_s};
       }
-      if (r.model != args.model || !r.estimate.estimate.ok ||
+      Eigen::VectorXd truth;
+      const std::string fitted = r.value("model", "");
+      if (fitted != args.model || !r.value("ok", false) ||
           !sim::FreeTruth(capture, args.model, context, window, &truth, &e)) {
-        out.error = r.model != args.model     ? "fitted " + r.model + ": " + r.note
-                    : !r.estimate.estimate.ok ? r.estimate.estimate.error
-                                              : e;
+        out.error = fitted != args.model    ? "fitted " + fitted + ": " + r.value("note", "")
+                    : !r.value("ok", false) ? r.value("error", "no estimate")
+                                            : e;
         continue;
       }
-      const Estimate& est = r.estimate.estimate;
-      out.z = (est.theta - truth).cwiseQuotient(est.sigma);
+      Eigen::VectorXd theta(N), sigma(N);
+      for (int i = 0; i < N; ++i) {
+        const auto& p = r["params"][model->parameters()[static_cast<std::size_t>(i)].name];
+        theta[i] = p["value"].get<double>();
+        sigma[i] = p["sigma"].is_number() ? p["sigma"].get<double>() : INFINITY;
+      }
+      out.z = (theta - truth).cwiseQuotient(sigma);
       if (args.verbose) {
         std::lock_guard<std::mutex> lock(print_mutex);
         for (int i = 0; i < N; ++i) {
           fmt::print(stderr, "run {} {} est {:.9g} truth {:.9g} sigma {:.3g} z {:+.2f}\n", run,
-                     model->parameters()[static_cast<std::size_t>(i)].name, est.theta[i], truth[i],
-                     est.sigma[i], out.z[i]);
+                     model->parameters()[static_cast<std::size_t>(i)].name, theta[i], truth[i],
+                     sigma[i], out.z[i]);
         }
       }
-      out.p_value = est.p_value;
-      out.gate = r.estimate.gate_passed;
+      out.p_value = r.value("p_value", 1.0);
+      out.gate = r["gate"].value("pass", false);
       out.ok = out.z.allFinite();
       if (!out.ok) out.error = "a sigma is not finite";
       const int d = ++done;
@@ -313,14 +278,10 @@ void AddFreeMonteCarloCommand(CLI::App* app) {
       "--field-unknown", [a](std::int64_t) { a->field_known = false; },
       "the magnetometer models without the field's magnitude (relative scale)");
   cmd->add_option("--drift", a->drift,
-                  "the calibration's model of the bias wander: gauss-markov (the class's, a "
-                  "process in time), independent (an offset per interval, --offset-sigma) or none")
-      ->check(CLI::IsMember({"gauss-markov", "independent", "none"}))
-      ->capture_default_str();
-  cmd->add_option("--offset-sigma", a->offset_sigma,
-                  "each interval's offset allowance (FreeContext's *_offset_sigma) in units of the "
-                  "class's bias instability")
-      ->check(CLI::NonNegativeNumber)
+                  "the station's model of the bias wander ([station] drift_model): gauss-markov "
+                  "(the class's, a process in time) or independent (an offset per interval of "
+                  "the class's bias instability)")
+      ->check(CLI::IsMember({"gauss-markov", "independent"}))
       ->capture_default_str();
   cmd->add_flag("--verbose", a->verbose,
                 "every run's estimate, truth, sigma and z per parameter on standard error");

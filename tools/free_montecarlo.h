@@ -1,11 +1,12 @@
 #pragma once
 // `turncal free-montecarlo`: is a free model's sigma honest through the whole free-mode path?
 // Every run simulates a tumble as bytes (random orientations of a three-axis table, exactly what
-// `turncal sim` writes, the table's announced poses ignored), decodes it, finds its static
-// intervals with the sequencer in free mode, fits the model (and its upstream) as `turncal free`
-// does, and compares every parameter with the free model's truth for the simulated sensor
-// (sim/free_truth.h). Prints mean and std of z = (estimate - truth) / sigma per parameter, the
-// count beyond 3 sigma, the chi^2 p-values against uniform and the gate (docs/ACCURACY.md).
+// `turncal sim` writes), runs it through the station exactly as `turncald --replay FILE --once
+// --pose-source free` does (the capture's pose events ignored, the static intervals found by the
+// sequencer in free mode, the model and its upstream fitted after every interval, gated), and
+// compares every parameter of the final estimate with the free model's truth for the simulated
+// sensor (sim/free_truth.h). Prints mean and std of z = (estimate - truth) / sigma per parameter,
+// the count beyond 3 sigma, the chi^2 p-values against uniform and the gate (docs/ACCURACY.md).
 
 #include <CLI/CLI.hpp>
 #include <cstdint>
@@ -24,11 +25,10 @@ struct FreeMonteCarloArgs {
   double dwell_s = 4.0;
   double cap_deg = 180.0;
   bool field_known = true;
-  // The calibration's model of the bias wander: "gauss-markov" (the class's drift, generalised
-  // least squares), "independent" (offset_sigma x the class's bias instability per interval) or
-  // "none".
+  // The station's model of the bias wander ([station] drift_model): "gauss-markov" (the class's
+  // drift, generalised least squares) or "independent" (the class's bias instability as an offset
+  // per interval).
   std::string drift = "gauss-markov";
-  double offset_sigma = 1.0;  // the intervals' offset allowance, in the class's bias instability
   bool verbose = false;
   bool json = false;
 };

@@ -210,4 +210,29 @@ std::optional<OrientationAdvice> NextOrientation(const FreeModel& model, const F
   return best;
 }
 
+std::vector<std::optional<OrientationAdvice>> NextOrientations(
+    const std::vector<FreeModelResult>& results, const std::vector<FreeInterval>& intervals,
+    const FreeContext& context) {
+  std::vector<std::optional<OrientationAdvice>> out;
+  for (const auto& r : results) {
+    std::optional<OrientationAdvice> advice;
+    std::string error;
+    auto model = r.estimate.estimate.ok ? MakeFreeModel(r.model, context, &error) : nullptr;
+    if (model) {
+      FreeData data;
+      data.intervals = intervals;
+      data.context = context;
+      for (const auto& u : results) {
+        if (u.model == model->upstream() && u.estimate.estimate.ok) {
+          data.upstream_theta = u.estimate.estimate.theta;
+          data.upstream_covariance = u.estimate.estimate.covariance;
+        }
+      }
+      advice = NextOrientation(*model, data, r.estimate);
+    }
+    out.push_back(advice);
+  }
+  return out;
+}
+
 }  // namespace turncal

@@ -14,6 +14,7 @@
 #include <Eigen/Core>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/estimation/free_calibrator.h"
 
@@ -32,5 +33,12 @@ struct OrientationAdvice {
 // estimate, or a gyroscope without an interval to turn from).
 std::optional<OrientationAdvice> NextOrientation(const FreeModel& model, const FreeData& data,
                                                  const FreeEstimate& estimate);
+
+// The next orientation for each of `results` (CalibrateFreeModels's, in its order), each model
+// weighed with its upstream's estimate where it builds on one; nullopt where a model has no
+// estimate or no candidate.
+std::vector<std::optional<OrientationAdvice>> NextOrientations(
+    const std::vector<FreeModelResult>& results, const std::vector<FreeInterval>& intervals,
+    const FreeContext& context);
 
 }  // namespace turncal

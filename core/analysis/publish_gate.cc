@@ -91,6 +91,20 @@ double ToleranceFor(const ParameterInfo& parameter, const GateOptions& options) 
   return t.gain;
 }
 
+double FreeToleranceFor(const ParameterInfo& parameter, const GateOptions& options,
+                        ParameterInfo* judged_as) {
+  ParameterInfo as = parameter;
+  const bool gain_k = parameter.unit == ParameterUnit::kGain && parameter.name.size() == 2 &&
+                      parameter.name[0] == 'k';
+  if (gain_k) as.unit = ParameterUnit::kScaleFactor;
+  if (judged_as) *judged_as = as;
+  if (parameter.kind != ParameterKind::kSensor &&
+      !options.parameter_tolerance.count(parameter.name)) {
+    return -1.0;
+  }
+  return ToleranceFor(as, options);
+}
+
 std::vector<std::string> PrecisionShortfalls(const MeasurementModel& model,
                                              const Eigen::VectorXd& sigma,
                                              const GateOptions& options,

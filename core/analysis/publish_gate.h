@@ -65,6 +65,15 @@ std::vector<int> GatedParameters(const MeasurementModel& model);
 // The 1 sigma a gated parameter must reach.
 double ToleranceFor(const ParameterInfo& parameter, const GateOptions& options);
 
+// The 1 sigma a free model's parameter (core/modeling/free_model.h, a calibration without poses)
+// must reach, or a negative number for one never gated (the rotation between two triads, the
+// dip: they do not enter the triad's own correction). A triad's gains k (about 1: imu_tk's scale)
+// are judged as scale factors, by the scale-factor tolerance, and `judged_as` (when given)
+// receives the parameter as judged, for FormatSigma; the rest by their unit, and per-parameter
+// tolerances by name override both.
+double FreeToleranceFor(const ParameterInfo& parameter, const GateOptions& options,
+                        ParameterInfo* judged_as = nullptr);
+
 struct GateResult {
   bool pass = false;
   std::vector<std::string> reasons;  // every failed check, in plain words

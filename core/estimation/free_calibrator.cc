@@ -26,6 +26,7 @@ bool FreeCalibratorOptions::IsValid(std::string* error) const {
   if (!(min_relative_singular >= 0) || !(min_coverage >= 0 && min_coverage <= 1)) {
     return fail("the gate's limits must be a relative singular value >= 0 and a share in [0, 1]");
   }
+  if (precision && !precision->IsValid(error)) return false;
   return observability.IsValid(error);
 }
 
@@ -333,6 +334,26 @@ FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
   if (options.min_coverage > 0 && out.coverage.fraction() < options.min_coverage) {
     refuse(fmt::format("coverage {:.1f} % of the sphere is below the {:.1f} % required",
                        100 * out.coverage.fraction(), 100 * options.min_coverage));
+  }
+  if (options.precision) {
+    const GateOptions& g = *options.precision;
+    if (est.dof < g.min_dof) {
+      refuse(fmt::format("{} redundant equations: the fit check needs at least {}", est.dof,
+                         g.min_dof));
+    } else if (est.p_value < g.min_p_value) {
+      refuse(fmt::format(
+          "chi2/dof {:.2f} (p {:.2g}, below {:.2g}): {}", est.dof > 0 ? est.chi2 / est.dof : 0.0,
+          est.p_value, g.min_p_value,
+          est.fit.cause.empty() ? "the noise model or the model does not fit" : est.fit.cause));
+    }
+    for (int i = 0; i < n; ++i) {
+      ParameterInfo as;
+      const double limit = FreeToleranceFor(model.parameters()[i], g, &as);
+      if (limit > 0 && std::isfinite(est.sigma[i]) && !(est.sigma[i] <= limit)) {
+        refuse(fmt::format("{}: sigma {} exceeds the tolerance {}", as.name,
+                           FormatSigma(as, est.sigma[i]), FormatSigma(as, limit)));
+      }
+    }
   }
   for (const auto& [name, limit] : options.max_sigma) {
     const int i = model.index_of(name);

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/analysis/observability.h"
+#include "core/analysis/publish_gate.h"
 #include "core/analysis/sphere_coverage.h"
 #include "core/estimation/calibrator.h"
 #include "core/modeling/free_model.h"
@@ -42,6 +43,10 @@ struct FreeCalibratorOptions {
   // A parameter's sigma above this (in its display unit's terms: the gate's per-parameter limit
   // in parameter units; empty: none) refuses too.
   std::vector<std::pair<std::string, double>> max_sigma;
+  // The station's gate (turncald's free pose source, [gate]): every sensor parameter's sigma
+  // within its tolerance (FreeToleranceFor), at least min_dof redundant equations and the
+  // chi^2's upper-tail p-value at least min_p_value. Unset (turncal free): none of these.
+  std::optional<GateOptions> precision;
 
   bool IsValid(std::string* error) const;
 };

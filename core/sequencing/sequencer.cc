@@ -144,6 +144,14 @@ void Sequencer::StartDetector(const NoiseProfile& profile, double t_s) {
 }
 
 bool Sequencer::Announce(const Announcement& a, std::string* error) {
+  if (free_) {
+    if (error) {
+      *error =
+          "free mode: the station finds the static intervals itself and takes no poses (hold "
+          "the device still in each orientation; next_pose says which to add)";
+    }
+    return false;
+  }
   if (scheduled()) {
     if (error) *error = "the sequencer follows a schedule; announcements are not taken";
     return false;
