@@ -16,6 +16,9 @@ bool Options::IsValid(std::string* error) const {
   if (!result_out.empty() && !once) return fail("--result-out needs --replay FILE --once");
   if (!record_path.empty() && once) return fail("--record is for live devices, not --once");
   if (replay_protocol && replay_path.empty()) return fail("--protocol needs --replay FILE");
+  if (replay_rate_hz > 0 && !replay_protocol) {
+    return fail("--rate is for a raw stream's replay (--replay FILE.bin --protocol P)");
+  }
   for (std::size_t i = 0; i < devices.size(); ++i) {
     for (std::size_t j = i + 1; j < devices.size(); ++j) {
       if (devices[i].name == devices[j].name) {
@@ -59,6 +62,9 @@ void AddCommandLine(CLI::App* app, Options* options) {
          },
          "protocol of a raw .bin replay: mip|gx2|xbus|xbus-legacy")
       ->type_name("P");
+  app->add_option("--rate", options->replay_rate_hz,
+                  "a raw replay's samples per second, for a stream without device time stamps")
+      ->check(CLI::PositiveNumber);
   app->add_option("--pose-source", options->pose_source,
                   "announced (a controller announces each pose) or free (no table: the static "
                   "intervals of a tumble, calibrated with the free models accel9, gyro9, "

@@ -17,9 +17,10 @@ struct Options {
   std::string state_dir = "/var/lib/turncal";
   std::string replay_path;                           // --replay FILE
   std::optional<drivers::Protocol> replay_protocol;  // --protocol, for raw .bin replays
-  bool once = false;                                 // --once: run the capture, then exit
-  std::string result_out;                            // --result-out FILE
-  std::string record_path;  // --record FILE.tcap: every device's bytes and the pose commands
+  double replay_rate_hz = 0.0;  // --rate: a raw replay's sample rate when it carries no time
+  bool once = false;            // --once: run the capture, then exit
+  std::string result_out;       // --result-out FILE
+  std::string record_path;      // --record FILE.tcap: every device's bytes and the pose commands
   // --pose-source announced|free: over [station] pose_source ("free": no table, the sequencer
   // finds the static intervals itself and the free models calibrate, docs/FREE.md).
   std::string pose_source;

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "daemon/station.h"
+#include "drivers/device_spec.h"
 
 namespace turncal::daemon {
 
@@ -22,5 +23,15 @@ bool ReplayOnce(const std::string& path, const StationOptions& options,
                 const std::string& result_out,
                 const std::function<void(const nlohmann::json&)>& on_event,
                 ReplayOnceOutcome* outcome, std::string* error);
+
+// The same on a raw device stream (`turncald --replay FILE.bin --protocol P --once`, DESIGN.md
+// "Capture file"): one device named after the file, its samples timed by the device's clock or,
+// without one, `rate_hz` (drivers/capture/raw_stream.h); a magnetometer the device holds between
+// updates keeps only its new values. The result adds "raw": the decoder's counters, the repeats
+// dropped and where the times came from.
+bool ReplayRawOnce(const std::string& path, drivers::Protocol protocol, double rate_hz,
+                   const StationOptions& options, const std::string& result_out,
+                   const std::function<void(const nlohmann::json&)>& on_event,
+                   ReplayOnceOutcome* outcome, std::string* error);
 
 }  // namespace turncal::daemon

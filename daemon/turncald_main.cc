@@ -26,7 +26,8 @@ DESCRIPTION
   state directory, announced, applied to the corrected output) once its gate passes. Flags
   override the configuration file; SIGHUP reloads it; SIGTERM stops cleanly. Under systemd it
   is Type=notify with a watchdog (systemd/turncald.service).
-  --replay FILE --once runs the same pipeline on a capture at full speed and exits.
+  --replay FILE --once runs the same pipeline on a capture at full speed and exits; a raw
+  device stream (.bin) needs --protocol, and --rate when its samples carry no time.
   --pose-source free (or [station] pose_source = "free") needs no table and no controller: the
   sequencer finds the static intervals of a tumble by hand or on a fixture itself, and the free
   models (accel9, gyro9, gyro9g, magellipsoid, magsphere, accmag) calibrate from them
@@ -40,6 +41,7 @@ EXAMPLES
   $ turncald --replay session.tcap --once --state-dir /tmp/replayed && \
     turncal report --state-dir /tmp/replayed -o report.html
   $ turncald --replay tumble.tcap --once --pose-source free --result-out result.json
+  $ turncald --replay compass.bin --protocol mip --rate 50 --once --pose-source free
 
 EXIT STATUS
   0 stopped by SIGTERM/SIGINT, or --once finished; 1 the service could not start (socket,
@@ -91,21 +93,18 @@ SEE ALSO
     // the default are not used, so a replay never writes into the service's directory unasked.
     if (app.count("--state-dir") > 0) station.state_dir = options.state_dir;
     turncal::daemon::ReplayOnceOutcome outcome;
-    if (options.replay_protocol) {
-      spdlog::error(
-          "--replay with --once takes a .tcap capture (raw .bin streams: turncal decode)");
-      return 2;
-    }
-    const bool ok = turncal::daemon::ReplayOnce(
-        options.replay_path, station, options.result_out,
-        [](const nlohmann::json& e) {
-          const std::string kind = e.value("class", "");
-          if (kind == "POSE_PROGRESS" || kind == "POSE_STARTED" || kind == "POSE_COLLECTING") {
-            return;
-          }
-          spdlog::info("{}", e.dump());
-        },
-        &outcome, &error);
+    const auto on_event = [](const nlohmann::json& e) {
+      const std::string kind = e.value("class", "");
+      if (kind == "POSE_PROGRESS" || kind == "POSE_STARTED" || kind == "POSE_COLLECTING") return;
+      spdlog::info("{}", e.dump());
+    };
+    const bool ok =
+        options.replay_protocol
+            ? turncal::daemon::ReplayRawOnce(options.replay_path, *options.replay_protocol,
+                                             options.replay_rate_hz, station, options.result_out,
+                                             on_event, &outcome, &error)
+            : turncal::daemon::ReplayOnce(options.replay_path, station, options.result_out,
+                                          on_event, &outcome, &error);
     if (!ok) {
       spdlog::error("{}", error);
       return 2;

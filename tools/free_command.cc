@@ -14,6 +14,7 @@
 #include "core/sequencing/free_intervals.h"
 #include "daemon/atomic_file.h"
 #include "daemon/capture_replay.h"
+#include "drivers/capture/raw_stream.h"
 #include "drivers/capture/tcap.h"
 #include "drivers/capture/text_log.h"
 #include "drivers/decoder_factory.h"
@@ -78,24 +79,6 @@ void Rescale(const FreeArgs& a, std::vector<Sample>* samples) {
     }
     if (s.mag) s.mag = (*s.mag - Eigen::Vector3d::Constant(a.mag.offset)) * a.mag.scale;
   }
-}
-
-// A raw stream's samples get host times from the device's clock, else from --rate.
-bool TimeRawSamples(const FreeArgs& a, std::vector<Sample>* samples, std::string* error) {
-  if (samples->empty()) return true;
-  const bool clocked = samples->front().t_device_s.has_value();
-  if (!clocked && !(a.rate_hz > 0)) {
-    *error = "the stream's samples carry no time: give their rate with --rate HZ";
-    return false;
-  }
-  const double t0 = clocked ? *samples->front().t_device_s : 0.0;
-  for (std::size_t i = 0; i < samples->size(); ++i) {
-    Sample& s = (*samples)[i];
-    const double t =
-        s.t_device_s && clocked ? *s.t_device_s - t0 : static_cast<double>(i) / a.rate_hz;
-    s.t_host_ns = static_cast<std::int64_t>(std::llround(t * 1e9));
-  }
-  return true;
 }
 
 bool ReadSamples(const FreeArgs& a, std::vector<Sample>* out, std::string* source,
@@ -175,16 +158,13 @@ bool ReadSamples(const FreeArgs& a, std::vector<Sample>* out, std::string* sourc
       *error = fmt::format("unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)", a.protocol);
       return false;
     }
-    auto decoder = drivers::MakeDecoder(*protocol, drivers::DecoderOptions{}, &collector, error);
-    if (!decoder) return false;
-    std::ifstream in(a.files[0], std::ios::binary);
-    if (!in) {
-      *error = fmt::format("cannot open '{}'", a.files[0]);
+    drivers::RawStreamStats stats;
+    if (!drivers::ReadRawStream(a.files[0], *protocol, a.rate_hz, &collector.samples, &stats,
+                                error)) {
+      if (error->find("carry no time") != std::string::npos) *error += ": --rate HZ";
       return false;
     }
-    drivers::DecodeStream(in, decoder.get());
-    if (!TimeRawSamples(a, &collector.samples, error)) return false;
-    const auto& c = decoder->counters();
+    const auto& c = stats.decoder;
     *source = fmt::format("{} stream, {} samples, {} bad frames", a.protocol,
                           collector.samples.size(), c.bad_checksums + c.bad_structure);
   } else {
@@ -194,31 +174,6 @@ bool ReadSamples(const FreeArgs& a, std::vector<Sample>* out, std::string* sourc
   Rescale(a, &collector.samples);
   *out = std::move(collector.samples);
   return true;
-}
-
-// A device that sends a triad faster than it samples it repeats the last value (sample and hold:
-// the MIP fixture's magnetometer, ~20 Hz in a 50 Hz stream): those repeats are not new
-// measurements, and their correlation breaks the stillness tests' white noise. In a stream of
-// that triad alone, samples repeating the previous value exactly are dropped when they are more
-// than a third of the stream. Returns how many were dropped.
-std::int64_t DropHeldRepeats(std::vector<Sample>* samples) {
-  auto only_mag = [](const Sample& s) { return s.mag && !s.acc_mps2 && !s.gyr_radps; };
-  std::int64_t repeats = 0, n = 0;
-  for (std::size_t i = 1; i < samples->size(); ++i) {
-    const Sample &a = (*samples)[i - 1], &b = (*samples)[i];
-    if (!only_mag(a) || !only_mag(b)) return 0;
-    ++n;
-    repeats += *a.mag == *b.mag;
-  }
-  if (n == 0 || 3 * repeats <= n) return 0;
-  std::vector<Sample> kept;
-  kept.reserve(samples->size() - static_cast<std::size_t>(repeats));
-  for (std::size_t i = 0; i < samples->size(); ++i) {
-    if (i == 0 || *(*samples)[i].mag != *(*samples)[i - 1].mag) kept.push_back((*samples)[i]);
-  }
-  const auto dropped = static_cast<std::int64_t>(samples->size() - kept.size());
-  *samples = std::move(kept);
-  return dropped;
 }
 
 std::vector<std::string> Split(const std::string& list) {
@@ -242,7 +197,7 @@ int Run(const FreeArgs& a) {
     fmt::print(stderr, "turncal free: {} samples: nothing to calibrate\n", samples.size());
     return 2;
   }
-  if (const std::int64_t held = DropHeldRepeats(&samples)) {
+  if (const std::int64_t held = drivers::DropHeldRepeats(&samples)) {
     source += fmt::format(
         "; {} repeated magnetometer values dropped (the device holds its field "
         "between updates: {} new values remain)",

@@ -1,6 +1,7 @@
 #include "tools/free_montecarlo.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -198,6 +199,10 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
   const Eigen::VectorXd mean = s1 / ok;
   const Eigen::VectorXd std_z = (s2 / ok - mean.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
   const auto [ks_d, ks_p] = KsUniform(p_values);
+  // The chi^2 p-values' deciles: uniform when the noise model is right (too many near 0: chi^2
+  // too large; near 1: too small).
+  std::vector<int> deciles(10, 0);
+  for (double p : p_values) ++deciles[static_cast<std::size_t>(std::clamp(p, 0.0, 0.999) * 10)];
   int bad = 0;
   nlohmann::json rows = nlohmann::json::array();
   std::string table =
@@ -227,6 +232,7 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
                                       {"gate_passed", gates},
                                       {"ks_d", ks_d},
                                       {"ks_p", ks_p},
+                                      {"p_value_deciles", deciles},
                                       {"params", rows}}
                            .dump());
   } else {
@@ -235,10 +241,11 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
         "+z), "
         "each as bytes through free mode: {} estimated ({} failed{}), {:.1f} intervals on "
         "average, gate passed {}\n\n{}\nchi^2 p-values against uniform: KS D = {:.3f}, p = "
-        "{:.3g}\nCriteria: std z in [0.9, 1.1] and |mean z| <= 0.15; {} of {} parameters fail.\n",
+        "{:.3g}; per tenth from 0 to 1: {}\nCriteria: std z in [0.9, 1.1] and |mean z| <= 0.15; "
+        "{} of {} parameters fail.\n",
         args.model, args.sensor_class, args.protocol, args.drift, args.runs, args.orientations,
         args.cap_deg, ok, args.runs - ok, first_error.empty() ? "" : ", the first: " + first_error,
-        intervals / ok, gates, table, ks_d, ks_p, bad, N);
+        intervals / ok, gates, table, ks_d, ks_p, fmt::join(deciles, " "), bad, N);
   }
   return bad == 0 ? 0 : 1;
 }

@@ -6,7 +6,9 @@ input exits 2. On imu_tk's real Xsens recording (skipped without ../shared/fixtu
 accel9's | |f| - g | and gyro9g's gravity-direction residual are the figures docs/ACCURACY.md
 quotes, and gyro9's chi^2 says the g-sensitivity is missing. The MIP SDK's real magnetometer-only
 packets run through free mode to a sphere, refused with the reason. A short Monte Carlo keeps its
-z spread near 1."""
+z spread near 1. turncald's free pose source on the same bytes (`turncald --replay FILE --once
+--pose-source free`, also on the raw MIP stream): every model activated, its documents re-fitted by
+`turncal report`, the raw stream's held repeats dropped and the sphere refused with the reason."""
 import json
 import math
 import os
@@ -16,6 +18,7 @@ import sys
 import tempfile
 
 TURNCAL = sys.argv[1]
+TURNCALD = sys.argv[2]
 failures = 0
 
 
@@ -27,6 +30,10 @@ def check(ok, what):
 
 def run(args):
     return subprocess.run([TURNCAL] + args, capture_output=True, text=True)
+
+
+def turncald(args):
+    return subprocess.run([TURNCALD] + args, capture_output=True, text=True)
 
 
 def model(result, name):
@@ -70,6 +77,28 @@ with tempfile.TemporaryDirectory() as d:
                 check("advice" in m, f"{name}: advice '{m.get('advice', {}).get('text')}'")
         text = open(html).read() if os.path.exists(html) else ""
         check("<svg" in text and "Coverage sphere" in text, "the HTML report has the coverage sphere")
+    # The same bytes through turncald's free pose source, persisted, then reported.
+    state = os.path.join(d, "state")
+    out = os.path.join(d, "result.json")
+    r = turncald(["--replay", capture, "--once", "--pose-source", "free", "--state-dir", state,
+                  "--result-out", out])
+    check(r.returncode == 0, f"turncald --pose-source free: exit {r.returncode} {r.stderr[-300:]}")
+    if os.path.exists(out):
+        res = json.load(open(out))
+        dev = res["devices"]["imu"]
+        check(res["pose_source"] == "free" and res["pose_commands_ignored"] == 20,
+              f"turncald: free, {res.get('pose_commands_ignored')} pose events ignored")
+        check(dev["poses"] == 20, f"turncald: {dev['poses']} intervals of 20 orientations")
+        for name in ["accel9", "gyro9", "magellipsoid", "accmag"]:
+            m = dev["models"].get(name, {})
+            check(m.get("gate", {}).get("pass") and m.get("active_version", 0) >= 1 and
+                  os.path.exists(os.path.join(state, "calibrations", f"imu.{name}.json")),
+                  f"turncald {name}: gate {m.get('gate')}, active v{m.get('active_version')}")
+        report = os.path.join(d, "report.html")
+        r = run(["report", "--state-dir", state, "-o", report])
+        text = open(report).read() if os.path.exists(report) else ""
+        check(r.returncode == 0 and text.count("the stored values agree") == 4,
+              f"turncal report re-fits the 4 free documents: exit {r.returncode} {r.stderr[-200:]}")
     r = run(["free", os.path.join(d, "none.tcap")])
     check(r.returncode == 2 and "cannot" in r.stderr, f"a missing file: exit {r.returncode}")
     r = run(["free", poses, "--columns", "t,ax,ay"])
@@ -153,6 +182,23 @@ else:
             check(not m.get("gate", {}).get("passed", True) and
                   any("rank" in why for why in m["gate"]["reasons"]),
                   f"MIP magnetometer only: refused for rank: {m.get('gate')}")
+        # The same bytes through turncald's free pose source.
+        r = turncald(["--replay", compass, "--protocol", "mip", "--once", "--pose-source", "free"])
+        check(r.returncode == 2 and "--rate" in r.stderr,
+              f"turncald: a raw stream without time asks for --rate: {r.stderr.strip()[-200:]}")
+        out = os.path.join(d, "compass.json")
+        r = turncald(["--replay", compass, "--protocol", "mip", "--rate", "50", "--once",
+                      "--pose-source", "free", "--result-out", out])
+        check(r.returncode == 0, f"turncald raw MIP magnetometer: exit {r.returncode}")
+        if os.path.exists(out):
+            res = json.load(open(out))
+            m = res["devices"]["compass"]["models"].get("magellipsoid", {})
+            check(res["raw"]["held_repeats_dropped"] > 0,
+                  f"turncald: held repeats dropped: {res['raw']}")
+            check(m.get("model") == "magsphere" and "cannot carry an ellipsoid" in m.get("note", "")
+                  and not m["gate"]["pass"] and any("rank" in w for w in m["gate"]["reasons"]),
+                  f"turncald raw MIP magnetometer: a sphere, refused with the reason: "
+                  f"{m.get('note', '')[:120]} {m.get('gate')}")
 
 print(f"free: {failures} failure(s)")
 sys.exit(1 if failures else 0)
