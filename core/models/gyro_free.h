@@ -19,13 +19,17 @@
 //    over the move (the white variance per sample times the period times the move's seconds, from
 //    the intervals' own sample covariance), and the Earth's turn over the move: the integral is
 //    inertial, gravity turns with the Earth, by T e x u, e the Earth's horizontal rate in the
-//    second interval's frame (Omega cos L, pointing where the unknown heading puts it) -- the same
-//    e its rest sees, so the two terms share it (FreeTerm::shared) and are whitened together. The
+//    second interval's frame (Omega cos L, pointing where the unknown heading puts it). The
 //    accelerometer's drift at both ends moves u (FreeTerm::extra_drift).
 //  - rest (3 per interval): T K (w_mean - b - B f) - Omega sin(latitude) u, the Earth's rate's
-//    vertical part known from gravity, the horizontal part e, (Omega cos L)^2 / 2 across u, in an
-//    unknown azimuth that a hand's placement draws afresh for each interval (shared with the move
-//    into the interval).
+//    vertical part known from gravity, the horizontal part e.
+// The Earth's horizontal rate is one vector in the world of known length and unknown azimuth, so
+// every rest and move of a chain of intervals joined by moves sees the same one, turned by the
+// turns between them (the moves' P at theta, composed from the chain's first interval): one
+// random vector per chain, (Omega cos L)^2 / 2 across gravity in that first frame, shared by all
+// its terms (FreeTerm::shared) and whitened with them. Taken as independent per interval instead,
+// an industrial gyro's misalignments had sigma 5 % too large (tests/core/free_calibrator_test.cc).
+// A chain restarts where a move is missing (its azimuth then independent of the previous one's).
 
 #include <ceres/rotation.h>
 #include <fmt/format.h>
@@ -207,6 +211,14 @@ class GyroFree final : public FreeModel {
       return Eigen::Matrix3d(P * La * MeanCovariance(s, data.context.acc_offset_sigma) *
                              La.transpose() * P / f.squaredNorm());
     };
+    // The Earth's horizontal rate is one vector in the world, of known length and unknown heading:
+    // every interval of a chain of intervals joined by moves sees it turned by the turns the gyro
+    // measured (Q, from the chain's first interval's frame to this one's), so all of them share
+    // it (a random vector, covariance h^2/2 across gravity in the first frame). A chain restarts
+    // where a move is missing; its heading is then independent of the previous chain's.
+    int chain_key = -1;
+    Eigen::Matrix3d Q = Eigen::Matrix3d::Identity();
+    Eigen::Matrix3d chain_cov = Eigen::Matrix3d::Zero();
     const FreeInterval* prev = nullptr;
     for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
       const FreeInterval& iv = data.intervals[k];
@@ -216,33 +228,12 @@ class GyroFree final : public FreeModel {
       }
       Eigen::Vector3d u1;
       const Eigen::Matrix3d cov1 = unit(*iv.acc, &u1);
-      if (iv.gyr && iv.gyr->count > 1) {
-        auto* f = new RestFunctor<kWithG>;
-        f->gyr = iv.gyr->mean;
-        f->acc = iv.acc->mean;
-        f->vertical_radps = omega * std::sin(lat);
-        const double h = omega * std::cos(lat);
-        const Eigen::Matrix3d across = Eigen::Matrix3d::Identity() - u1 * u1.transpose();
-        const Eigen::Matrix3d c =
-            Lg * MeanCovariance(*iv.gyr, data.context.gyr_offset_sigma) * Lg.transpose();
-        f->W = Whitener<3>(c);
-        FreeTerm t;
-        // The Earth's horizontal rate in this interval's frame, shared with the move into it.
-        t.shared.push_back({k, f->W, h * h / 2 * across});
-        t.cost =
-            std::make_unique<ceres::AutoDiffCostFunction<RestFunctor<kWithG>, 3, kGyr, kAcc>>(f);
-        t.upstream = true;
-        t.interval = k;
-        t.kind = "rest";
-        t.window = free::Window(iv);
-        terms.push_back(std::move(t));
-      }
-      if (prev && iv.move_in && !iv.move_in->increment_rad.empty()) {
+      const bool moved = prev && iv.move_in && !iv.move_in->increment_rad.empty();
+      // The turn of the move at theta (from the previous interval's frame to this one's), to
+      // carry the first end's covariance to the second and the Earth's rate along the chain.
+      Eigen::Matrix3d P = Eigen::Matrix3d::Identity();
+      if (moved) {
         const MoveRecord& m = *iv.move_in;
-        Eigen::Vector3d u0;
-        const Eigen::Matrix3d cov0 = unit(*prev->acc, &u0);
-        // The turn at theta, to carry the first end's covariance to the second.
-        Eigen::Matrix3d P = Eigen::Matrix3d::Identity();
         for (std::size_t j = 0; j < m.increment_rad.size(); ++j) {
           const Eigen::Vector3d phi =
               -(Lg * (m.increment_rad[j] - m.block_s[j] * BiasAt(data, theta, m, j, *prev)));
@@ -252,6 +243,37 @@ class GyroFree final : public FreeModel {
                                         : Eigen::Matrix3d::Identity();
           P = R * P;
         }
+      }
+      if (!moved || chain_key < 0) {
+        chain_key = k;
+        Q.setIdentity();
+        chain_cov = earth_h * earth_h / 2 * (Eigen::Matrix3d::Identity() - u1 * u1.transpose());
+      } else {
+        Q = P * Q;
+      }
+      if (iv.gyr && iv.gyr->count > 1) {
+        auto* f = new RestFunctor<kWithG>;
+        f->gyr = iv.gyr->mean;
+        f->acc = iv.acc->mean;
+        f->vertical_radps = omega * std::sin(lat);
+        const Eigen::Matrix3d c =
+            Lg * MeanCovariance(*iv.gyr, data.context.gyr_offset_sigma) * Lg.transpose();
+        f->W = Whitener<3>(c);
+        FreeTerm t;
+        // The Earth's horizontal rate in this interval's frame: the chain's, turned by Q.
+        t.shared.push_back({chain_key, Eigen::MatrixXd(f->W * Q), chain_cov});
+        t.cost =
+            std::make_unique<ceres::AutoDiffCostFunction<RestFunctor<kWithG>, 3, kGyr, kAcc>>(f);
+        t.upstream = true;
+        t.interval = k;
+        t.kind = "rest";
+        t.window = free::Window(iv);
+        terms.push_back(std::move(t));
+      }
+      if (moved) {
+        const MoveRecord& m = *iv.move_in;
+        Eigen::Vector3d u0;
+        const Eigen::Matrix3d cov0 = unit(*prev->acc, &u0);
         const double T = m.duration_s();
         const Eigen::Matrix3d across = Eigen::Matrix3d::Identity() - u1 * u1.transpose();
         const Eigen::Matrix3d c = cov1 + P * cov0 * P.transpose() + arw_per_s * T * across;
@@ -285,8 +307,8 @@ class GyroFree final : public FreeModel {
         // vertical part leaves u as it is), the residual by -T [u x] e.
         Eigen::Matrix3d ux;
         ux << 0, -u1.z(), u1.y(), u1.z(), 0, -u1.x(), -u1.y(), u1.x(), 0;
-        t.shared.push_back({k, Eigen::MatrixXd(f->W * f->E.transpose() * (-T) * ux),
-                            earth_h * earth_h / 2 * across});
+        t.shared.push_back(
+            {chain_key, Eigen::MatrixXd(f->W * f->E.transpose() * (-T) * ux * Q), chain_cov});
         // The accelerometer's drift at both ends moves gravity's measured direction:
         // d u / d a = (I - u u^T) L_a / |f|.
         const Eigen::Matrix<double, 2, 3> WE = f->W * f->E.transpose();
