@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "core/sequencing/stillness.h"
+#include "daemon/model_pipeline.h"
 #include "daemon/station.h"
 #include "protocol/calibration_json.h"
 #include "protocol/free_json.h"
@@ -138,19 +139,7 @@ Eigen::Vector3d FreeModelState::Correct(const Eigen::Vector3d& raw, const Eigen:
           }
         }
       }
-      Eigen::Matrix<double, 3, Eigen::Dynamic> jacobian(3, n);
-      Eigen::VectorXd t = applied_theta;
-      for (Eigen::Index k = 0; k < n; ++k) {
-        const double h = 1e-6 * std::max(1.0, std::abs(applied_theta[k]));
-        t[k] = applied_theta[k] + h;
-        const Eigen::Vector3d up = corrected(t);
-        t[k] = applied_theta[k] - h;
-        const Eigen::Vector3d down = corrected(t);
-        t[k] = applied_theta[k];
-        jacobian.col(k) = (up - down) / (2 * h);
-      }
-      const Eigen::Matrix3d c = jacobian * covariance * jacobian.transpose();
-      *sigma = c.diagonal().cwiseMax(0.0).cwiseSqrt();
+      *sigma = PropagatedSigma(corrected, applied_theta, covariance);
     }
   }
   return value;

@@ -153,6 +153,15 @@ std::optional<Eigen::Vector3d> CorrectionSigma(
     }
     return model.Correct(at, r);
   };
+  return PropagatedSigma(corrected, theta, covariance);
+}
+
+}  // namespace
+
+Eigen::Vector3d PropagatedSigma(
+    const std::function<Eigen::Vector3d(const Eigen::VectorXd&)>& corrected,
+    const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance) {
+  const Eigen::Index n = theta.size();
   Jacobian3 jacobian(3, n);
   Eigen::VectorXd t = theta;
   for (Eigen::Index k = 0; k < n; ++k) {
@@ -167,8 +176,6 @@ std::optional<Eigen::Vector3d> CorrectionSigma(
   const Eigen::Matrix3d c = jacobian * covariance * jacobian.transpose();
   return c.diagonal().cwiseMax(0.0).cwiseSqrt();
 }
-
-}  // namespace
 
 int ModelPipeline::triad() const {
   switch (model->sensor()) {

@@ -4,6 +4,7 @@
 // correction's sigma growing with the time since). The station (daemon/station.h) wires it to
 // the device's poses, the solve worker, persistence and events.
 
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -26,6 +27,12 @@ nlohmann::json ParamsJson(const Estimate& e);
 // The drift's identified strength, with the scale the solve used ("used": 1 while the poses do
 // not reject the prior).
 nlohmann::json DriftScaleJson(const Estimate& e);
+
+// The 1 sigma per axis of a correction `corrected(theta)` from theta's `covariance`: J C J^T, J by
+// central differences (steps of 1e-6 of each parameter's scale).
+Eigen::Vector3d PropagatedSigma(
+    const std::function<Eigen::Vector3d(const Eigen::VectorXd&)>& corrected,
+    const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance);
 
 // What one pose's update computes (on the solve worker when there is one).
 struct ModelUpdate {

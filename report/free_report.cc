@@ -166,12 +166,13 @@ nlohmann::json FreeReportJson(const FreeReportInput& in) {
   nlohmann::json models = nlohmann::json::array();
   for (std::size_t i = 0; i < in.results.size(); ++i) {
     const FreeModelResult& r = in.results[i];
-    const FreeEstimate& fe = r.estimate;
-    const Estimate& e = fe.estimate;
-    nlohmann::json m = {{"requested", r.requested}, {"model", r.model}, {"ok", e.ok}};
-    if (!r.note.empty()) m["note"] = r.note;
+    const Estimate& e = r.estimate.estimate;
+    // The station's result (protocol/free_json.h), with the parameters also as a list in the
+    // model's order with their units, the covariance, and the gate's verdict as "passed".
+    nlohmann::json m = protocol::FreeResultJson(
+        r, i < in.advice.size() ? in.advice[i] : std::optional<OrientationAdvice>());
+    m["gate"]["passed"] = m["gate"]["pass"];
     if (!e.ok) {
-      m["error"] = e.error;
       models.push_back(m);
       continue;
     }
@@ -189,38 +190,9 @@ nlohmann::json FreeReportJson(const FreeReportInput& in) {
       for (int b = 0; b < e.covariance.cols(); ++b) row.push_back(e.covariance(a, b));
       cov.push_back(row);
     }
-    auto figures = [](const std::vector<MisfitFigure>& v) {
-      nlohmann::json j = nlohmann::json::array();
-      for (const auto& f : v) {
-        j.push_back({{"kind", f.kind}, {"count", f.count}, {"rms", f.rms}, {"max", f.max_abs}});
-      }
-      return j;
-    };
     m["parameters"] = params;
     m["covariance"] = cov;
-    m["intervals"] = fe.intervals;
-    m["residuals"] = fe.residuals;
-    m["rank"] = e.rank;
-    m["condition"] = std::isfinite(e.condition) ? nlohmann::json(e.condition) : nlohmann::json();
-    m["chi2"] = e.chi2;
-    m["dof"] = e.dof;
-    m["p_value"] = e.p_value;
-    m["covariance_scale"] = e.covariance_scale;
-    m["fit"] = {{"verdict", ToString(e.fit.verdict)}, {"cause", e.fit.cause}};
-    m["coverage"] = {{"filled", fe.coverage.filled},
-                     {"total", fe.coverage.total},
-                     {"fraction", fe.coverage.fraction()}};
-    m["weak"] = fe.weak;
-    m["undetermined"] = fe.undetermined;
-    if (!fe.analysis.weak.empty()) m["weakest_direction"] = fe.analysis.weak.back().text;
-    m["gate"] = {{"passed", fe.gate_passed}, {"reasons", fe.gate_reasons}};
-    m["misfit_before"] = figures(fe.before);
-    m["misfit_after"] = figures(fe.after);
-    m["relative_scale"] = fe.relative_scale;
-    m["warnings"] = e.warnings;
-    if (i < in.advice.size() && in.advice[i]) {
-      m["advice"] = {{"text", in.advice[i]->text}, {"sigma_ratio", in.advice[i]->sigma_ratio}};
-    }
+    m["fit"] = m["fit_check"];
     models.push_back(m);
   }
   return {{"source", in.source},         {"summary", in.found.summary},

@@ -134,40 +134,53 @@ TEST(FreeCalibrator, ZScoresOverRepeatedTumblesHaveUnitSpread) {
   }
 }
 
+// gyro9 on accel9 over `runs` tumbles: the z-scores' mean and spread per parameter, and the mean
+// chi^2/dof.
+struct Gyro9Spread {
+  Eigen::VectorXd mean, sd;
+  double chi2_per_dof = 0.0;
+};
+Gyro9Spread Gyro9OverTumbles(const sim::TumbleOptions& options, std::uint64_t seed, int runs) {
+  const sim::TumbleTruth truth;
+  std::mt19937_64 rng(seed);
+  Gyro9Spread out;
+  Eigen::VectorXd sum = Eigen::VectorXd::Zero(12), sum2 = Eigen::VectorXd::Zero(12);
+  for (int run = 0; run < runs; ++run) {
+    FreeData data = Data(sim::SimulateTumble(truth, options, &rng));
+    const FreeEstimate a = CalibrateFree(*Model("accel9", data.context), data, {});
+    EXPECT_TRUE(a.estimate.ok) << a.estimate.error;
+    data.upstream_theta = a.estimate.theta;
+    data.upstream_covariance = a.estimate.covariance;
+    const FreeEstimate g = CalibrateFree(*Model("gyro9", data.context), data, {});
+    EXPECT_TRUE(g.estimate.ok) << g.estimate.error;
+    if (!a.estimate.ok || !g.estimate.ok) return out;
+    out.chi2_per_dof += g.estimate.chi2 / g.estimate.dof / runs;
+    const Eigen::VectorXd z = ZScores(g, truth.gyro9);
+    sum += z;
+    sum2 += z.cwiseAbs2();
+  }
+  out.mean = sum / runs;
+  out.sd = (sum2 / runs - out.mean.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
+  return out;
+}
+
 // The Earth's horizontal rate is one vector in the world, seen by every interval of a tumble
 // through the turns between them. Where it is as large as an interval's gyro noise (an industrial
 // gyro, 0.01 deg/s/sqrt(Hz)) the misalignments' sigma is honest only when the model shares it
 // across the whole tumble: as independent noise per interval, their z spread averaged 0.952 here
 // (each 0.92-0.97: sigma about 5 % too large); shared, 0.999.
 TEST(FreeCalibrator, TheEarthsRateIsOneVectorForTheWholeTumble) {
-  const sim::TumbleTruth truth;
   sim::TumbleOptions options;
   options.acc_sigma = 4.2e-3;   // industrial, per sample at 100 Hz
   options.gyr_sigma = 1.23e-3;  // industrial
-  std::mt19937_64 rng(11);
-  const int runs = 400;
-  Eigen::VectorXd sum = Eigen::VectorXd::Zero(12), sum2 = Eigen::VectorXd::Zero(12);
-  for (int run = 0; run < runs; ++run) {
-    FreeData data = Data(sim::SimulateTumble(truth, options, &rng));
-    const FreeEstimate a = CalibrateFree(*Model("accel9", data.context), data, {});
-    ASSERT_TRUE(a.estimate.ok) << a.estimate.error;
-    data.upstream_theta = a.estimate.theta;
-    data.upstream_covariance = a.estimate.covariance;
-    const FreeEstimate g = CalibrateFree(*Model("gyro9", data.context), data, {});
-    ASSERT_TRUE(g.estimate.ok) << g.estimate.error;
-    const Eigen::VectorXd z = ZScores(g, truth.gyro9);
-    sum += z;
-    sum2 += z.cwiseAbs2();
-  }
-  double misalignment_spread = 0;
+  const Gyro9Spread s = Gyro9OverTumbles(options, 11, 400);
+  ASSERT_EQ(s.sd.size(), 12);
   for (int i = 0; i < 12; ++i) {
-    const double mean = sum[i] / runs;
-    const double sd = std::sqrt(sum2[i] / runs - mean * mean);
-    EXPECT_GT(sd, 0.9) << i;
-    EXPECT_LT(sd, 1.1) << i;
-    EXPECT_LT(std::abs(mean), 0.15) << i;
-    if (i >= 3 && i < 9) misalignment_spread += sd / 6;
+    EXPECT_GT(s.sd[i], 0.9) << i;
+    EXPECT_LT(s.sd[i], 1.1) << i;
+    EXPECT_LT(std::abs(s.mean[i]), 0.15) << i;
   }
+  const double misalignment_spread = s.sd.segment<6>(3).mean();
   EXPECT_GT(misalignment_spread, 0.975);
   EXPECT_LT(misalignment_spread, 1.05);
 }
@@ -178,34 +191,16 @@ TEST(FreeCalibrator, TheEarthsRateIsOneVectorForTheWholeTumble) {
 // inflated sigma in the tumbles it pushed past p = 0.01), 0.983 with accel9's error in the
 // residuals' covariance; every z spread within [0.92, 1.08].
 TEST(FreeCalibrator, Gyro9WeighsItsUpstreamsErrorAsNoise) {
-  const sim::TumbleTruth truth;
   sim::TumbleOptions options;
   options.acc_sigma = 0.08;
   options.gyr_sigma = 1.2e-3;
-  std::mt19937_64 rng(12);
-  const int runs = 300;
-  double chi2_per_dof = 0;
-  Eigen::VectorXd sum = Eigen::VectorXd::Zero(12), sum2 = Eigen::VectorXd::Zero(12);
-  for (int run = 0; run < runs; ++run) {
-    FreeData data = Data(sim::SimulateTumble(truth, options, &rng));
-    const FreeEstimate a = CalibrateFree(*Model("accel9", data.context), data, {});
-    ASSERT_TRUE(a.estimate.ok) << a.estimate.error;
-    data.upstream_theta = a.estimate.theta;
-    data.upstream_covariance = a.estimate.covariance;
-    const FreeEstimate g = CalibrateFree(*Model("gyro9", data.context), data, {});
-    ASSERT_TRUE(g.estimate.ok) << g.estimate.error;
-    chi2_per_dof += g.estimate.chi2 / g.estimate.dof / runs;
-    const Eigen::VectorXd z = ZScores(g, truth.gyro9);
-    sum += z;
-    sum2 += z.cwiseAbs2();
-  }
+  const Gyro9Spread s = Gyro9OverTumbles(options, 12, 300);
+  ASSERT_EQ(s.sd.size(), 12);
   // 300 tumbles of ~140 degrees of freedom: the mean's 1 sigma is 0.007.
-  EXPECT_NEAR(chi2_per_dof, 1.0, 0.035);
+  EXPECT_NEAR(s.chi2_per_dof, 1.0, 0.035);
   for (int i = 0; i < 12; ++i) {
-    const double mean = sum[i] / runs;
-    const double sd = std::sqrt(sum2[i] / runs - mean * mean);
-    EXPECT_GT(sd, 0.85) << i;
-    EXPECT_LT(sd, 1.15) << i;
+    EXPECT_GT(s.sd[i], 0.85) << i;
+    EXPECT_LT(s.sd[i], 1.15) << i;
   }
 }
 
