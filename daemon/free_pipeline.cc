@@ -163,6 +163,7 @@ nlohmann::json FreeModelState::PrecisionJson(const GateOptions& gate) const {
 nlohmann::json FreeModelState::ResultJson() const {
   nlohmann::json j = protocol::FreeResultJson(result, advice);
   j["requested"] = requested;
+  if (result.model.empty()) j["model"] = requested;  // not fitted yet
   j["poses"] = result.estimate.intervals;
   j["moves"] = MovesUsed(result.estimate);
   j["upstream"] = upstream ? nlohmann::json(upstream->model) : nlohmann::json();
@@ -173,11 +174,13 @@ nlohmann::json FreeModelState::ResultJson() const {
 
 nlohmann::json FreeModelState::StatusJson() const {
   const FreeEstimate& fe = result.estimate;
+  const std::string why =
+      fe.estimate.error.empty() ? "no static interval fitted yet" : fe.estimate.error;
   nlohmann::json gate = {
       {"pass", fe.estimate.ok && fe.gate_passed},
-      {"reasons", fe.estimate.ok ? fe.gate_reasons
-                                 : std::vector<std::string>{"no estimate: " + fe.estimate.error}}};
-  return {{"model", result.model},
+      {"reasons",
+       fe.estimate.ok ? fe.gate_reasons : std::vector<std::string>{"no estimate: " + why}}};
+  return {{"model", result.model.empty() ? requested : result.model},
           {"note", result.note},
           {"poses", fe.intervals},
           {"intervals", fe.intervals},

@@ -173,11 +173,13 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
     params[e.parameters[p].name] = {{"value", e.theta[k]}, {"sigma", Number(e.sigma[k])}};
   }
   m["params"] = params;
+  // A model not fitted yet (no interval) has no error of its own.
+  const std::string why = e.error.empty() ? "no static interval fitted yet" : e.error;
   m["gate"] = {
       {"pass", e.ok && fe.gate_passed},
-      {"reasons", e.ok ? fe.gate_reasons : std::vector<std::string>{"no estimate: " + e.error}}};
+      {"reasons", e.ok ? fe.gate_reasons : std::vector<std::string>{"no estimate: " + why}}};
   if (!e.ok) {
-    m["error"] = e.error;
+    m["error"] = why;
     m["rank"] = 0;
     return m;
   }

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -32,8 +33,32 @@ struct Outcome {
   Eigen::VectorXd z;
   double p_value = 1.0;
   bool gate = false;
+  bool gated = false;  // the model's gate judged the run (pass or refuse)
+  std::vector<std::string> reasons;  // why it refused, digits left out (to count alike ones)
   int intervals = 0;
 };
+
+// A gate reason with its numbers left out: refusals for the same cause count together.
+std::string ReasonKind(const std::string& reason) {
+  auto digit = [&](std::size_t i) {
+    return i < reason.size() && reason[i] >= '0' && reason[i] <= '9';
+  };
+  std::string out;
+  for (std::size_t i = 0; i < reason.size();) {
+    if (digit(i) || (reason[i] == '.' && digit(i + 1))) {
+      // A number: digits, a point, an exponent.
+      while (digit(i) || reason[i] == '.' ||
+             ((reason[i] == 'e' || reason[i] == 'E') &&
+              (digit(i + 1) || ((reason[i + 1] == '-' || reason[i + 1] == '+') && digit(i + 2))))) {
+        i += (reason[i] == 'e' || reason[i] == 'E') && !digit(i + 1) ? 2 : 1;
+      }
+      out += '#';
+      continue;
+    }
+    out += reason[i++];
+  }
+  return out;
+}
 
 }  // namespace
 
@@ -111,6 +136,11 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
         continue;
       }
       const nlohmann::json& r = *it;
+      out.gated = true;
+      out.gate = r["gate"].value("pass", false);
+      for (const auto& why : r["gate"].value("reasons", nlohmann::json::array())) {
+        if (why.is_string()) out.reasons.push_back(ReasonKind(why.get<std::string>()));
+      }
       // The bias window on the session's clock (host time = capture time).
       std::optional<TimeWindow> window;
       TimeWindow host;
@@ -143,7 +173,6 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
         }
       }
       out.p_value = r.value("p_value", 1.0);
-      out.gate = r["gate"].value("pass", false);
       out.ok = out.z.allFinite();
       if (!out.ok) out.error = "a sigma is not finite";
       const int d = ++done;
@@ -161,9 +190,23 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
   Eigen::VectorXd s1 = Eigen::VectorXd::Zero(N), s2 = Eigen::VectorXd::Zero(N);
   Eigen::VectorXi beyond3 = Eigen::VectorXi::Zero(N);
   std::vector<double> p_values;
-  int ok = 0, gates = 0;
+  int ok = 0, gates = 0, gated = 0;
   double intervals = 0;
   std::string first_error;
+  // The gate over every run it judged (also those whose sigma is not finite: a low-coverage
+  // tumble's undetermined directions), and its reasons, alike ones counted together.
+  std::map<std::string, int> reasons;
+  for (const auto& out : outcomes) {
+    gated += out.gated;
+    gates += out.gated && out.gate;
+    for (const auto& why : out.reasons) ++reasons[why];
+  }
+  std::vector<std::pair<int, std::string>> top;
+  for (const auto& [why, count] : reasons) top.emplace_back(count, why);
+  std::sort(top.rbegin(), top.rend());
+  if (top.size() > 5) top.resize(5);
+  std::string reasons_text;
+  for (const auto& [count, why] : top) reasons_text += fmt::format("  {} runs: {}\n", count, why);
   for (const auto& out : outcomes) {
     if (!out.ok) {
       if (first_error.empty()) first_error = out.error;
@@ -174,12 +217,15 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
     s2 += out.z.cwiseAbs2();
     for (int i = 0; i < N; ++i) beyond3[i] += std::abs(out.z[i]) > 3;
     p_values.push_back(out.p_value);
-    gates += out.gate;
     intervals += out.intervals;
   }
   if (ok < 2) {
     fmt::print(stderr, "turncal free-montecarlo: {} of {} runs gave an estimate ({})\n", ok,
                args.runs, first_error);
+    if (gated > 0) {
+      fmt::print("the gate passed {} of {} runs{}\n{}", gates, gated,
+                 top.empty() ? "" : "; it refused for", reasons_text);
+    }
     return 1;
   }
   const Eigen::VectorXd mean = s1 / ok;
@@ -216,6 +262,8 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
                                       {"cap_deg", args.cap_deg},
                                       {"mean_intervals", intervals / ok},
                                       {"gate_passed", gates},
+                                      {"gated", gated},
+                                      {"gate_reasons", top},
                                       {"ks_d", ks_d},
                                       {"ks_p", ks_p},
                                       {"p_value_deciles", deciles},
@@ -226,12 +274,13 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
         "free {} ({} class, {}, drift {}), {} tumbles of {} orientations (up within {:.0f} deg of "
         "+z), "
         "each as bytes through free mode: {} estimated ({} failed{}), {:.1f} intervals on "
-        "average, gate passed {}\n\n{}\nchi^2 p-values against uniform: KS D = {:.3f}, p = "
+        "average, gate passed {} of {}\n{}\n{}\nchi^2 p-values against uniform: KS D = {:.3f}, p = "
         "{:.3g}; per tenth from 0 to 1: {}\nCriteria: std z in [0.9, 1.1] and |mean z| <= 0.15; "
         "{} of {} parameters fail.\n",
         args.model, args.sensor_class, args.protocol, args.drift, args.runs, args.orientations,
         args.cap_deg, ok, args.runs - ok, first_error.empty() ? "" : ", the first: " + first_error,
-        intervals / ok, gates, table, ks_d, ks_p, fmt::join(deciles, " "), bad, N);
+        intervals / ok, gates, gated, top.empty() ? "" : "refused for:\n" + reasons_text, table,
+        ks_d, ks_p, fmt::join(deciles, " "), bad, N);
   }
   return bad == 0 ? 0 : 1;
 }
