@@ -74,6 +74,10 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
   station.sequencer.dwell_s = 1.0;
   station.free.field_known = args.field_known;
   station.drift_model = args.drift == "gauss-markov";
+  if (args.warmup > 0) {
+    station.warmup_in_instabilities = args.warmup;
+    station.warmup_tau_s = args.warmup_tau_s;
+  }
   const bool known_class = SensorClassByName(args.sensor_class, &sensor);
   // The free models' context as the station makes it: what the truth is expressed in.
   const FreeContext context = daemon::FreeContextFor(station, sensor);
@@ -114,6 +118,9 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
       if (gyro) o.gyro_model = "gyro12";
       o.poses = sim::TumbleTablePoses(args.orientations, args.cap_deg, &rng);
       o.session.sensor = sensor;
+      o.session.acc_warmup = args.warmup * sensor.acc_bias_instability;
+      o.session.mag_warmup = args.warmup * sensor.mag_bias_instability;
+      o.session.warmup_tau_s = args.warmup_tau_s;
       o.session.dwell_s = args.dwell_s;
       o.session.seed = seed;
       sim::SimCapture capture;
@@ -256,6 +263,7 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
                                       {"class", args.sensor_class},
                                       {"protocol", args.protocol},
                                       {"drift", args.drift},
+                                      {"warmup", args.warmup},
                                       {"runs", args.runs},
                                       {"ok", ok},
                                       {"orientations", args.orientations},
@@ -271,13 +279,15 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
                            .dump());
   } else {
     fmt::print(
-        "free {} ({} class, {}, drift {}), {} tumbles of {} orientations (up within {:.0f} deg of "
+        "free {} ({} class, {}, drift {}{}), {} tumbles of {} orientations (up within {:.0f} deg of "
         "+z), "
         "each as bytes through free mode: {} estimated ({} failed{}), {:.1f} intervals on "
         "average, gate passed {} of {}\n{}\n{}\nchi^2 p-values against uniform: KS D = {:.3f}, p = "
         "{:.3g}; per tenth from 0 to 1: {}\nCriteria: std z in [0.9, 1.1] and |mean z| <= 0.15; "
         "{} of {} parameters fail.\n",
-        args.model, args.sensor_class, args.protocol, args.drift, args.runs, args.orientations,
+        args.model, args.sensor_class, args.protocol, args.drift,
+        args.warmup > 0 ? fmt::format(", warm-up {} bias instabilities", args.warmup) : "",
+        args.runs, args.orientations,
         args.cap_deg, ok, args.runs - ok, first_error.empty() ? "" : ", the first: " + first_error,
         intervals / ok, gates, gated, top.empty() ? "" : "refused for:\n" + reasons_text, table,
         ks_d, ks_p, fmt::join(deciles, " "), bad, N);
@@ -324,6 +334,14 @@ void AddFreeMonteCarloCommand(CLI::App* app) {
                   "(the class's, a process in time) or independent (an offset per interval of "
                   "the class's bias instability)")
       ->check(CLI::IsMember({"gauss-markov", "independent"}))
+      ->capture_default_str();
+  cmd->add_option("--warmup", a->warmup,
+                  "a warm-up after power-on of this many bias instabilities (accelerometer and "
+                  "magnetometer), simulated and allowed for by the station")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--warmup-tau", a->warmup_tau_s, "the warm-up's time constant, s")
+      ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_flag("--verbose", a->verbose,
                 "every run's estimate, truth, sigma and z per parameter on standard error");

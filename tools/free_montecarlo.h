@@ -29,6 +29,11 @@ struct FreeMonteCarloArgs {
   // drift, generalised least squares) or "independent" (the class's bias instability as an offset
   // per interval).
   std::string drift = "gauss-markov";
+  // A warm-up after power-on: the simulator draws an offset per axis of this many bias
+  // instabilities (accelerometer and magnetometer) settling with warmup_tau_s, and the station
+  // allows for the same ([station] warmup, warmup_tau_s). 0: none.
+  double warmup = 0.0;
+  double warmup_tau_s = 60.0;
   bool verbose = false;
   bool json = false;
 };
