@@ -33,7 +33,7 @@ struct Outcome {
   Eigen::VectorXd z;
   double p_value = 1.0;
   bool gate = false;
-  bool gated = false;  // the model's gate judged the run (pass or refuse)
+  bool gated = false;                // the model's gate judged the run (pass or refuse)
   std::vector<std::string> reasons;  // why it refused, digits left out (to count alike ones)
   int intervals = 0;
 };
@@ -279,7 +279,8 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
                            .dump());
   } else {
     fmt::print(
-        "free {} ({} class, {}, drift {}{}), {} tumbles of {} orientations (up within {:.0f} deg of "
+        "free {} ({} class, {}, drift {}{}), {} tumbles of {} orientations (up within {:.0f} deg "
+        "of "
         "+z), "
         "each as bytes through free mode: {} estimated ({} failed{}), {:.1f} intervals on "
         "average, gate passed {} of {}\n{}\n{}\nchi^2 p-values against uniform: KS D = {:.3f}, p = "
@@ -287,10 +288,10 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
         "{} of {} parameters fail.\n",
         args.model, args.sensor_class, args.protocol, args.drift,
         args.warmup > 0 ? fmt::format(", warm-up {} bias instabilities", args.warmup) : "",
-        args.runs, args.orientations,
-        args.cap_deg, ok, args.runs - ok, first_error.empty() ? "" : ", the first: " + first_error,
-        intervals / ok, gates, gated, top.empty() ? "" : "refused for:\n" + reasons_text, table,
-        ks_d, ks_p, fmt::join(deciles, " "), bad, N);
+        args.runs, args.orientations, args.cap_deg, ok, args.runs - ok,
+        first_error.empty() ? "" : ", the first: " + first_error, intervals / ok, gates, gated,
+        top.empty() ? "" : "refused for:\n" + reasons_text, table, ks_d, ks_p,
+        fmt::join(deciles, " "), bad, N);
   }
   return bad == 0 ? 0 : 1;
 }
