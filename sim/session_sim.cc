@@ -20,7 +20,8 @@ bool SessionSimOptions::IsValid(std::string* error) const {
   if (!lever_arm_q_m.allFinite() || lever_arm_q_m.norm() > 2.0) {
     return fail("the lever arm must be finite and at most 2 m");
   }
-  if (!(acc_random_walk >= 0 && mag_random_walk >= 0 && acc_warmup >= 0 && mag_warmup >= 0)) {
+  if (!(acc_random_walk >= 0 && mag_random_walk >= 0 && acc_warmup >= 0 && mag_warmup >= 0 &&
+        gyr_warmup >= 0)) {
     return fail("random walk and warm-up must be >= 0");
   }
   if (!(warmup_tau_s > 0)) return fail("the warm-up time constant must be > 0");
@@ -242,9 +243,13 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
   Eigen::Vector3d warm_acc = Eigen::Vector3d::Zero(), warm_mag = Eigen::Vector3d::Zero();
   const double walk_acc_step = o.acc_random_walk * std::sqrt(dt);
   const double walk_mag_step = o.mag_random_walk * std::sqrt(dt);
+  Eigen::Vector3d warm_gyr = Eigen::Vector3d::Zero();
   for (int i = 0; i < 3; ++i) {
     if (o.acc_warmup > 0) warm_acc[i] = o.acc_warmup * normal(rng);
     if (o.mag_warmup > 0) warm_mag[i] = o.mag_warmup * normal(rng);
+  }
+  if (gyro_model && o.gyr_warmup > 0) {
+    for (int i = 0; i < 3; ++i) warm_gyr[i] = o.gyr_warmup * normal(rng);
   }
   const auto n = static_cast<std::size_t>(std::floor(out.duration_s * o.rate_hz));
   out.samples.reserve(n);
@@ -329,7 +334,7 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
         wander_gyr[i] = phi * wander_gyr[i] + drive * c.gyr_bias_instability * normal(rng);
         if (walk_gyr_step > 0) walk_gyr[i] += walk_gyr_step * normal(rng);
       }
-      const Eigen::Vector3d drift_gyr = wander_gyr + walk_gyr;
+      const Eigen::Vector3d drift_gyr = wander_gyr + walk_gyr + settle * warm_gyr;
       out.gyr_drift_sum.push_back(out.gyr_drift_sum.back() + drift_gyr);
       // The instantaneous inertial rate and specific force in q (with the lever arm's).
       const Mat3<double> C = pose.C_p_q();

@@ -47,6 +47,7 @@ struct SessionSimOptions {
   // exp(-t / warmup_tau_s) (0: none).
   double acc_warmup = 0.0;  // m/s^2
   double mag_warmup = 0.0;  // Gauss
+  double gyr_warmup = 0.0;  // rad/s (only with a gyro model)
   double warmup_tau_s = 60.0;
   double clock_drift_ppm = 20.0;
   double clock_offset_s = 10.0;

@@ -120,6 +120,7 @@ int RunFreeMonteCarlo(const FreeMonteCarloArgs& args) {
       o.session.sensor = sensor;
       o.session.acc_warmup = args.warmup * sensor.acc_bias_instability;
       o.session.mag_warmup = args.warmup * sensor.mag_bias_instability;
+      o.session.gyr_warmup = args.warmup * sensor.gyr_bias_instability;
       o.session.warmup_tau_s = args.warmup_tau_s;
       o.session.dwell_s = args.dwell_s;
       o.session.seed = seed;
@@ -337,8 +338,8 @@ void AddFreeMonteCarloCommand(CLI::App* app) {
       ->check(CLI::IsMember({"gauss-markov", "independent"}))
       ->capture_default_str();
   cmd->add_option("--warmup", a->warmup,
-                  "a warm-up after power-on of this many bias instabilities (accelerometer and "
-                  "magnetometer), simulated and allowed for by the station")
+                  "a warm-up after power-on of this many bias instabilities (every triad, the "
+                  "gyroscope's too), simulated and allowed for by the station")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--warmup-tau", a->warmup_tau_s, "the warm-up's time constant, s")

@@ -210,6 +210,7 @@ int RunPipelineMonteCarlo(const PipelineMonteCarloArgs& args) {
       o.session.seed = seed;
       o.session.acc_warmup = args.warmup * sensor.acc_bias_instability;
       o.session.mag_warmup = args.warmup * sensor.mag_bias_instability;
+      o.session.gyr_warmup = args.warmup * sensor.gyr_bias_instability;
       o.session.warmup_tau_s = args.warmup_tau_s;
       if (args.lever_arm_m.size() == 3) {
         o.session.lever_arm_q_m =

@@ -51,7 +51,7 @@ struct SimCommandArgs {
   double acc_noise = -1, acc_bias_instability = -1, gyr_noise = -1, mag_noise = -1,
          mag_bias_instability = -1;
   double bias_tau_s = -1, acc_random_walk = 0, mag_random_walk = 0, acc_warmup = 0, mag_warmup = 0,
-         warmup_tau_s = 60;
+         gyr_warmup = 0, warmup_tau_s = 60;
   bool no_quantisation = false;
   bool no_rate_segments = false;  // a table without a rate mode
   double table_rate_dps = 0;      // 0: every move takes 3 s (SessionSimOptions::move_s)
@@ -204,6 +204,7 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
       {"mag_random_walk", so.mag_random_walk},
       {"acc_warmup", so.acc_warmup},
       {"mag_warmup", so.mag_warmup},
+      {"gyr_warmup", so.gyr_warmup},
       {"warmup_tau_s", so.warmup_tau_s},
       {"bias_truth", "at_last_pose"},
       {"models", models},
@@ -375,6 +376,7 @@ int RunSim(const SimCommandArgs& args) {
   o.mag_random_walk = args.mag_random_walk;
   o.acc_warmup = args.acc_warmup;
   o.mag_warmup = args.mag_warmup;
+  o.gyr_warmup = args.gyr_warmup;
   o.warmup_tau_s = args.warmup_tau_s;
   if (args.table_rate_dps > 0) {
     TableMotion table;
@@ -517,6 +519,9 @@ void AddSimCommand(CLI::App* app) {
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--mag-warmup", args->mag_warmup,
                   "magnetometer warm-up offset at power-on, Gauss (default 0)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--gyr-warmup", args->gyr_warmup,
+                  "gyroscope warm-up offset at power-on, rad/s (default 0; with a gyro model)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--warmup-tau", args->warmup_tau_s, "time constant of the warm-up, s")
       ->check(CLI::PositiveNumber)

@@ -352,8 +352,8 @@ void AddSimFitCommands(CLI::App* app) {
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
   mc->add_option("--warmup", pipe->warmup,
-                 "with --pipeline: warm-up transient of both triads, 1 sigma at power-on in units "
-                 "of the class's bias instability (0: none)")
+                 "with --pipeline: warm-up transient of every triad (a gyro model's too), 1 sigma "
+                 "at power-on in units of the class's bias instability (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   mc->add_option("--warmup-tau", pipe->warmup_tau_s, "with --pipeline: warm-up time constant, s")

@@ -19,6 +19,7 @@ import tempfile
 
 TURNCAL = sys.argv[1]
 TURNCALD = sys.argv[2]
+SANITIZED = os.environ.get("TURNCAL_SANITIZED") == "1"
 failures = 0
 
 
@@ -107,13 +108,16 @@ with tempfile.TemporaryDirectory() as d:
     check(r.returncode == 2 and "unknown free model" in r.stderr,
           f"a model that is not a free model: exit {r.returncode} {r.stderr.strip()}")
 
-    r = run(["free-montecarlo", "--model", "accel9", "--runs", "30", "--json"])
+    # Instrumented (TURNCAL_SANITIZED=1), 3 tumbles run the same code; the spread is checked
+    # in the optimised suite.
+    runs = 3 if SANITIZED else 30
+    r = run(["free-montecarlo", "--model", "accel9", "--runs", str(runs), "--json"])
     check(r.returncode in (0, 1), f"free-montecarlo runs: exit {r.returncode} {r.stderr[-200:]}")
     if r.stdout.strip():
         mc = json.loads(r.stdout)
-        check(mc["ok"] == 30, f"30 of 30 tumbles estimated ({mc['ok']})")
+        check(mc["ok"] == runs, f"{runs} of {runs} tumbles estimated ({mc['ok']})")
         # 30 runs estimate a std to ~13 %: 1 within 4 of those.
-        for p in mc["params"]:
+        for p in mc["params"] if not SANITIZED else []:
             check(0.5 < p["std_z"] < 1.5, f"accel9 {p['name']}: std z {p['std_z']:.2f}")
 
 shared = os.environ.get("TURNCAL_SHARED_DIR", os.path.join(os.path.dirname(__file__), "../../../shared"))
