@@ -6,10 +6,14 @@
 namespace turncal::protocol {
 
 nlohmann::json ToJson(const MoveRecord& m, bool with_blocks) {
-  nlohmann::json j = {{"from", ToJson(m.from)},     {"to", ToJson(m.to)},
-                      {"t_start", m.t_start_s},     {"t_end", m.t_end_s},
-                      {"samples", m.samples},       {"duration_s", m.duration_s()},
-                      {"blocks", m.block_s.size()}, {"bridged", m.bridged}};
+  nlohmann::json j = {{"from", protocol::ToJson(m.from)},
+                      {"to", protocol::ToJson(m.to)},
+                      {"t_start", m.t_start_s},
+                      {"t_end", m.t_end_s},
+                      {"samples", m.samples},
+                      {"duration_s", m.duration_s()},
+                      {"blocks", m.block_s.size()},
+                      {"bridged", m.bridged}};
   if (!with_blocks) return j;
   nlohmann::json increments = nlohmann::json::array(), forces = nlohmann::json::array();
   for (const auto& v : m.increment_rad) increments.push_back(JsonVec3(v));

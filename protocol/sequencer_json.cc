@@ -74,7 +74,8 @@ bool ParsePoseCommand(const nlohmann::json& j, std::int64_t t_host_ns, Announcem
 }
 
 nlohmann::json ToJson(const PoseRecord& r, bool move_blocks) {
-  nlohmann::json j = {{"pose", ToJson(r.pose)}, {"t_start", r.t_start_s}, {"t_end", r.t_end_s}};
+  nlohmann::json j = {
+      {"pose", protocol::ToJson(r.pose)}, {"t_start", r.t_start_s}, {"t_end", r.t_end_s}};
   if (r.acc) j["acc"] = Triad(*r.acc);
   if (r.gyr) j["gyr"] = Triad(*r.gyr);
   if (r.mag) j["mag"] = Triad(*r.mag);
@@ -234,7 +235,7 @@ nlohmann::json ToJson(const SequencerEvent& e) {
   nlohmann::json j = {{"class", ToString(e.kind)}, {"t", e.t_s}};
   if (e.index >= 0) {
     j["index"] = e.index;
-    j["pose"] = ToJson(e.pose);
+    j["pose"] = protocol::ToJson(e.pose);
   }
   if (e.needed > 0) {
     j["collected"] = e.collected;

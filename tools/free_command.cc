@@ -45,9 +45,9 @@ struct FreeArgs {
 };
 
 // Samples of one device in time order.
-class Collector : public daemon::ReplayTarget, public drivers::DecoderSink {
+class FreeCollector : public daemon::ReplayTarget, public drivers::DecoderSink {
  public:
-  explicit Collector(int device) : device_(device) {}
+  explicit FreeCollector(int device) : device_(device) {}
   void OnSample(int device, const Sample& s) override {
     if (device == device_) samples.push_back(s);
   }
@@ -129,7 +129,7 @@ bool ReadSamples(const FreeArgs& a, std::vector<Sample>* out, std::string* sourc
         stats.backwards ? fmt::format(", {} going back in time dropped", stats.backwards) : "");
     return true;
   }
-  Collector collector(0);
+  FreeCollector collector(0);
   if (format == "tcap") {
     drivers::CaptureReader reader;
     if (!reader.Open(a.files[0], error)) return false;
@@ -144,7 +144,7 @@ bool ReadSamples(const FreeArgs& a, std::vector<Sample>* out, std::string* sourc
         return false;
       }
     }
-    collector = Collector(device);
+    collector = FreeCollector(device);
     daemon::ReplayStats stats;
     if (!daemon::ReplayInto(&reader, &collector, false, {}, &stats, error)) return false;
     *source = fmt::format("capture, device {}, {} samples ({} pose events ignored: free mode)",
