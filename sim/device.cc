@@ -11,6 +11,7 @@
 #include "drivers/xbus/mtdata2.h"
 #include "drivers/xbus/xbus_decoder.h"
 #include "drivers/xbus/xbus_encoder.h"
+#include "sim/mip_storage.h"
 
 namespace turncal::sim {
 
@@ -65,7 +66,7 @@ class ScanningEmulator : public DeviceEmulator {
 // ---------------------------------------------------------------------------------------------
 // MIP
 
-constexpr std::uint8_t kAck = 0, kUnknownCommand = 1, kBadParameter = 3;
+constexpr std::uint8_t kAck = 0, kUnknownCommand = 1, kBadParameter = 3, kFailed = 4;
 
 std::string Padded16(const std::string& s) {
   std::string out = s.substr(0, 16);
@@ -93,7 +94,14 @@ bool KnownImuDescriptor(std::uint8_t d) {
 class MipEmulator final : public ScanningEmulator {
  public:
   MipEmulator(const EmulatedIdentity& id, double rate_hz)
-      : id_(id), stored_(id.mip_stored), base_rate_(MipBaseRate(rate_hz)) {
+      : id_(id), nonvolatile_(id.mip_stored), base_rate_(MipBaseRate(rate_hz)) {
+    if (!id.mip_nonvolatile_path.empty()) {
+      std::string e;
+      if (!ReadMipNonvolatile(id.mip_nonvolatile_path, id.mip_stored, &nonvolatile_, &e)) {
+        storage_error_ = e;  // a corrupt storage: the device starts with its power-up values
+      }
+    }
+    stored_ = nonvolatile_;
     decimation_at_power_up_ =
         static_cast<std::uint16_t>(std::clamp(rate_hz > 0 ? std::round(base_rate_ / rate_hz) : 1.0,
                                               1.0, static_cast<double>(base_rate_)));
@@ -103,6 +111,12 @@ class MipEmulator final : public ScanningEmulator {
 
   bool streaming() const override { return !idle_ && sensor_stream_on_; }
   drivers::Protocol protocol() const override { return drivers::Protocol::kMip; }
+  void ApplyStored(Sample* s) const override { ApplyMipStored(id_.mip_stored, stored_, s); }
+  std::optional<drivers::mip::StoredCalibration> mip_stored() const override { return stored_; }
+  std::optional<drivers::mip::StoredCalibration> mip_nonvolatile() const override {
+    return nonvolatile_;
+  }
+  const std::string& storage_error() const override { return storage_error_; }
   std::optional<double> requested_rate_hz() const override {
     if (!host_configured_) return std::nullopt;
     for (const auto& [desc, decimation] : format_) {
@@ -191,7 +205,7 @@ class MipEmulator final : public ScanningEmulator {
       case 0x7E:  // device reset
         PowerUp();
         host_configured_ = false;
-        stored_ = id_.mip_stored;
+        stored_ = nonvolatile_;
         return {};
       default:
         return {kUnknownCommand, {}};
@@ -210,11 +224,11 @@ class MipEmulator final : public ScanningEmulator {
       case 0x11:
         return EnableStream(data);
       case 0x37:
-        return Stored(0x9A, &stored_.accel_bias, data);
+        return Stored(0x9A, &drivers::mip::StoredCalibration::accel_bias, data);
       case 0x38:
-        return Stored(0x9B, &stored_.gyro_bias, data);
+        return Stored(0x9B, &drivers::mip::StoredCalibration::gyro_bias, data);
       case 0x3A:
-        return Stored(0x9C, &stored_.hard_iron, data);
+        return Stored(0x9C, &drivers::mip::StoredCalibration::hard_iron, data);
       case 0x3B:
         return StoredMatrix(data);
       default:
@@ -281,8 +295,27 @@ class MipEmulator final : public ScanningEmulator {
     return {kBadParameter, {}};
   }
 
-  Result Stored(std::uint8_t reply_desc, std::optional<Eigen::Vector3d>* value,
-                std::span<const std::uint8_t> data) {
+  using VectorEntry = std::optional<Eigen::Vector3d> drivers::mip::StoredCalibration::*;
+
+  // Save (function 3): the values in use become the startup values, kept in the file when the
+  // device has one (a file that cannot be written: NACK 4 "failed", nothing saved).
+  template <typename Entry>
+  Result Save(Entry entry) {
+    drivers::mip::StoredCalibration saved = nonvolatile_;
+    saved.*entry = stored_.*entry;
+    if (!id_.mip_nonvolatile_path.empty()) {
+      std::string e;
+      if (!WriteMipNonvolatile(id_.mip_nonvolatile_path, saved, &e)) {
+        storage_error_ = e;
+        return {kFailed, {}};
+      }
+    }
+    nonvolatile_ = saved;
+    return {};
+  }
+
+  Result Stored(std::uint8_t reply_desc, VectorEntry entry, std::span<const std::uint8_t> data) {
+    std::optional<Eigen::Vector3d>* value = &(stored_.*entry);
     if (!*value) return {kUnknownCommand, {}};
     if (data.empty()) return {kBadParameter, {}};
     switch (data[0]) {
@@ -296,7 +329,9 @@ class MipEmulator final : public ScanningEmulator {
         return {kAck, {std::move(f)}};
       }
       case 3:
+        return Save(entry);
       case 4:
+        *value = nonvolatile_.*entry;
         return {};
       case 5:
         **value = Eigen::Vector3d::Zero();
@@ -322,7 +357,9 @@ class MipEmulator final : public ScanningEmulator {
         return {kAck, {std::move(f)}};
       }
       case 3:
+        return Save(&drivers::mip::StoredCalibration::soft_iron);
       case 4:
+        m = nonvolatile_.soft_iron;
         return {};
       case 5:
         *m = Eigen::Matrix3d::Identity();
@@ -333,7 +370,9 @@ class MipEmulator final : public ScanningEmulator {
   }
 
   EmulatedIdentity id_;
-  drivers::mip::StoredCalibration stored_;
+  drivers::mip::StoredCalibration nonvolatile_;  // the startup values (save, load, power-up)
+  drivers::mip::StoredCalibration stored_;       // the values in use
+  std::string storage_error_;
   std::uint16_t base_rate_;
   std::uint16_t decimation_at_power_up_ = 1;
   bool idle_ = false;

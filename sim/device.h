@@ -27,10 +27,14 @@
 //   0x85 [set][on]), fn 3-5 ACK. Disabling set 0x80 also stops streaming().
 //   0x0C 0x37 / 0x38 / 0x3A / 0x3B stored accel bias / gyro bias / hard-iron offset / soft-iron
 //   matrix: when the identity has the value, read (fn 2: ACK + 0x9A / 0x9B / 0x9C / 0x9D, 3 or 9
-//   big-endian f32), write (fn 1), save / load (ACK), default (fn 5: zeros, identity matrix);
-//   otherwise NACK 1 "unknown command", as a device without that setting does. The default
-//   identity has a zero accel and gyro bias and no hard- or soft-iron commands (so the dialogue
-//   records accel/gyro bias 0 and no magnetometer correction).
+//   big-endian f32), write (fn 1), save (fn 3: the values in use become the startup values, in
+//   EmulatedIdentity::mip_nonvolatile_path when set; a file that cannot be written: NACK 4
+//   "failed"), load (fn 4: the startup values back in use), default (fn 5: zeros, identity
+//   matrix, in use); otherwise NACK 1 "unknown command", as a device without that setting does.
+//   Power-up and device reset put the startup values in use. The device applies the values in
+//   use to what it outputs (ApplyStored, sim/mip_storage.h). The default identity has a zero
+//   accel and gyro bias and no hard- or soft-iron commands (so the dialogue records accel/gyro
+//   bias 0 and no magnetometer correction).
 //   Anything else (wrong function selector, short data): NACK 3 "bad parameter".
 //
 // Xbus (MTi 1/10/100 series, MTData2) and Xbus legacy (MTi/MTx, MTData): one reply message per
@@ -64,6 +68,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/sequencing/sample.h"
 #include "drivers/device_spec.h"
 #include "drivers/mip/mip_dialogue.h"
 #include "drivers/xbus/xbus_decoder.h"
@@ -88,6 +93,11 @@ struct EmulatedIdentity {
   // entry is a command the device does not know (NACK 1).
   drivers::mip::StoredCalibration mip_stored = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
                                                 std::nullopt, std::nullopt};
+  // The simulator's samples carry mip_stored (they are the device's output with those values in
+  // use). The device's non-volatile storage: a JSON file that keeps what the host saved, read at
+  // power-up, so a saved calibration survives the device's restart (a missing file: nothing
+  // saved yet, mip_stored at power-up). Empty: saves last as long as the emulator.
+  std::string mip_nonvolatile_path;
 
   // Xbus.
   std::uint32_t xbus_device_id = 0x03700001;
@@ -129,6 +139,21 @@ class DeviceEmulator {
   virtual const Counters& counters() const = 0;
 
   virtual drivers::Protocol protocol() const = 0;
+
+  // The simulator's sample as the device outputs it now, with the stored calibration in use
+  // (MIP: what the host wrote, loaded or defaulted since power-up); unchanged otherwise.
+  virtual void ApplyStored(Sample* s) const { (void)s; }
+  // MIP: the stored calibration in use and the startup values; nullopt for other protocols.
+  virtual std::optional<drivers::mip::StoredCalibration> mip_stored() const { return std::nullopt; }
+  virtual std::optional<drivers::mip::StoredCalibration> mip_nonvolatile() const {
+    return std::nullopt;
+  }
+  // The last failure of the non-volatile storage (unreadable at power-up, unwritable at a save);
+  // empty when none.
+  virtual const std::string& storage_error() const {
+    static const std::string none;
+    return none;
+  }
 
   // The output rate the host's configuration asks for, from the accelerometer entry: MIP base
   // rate / decimation of 0x04 in the IMU message format written; Xbus the Acceleration (0x4020)

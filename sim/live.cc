@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 #include <random>
 #include <set>
@@ -151,9 +152,14 @@ bool OpenDevice(Device* d, std::string* error) {
 }
 
 // The device's dialogue state as at power-up: the i-th simulated device's identity.
-std::unique_ptr<DeviceEmulator> PowerUp(const Device& d, std::size_t i) {
+std::unique_ptr<DeviceEmulator> PowerUp(const Device& d, std::size_t i,
+                                        const std::string& state_dir) {
   EmulatedIdentity id;
   id.serial = fmt::format("SIM{:04}", i + 1);
+  if (!state_dir.empty() && d.protocol == drivers::Protocol::kMip) {
+    id.mip_nonvolatile_path =
+        (std::filesystem::path(state_dir) / (id.serial + ".nvm.json")).string();
+  }
   id.xbus_device_id = 0x03700001u + static_cast<std::uint32_t>(i);
   return DeviceEmulator::Make(d.protocol, id, d.capture->session_options.rate_hz);
 }
@@ -181,6 +187,7 @@ void Emit(Device* d, Sample s, BitErrors* errors, double vt, double turn_gap_s) 
     ++d->withheld;  // idle or in config state: the device sends nothing
     return;
   }
+  d->emulator->ApplyStored(&s);  // the stored calibration the host left in use
   const std::vector<std::uint8_t> frame = EncodeSimSample(d->protocol, s);
   if (d->max_queued == 0) {
     d->max_queued =
@@ -299,7 +306,12 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     d.protocol = d.capture->header.devices.at(0).protocol;
     d.period_s = 1.0 / d.capture->session_options.rate_hz;
     d.speed = options.speed;
-    d.emulator = PowerUp(d, i);
+    d.emulator = PowerUp(d, i, options.device_state_dir);
+    if (!d.emulator->storage_error().empty()) {
+      Say({{"event", "device_storage"},
+           {"device", d.path},
+           {"error", d.emulator->storage_error()}});
+    }
     if (!OpenDevice(&d, error)) return false;
   }
   BitErrors errors(options.bit_error_rate, options.fault_seed);
@@ -542,7 +554,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
       Device& d = devices[i];
       if (!d.unplugged || vt < d.replug_vt) continue;
       if (!OpenDevice(&d, error)) return false;
-      d.emulator = PowerUp(d, i);
+      d.emulator = PowerUp(d, i, options.device_state_dir);
       d.unplugged = false;
       Say({{"event", "replugged"}, {"device", d.path}});
     }

@@ -53,6 +53,10 @@ struct LiveSimOptions {
   };
   std::vector<Unplug> unplugs;
   double unplug_s = 2.0;
+  // A folder for the MIP devices' non-volatile storage (DIR/SIM0001.nvm.json, ...): what the
+  // daemon saves into a device survives an unplug and the next run (sim/mip_storage.h). Empty:
+  // saves last until the device's next power-up.
+  std::string device_state_dir;
 };
 
 struct LiveSimReport {

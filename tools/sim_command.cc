@@ -65,6 +65,7 @@ struct SimCommandArgs {
   double bit_error_rate = 0;
   std::vector<std::string> unplugs;  // POSE:mid|between[:DEVICE]
   double unplug_s = 2.0;
+  std::string device_state;
 };
 
 // "POSE:mid", "POSE:between", optionally ":DEVICE" (index among the --live devices).
@@ -275,6 +276,16 @@ int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
   live.bit_error_rate = args.bit_error_rate;
   live.fault_seed = args.seed * 7919 + 17;
   live.unplug_s = args.unplug_s;
+  live.device_state_dir = args.device_state;
+  if (!live.device_state_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(live.device_state_dir, ec);
+    if (ec) {
+      fmt::print(stderr, "turncal sim: cannot create '{}': {}\n", live.device_state_dir,
+                 ec.message());
+      return 1;
+    }
+  }
   for (const auto& text : args.unplugs) {
     sim::LiveSimOptions::Unplug u;
     if (!ParseUnplug(text, &u, &error)) {
@@ -567,6 +578,10 @@ void AddSimCommand(CLI::App* app) {
                   "with --controller: session seconds a device stays unplugged")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_option("--device-state", args->device_state,
+                  "with --live: a folder for the MIP devices' non-volatile storage "
+                  "(DIR/SIM0001.nvm.json): a calibration the daemon saves into a device survives "
+                  "its unplug and the next run");
   cmd->add_option("--live-speed", args->live_speed, "time scale of --live (2 = twice as fast)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

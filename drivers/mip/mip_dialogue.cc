@@ -157,6 +157,61 @@ std::optional<StoredCalibration> Dialogue::ReadStoredCalibration(std::string* er
   return stored;
 }
 
+namespace {
+const char* StoredName(std::uint8_t descriptor) {
+  switch (descriptor) {
+    case 0x37:
+      return "stored accel bias";
+    case 0x38:
+      return "stored gyro bias";
+    case 0x3A:
+      return "stored hard-iron offset";
+    case 0x3B:
+      return "stored soft-iron matrix";
+    default:
+      return "stored value";
+  }
+}
+const char* FunctionName(std::uint8_t function) {
+  switch (function) {
+    case 1:
+      return "write";
+    case 2:
+      return "read";
+    case 3:
+      return "save";
+    case 4:
+      return "load";
+    case 5:
+      return "default";
+    default:
+      return "function";
+  }
+}
+}  // namespace
+
+bool Dialogue::WriteStored(std::uint8_t descriptor, std::span<const double> values,
+                           std::string* error, std::uint8_t* nack_code) {
+  if (nack_code) *nack_code = 0xFF;
+  const std::size_t want = descriptor == 0x3B ? 9 : 3;
+  if (values.size() != want) {
+    if (error) *error = fmt::format("write {}: {} values expected", StoredName(descriptor), want);
+    return false;
+  }
+  return Command(mip::WriteStored(descriptor, values),
+                 fmt::format("write {}", StoredName(descriptor)), error, nack_code)
+      .has_value();
+}
+
+bool Dialogue::StoredFunction(std::uint8_t descriptor, std::uint8_t function, std::string* error,
+                              std::uint8_t* nack_code) {
+  if (nack_code) *nack_code = 0xFF;
+  return Command(mip::StoredFunction(descriptor, function),
+                 fmt::format("{} {}", FunctionName(function), StoredName(descriptor)), error,
+                 nack_code)
+      .has_value();
+}
+
 std::optional<Configured> Dialogue::Configure(double rate_hz, std::string* error) {
   Configured c;
   if (!SetToIdle(error)) return std::nullopt;

@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <optional>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -49,6 +50,13 @@ class Dialogue {
   bool EnableStream(std::uint8_t data_set, bool on, std::string* error);
   bool Resume(std::string* error);
   std::optional<StoredCalibration> ReadStoredCalibration(std::string* error);
+  // Write (function 1) one stored quantity (0x37, 0x38, 0x3A: 3 values; 0x3B: 9, row-major),
+  // or save (3), load (4) or default (5) it. `nack_code` (when not null) gets the reply's code
+  // (0xFF: no reply).
+  bool WriteStored(std::uint8_t descriptor, std::span<const double> values, std::string* error,
+                   std::uint8_t* nack_code = nullptr);
+  bool StoredFunction(std::uint8_t descriptor, std::uint8_t function, std::string* error,
+                      std::uint8_t* nack_code = nullptr);
 
   // The whole sequence: idle, device info, base rate, accel+gyro+mag at the decimation closest to
   // `rate_hz`, stored calibration, enable the sensor stream, resume. nullopt with the step that

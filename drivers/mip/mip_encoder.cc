@@ -64,6 +64,16 @@ std::vector<std::uint8_t> ReadStored(std::uint8_t descriptor) {
   return Command(0x0C, descriptor, {0x02});
 }
 
+std::vector<std::uint8_t> WriteStored(std::uint8_t descriptor, std::span<const double> values) {
+  std::vector<std::uint8_t> data = {0x01};
+  for (double v : values) PutF32(&data, static_cast<float>(v));
+  return Command(0x0C, descriptor, data);
+}
+
+std::vector<std::uint8_t> StoredFunction(std::uint8_t descriptor, std::uint8_t function) {
+  return Command(0x0C, descriptor, {function});
+}
+
 std::vector<std::uint8_t> Reply(std::uint8_t set, std::uint8_t echo, std::uint8_t code,
                                 std::span<const Field> data) {
   std::vector<Field> fields = {{0xF1, {echo, code}}};

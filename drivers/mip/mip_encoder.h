@@ -33,6 +33,12 @@ std::vector<std::uint8_t> EnableStream(std::uint8_t data_set, bool on);
 // Read (function 2) a stored calibration: 0x37 accel bias, 0x38 gyro bias, 0x3A hard iron,
 // 0x3B soft iron.
 std::vector<std::uint8_t> ReadStored(std::uint8_t descriptor);
+// Write (function 1) a stored calibration: 0x37 / 0x38 / 0x3A three values, 0x3B nine
+// (row-major), each as a big-endian f32 (the values are rounded to float, as the device holds
+// them).
+std::vector<std::uint8_t> WriteStored(std::uint8_t descriptor, std::span<const double> values);
+// Save (3), load (4) or default (5) a stored calibration.
+std::vector<std::uint8_t> StoredFunction(std::uint8_t descriptor, std::uint8_t function);
 
 // A reply: the ACK/NACK field 04 F1 <echo> <code> and optional data fields.
 std::vector<std::uint8_t> Reply(std::uint8_t set, std::uint8_t echo, std::uint8_t code,

@@ -1,0 +1,225 @@
+// What a calibration writes into a MIP device (daemon/device_write_plan.h, issue 23): the values
+// composed with what the device stores make its new output, corrected by what stays in the
+// stream, give exactly the calibration's correction of the old output (up to the f32 the device
+// holds); their sigma is the covariance carried through; every refusal names its reason.
+#include "daemon/device_write_plan.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/LU>
+#include <random>
+
+#include "core/frames/reference.h"
+#include "core/frames/table_pose.h"
+
+namespace turncal::daemon {
+namespace {
+
+using drivers::mip::StoredCalibration;
+
+// A model's parameters off nominal by what a real sensor has: 2 % scales and gains, 10 mrad
+// angles, 0.05 m/s^2, 0.05 Gauss, 0.005 rad/s biases.
+Eigen::VectorXd Perturbed(const MeasurementModel& m, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> n;
+  Eigen::VectorXd theta = m.nominal();
+  for (int i = 0; i < m.num_parameters(); ++i) {
+    const ParameterInfo& p = m.parameters()[static_cast<std::size_t>(i)];
+    if (p.kind != ParameterKind::kSensor) continue;
+    double s = 0.02;
+    switch (p.unit) {
+      case ParameterUnit::kAngle:
+        s = 0.01;
+        break;
+      case ParameterUnit::kAcceleration:
+      case ParameterUnit::kField:
+        s = 0.05;
+        break;
+      case ParameterUnit::kAngularRate:
+        s = 0.005;
+        break;
+      default:
+        break;
+    }
+    theta[i] += s * n(rng);
+  }
+  return theta;
+}
+
+std::unique_ptr<MeasurementModel> Model(const std::string& name) {
+  std::string error;
+  auto m = MakeModel(name, ModelContext{}, &error);
+  EXPECT_TRUE(m) << error;
+  return m;
+}
+
+StoredCalibration Gx5WithMagnetometer() {
+  StoredCalibration s;
+  s.accel_bias = Eigen::Vector3d(0.001, -0.002, 0.0005);
+  s.gyro_bias = Eigen::Vector3d::Zero();
+  s.hard_iron = Eigen::Vector3d(0.01, -0.02, 0.03);
+  Eigen::Matrix3d soft;
+  soft << 1.01, 0.002, 0, 0.002, 0.99, -0.001, 0, -0.001, 1.0;
+  s.soft_iron = soft;
+  return s;
+}
+
+DeviceWriteRequest Request(const MeasurementModel* model, const Eigen::VectorXd& theta) {
+  DeviceWriteRequest q;
+  q.device = "imu1";
+  q.serial_now = q.serial_then = "SIM0001";
+  q.stored_now = Gx5WithMagnetometer();
+  q.stored_then = q.stored_now;
+  q.model = model;
+  q.theta = theta;
+  q.version = 3;
+  q.gate_passed = true;
+  return q;
+}
+
+const StoredWrite* Find(const DeviceWritePlan& plan, const std::string& quantity) {
+  for (const StoredWrite& w : plan.writes) {
+    if (w.quantity == quantity) return &w;
+  }
+  return nullptr;
+}
+
+Eigen::Vector3d V(const std::vector<double>& v, std::size_t at = 0) {
+  return {v[at], v[at + 1], v[at + 2]};
+}
+
+TEST(DeviceWritePlan, TheMagnetometersNewOutputCorrectedByTheStreamIsTheCalibration) {
+  for (const std::string name : {"mag13", "mag22"}) {
+    auto model = Model(name);
+    const Eigen::VectorXd theta = Perturbed(*model, 7);
+    const DeviceWritePlan plan = PlanDeviceWrite(Request(model.get(), theta));
+    ASSERT_TRUE(plan.ok()) << name << ": " << plan.refusals.front();
+    const StoredWrite* h = Find(plan, "hard_iron_gauss");
+    const StoredWrite* s = Find(plan, "soft_iron");
+    ASSERT_TRUE(h && s);
+    Eigen::Matrix3d S_new;
+    for (int i = 0; i < 9; ++i) S_new(i / 3, i % 3) = s->to_write[static_cast<std::size_t>(i)];
+    EXPECT_LT((S_new - S_new.transpose()).norm(), 0.05) << "nearly symmetric: " << name;
+    const StoredCalibration old = Gx5WithMagnetometer();
+    for (int k = 0; k < 20; ++k) {
+      const TablePose pose{k * 0.7, k * 0.3 - 1.0, k * 1.1};
+      const Eigen::Vector3d m_old = model->Predict(theta, pose);  // the output then
+      const Eigen::Vector3d raw = old.soft_iron->inverse() * m_old + *old.hard_iron;
+      const Eigen::Vector3d m_new = S_new * (raw - V(h->to_write));  // the device's, written
+      const Eigen::Vector3d want = model->Correct(theta, m_old);
+      const Eigen::Vector3d got = plan.stream.A * m_new + plan.stream.c;
+      // f32 values: ~6e-8 relative on a 0.5 Gauss field.
+      EXPECT_LT((got - want).norm(), 1e-6) << name << " pose " << k;
+    }
+    EXPECT_FALSE(plan.kept_in_stream.empty());
+    EXPECT_NE(plan.kept_in_stream.front().find("rotation"), std::string::npos);
+  }
+}
+
+TEST(DeviceWritePlan, TheAccelerometerAndGyroWriteTheirBiasAndKeepTheRestInTheStream) {
+  for (const std::string name : {"accel13", "accel12", "gyro12", "gyro21"}) {
+    auto model = Model(name);
+    const Eigen::VectorXd theta = Perturbed(*model, 11);
+    const DeviceWritePlan plan = PlanDeviceWrite(Request(model.get(), theta));
+    ASSERT_TRUE(plan.ok()) << name << ": " << plan.refusals.front();
+    ASSERT_EQ(plan.writes.size(), 1u) << name;
+    const bool acc = model->sensor() == SensorKind::kAccelerometer;
+    const StoredWrite& w = plan.writes.front();
+    EXPECT_EQ(w.quantity, acc ? "accel_bias_g" : "gyro_bias_radps");
+    const StoredCalibration old = Gx5WithMagnetometer();
+    const double unit = acc ? kStandardGravity_mps2 : 1.0;
+    const Eigen::Vector3d b_old = acc ? *old.accel_bias : *old.gyro_bias;
+    for (int k = 0; k < 20; ++k) {
+      const Eigen::Vector3d m_old =
+          Eigen::Vector3d(0.3 * k - 3, 9.8 - k, 0.5 * k) * (acc ? 1 : 0.1);
+      const Eigen::Vector3d raw = m_old + b_old * unit;
+      const Eigen::Vector3d m_new = raw - V(w.to_write) * unit;
+      const Eigen::Vector3d want = model->Correct(theta, m_old);
+      const Eigen::Vector3d got = plan.stream.A * m_new + plan.stream.c;
+      EXPECT_LT((got - want).norm(), 1e-6 * (1 + want.norm())) << name << " sample " << k;
+    }
+    ASSERT_FALSE(plan.kept_in_stream.empty());
+    EXPECT_NE(plan.kept_in_stream.front().find("no command"), std::string::npos);
+  }
+}
+
+TEST(DeviceWritePlan, TheSigmaOfABiasIsTheCalibrationsCarriedThrough) {
+  auto model = Model("accel13");
+  const Eigen::VectorXd theta = Perturbed(*model, 3);
+  DeviceWriteRequest q = Request(model.get(), theta);
+  const int n = model->num_parameters();
+  Eigen::VectorXd sd = Eigen::VectorXd::Constant(n, 1e-5);
+  const int bx = model->index_of("bx");
+  ASSERT_GE(bx, 0);
+  sd.segment(bx, 3) << 1e-3, 2e-3, 3e-3;  // m/s^2
+  q.covariance = sd.cwiseAbs2().asDiagonal();
+  const DeviceWritePlan plan = PlanDeviceWrite(q);
+  ASSERT_TRUE(plan.ok());
+  const std::vector<double>& sigma = plan.writes.front().sigma;
+  // The bias in the measurement is the model's bias; the scales' 1e-5 add ~1e-4 m/s^2 on 9.8.
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(sigma[static_cast<std::size_t>(i)] * kStandardGravity_mps2, sd[bx + i],
+                0.15 * sd[bx + i])
+        << i;
+  }
+}
+
+TEST(DeviceWritePlan, EachRefusalNamesItsReason) {
+  auto mag = Model("mag13");
+  const Eigen::VectorXd theta = Perturbed(*mag, 5);
+  const auto reasons = [&](const std::function<void(DeviceWriteRequest*)>& change) {
+    DeviceWriteRequest q = Request(mag.get(), theta);
+    change(&q);
+    const DeviceWritePlan plan = PlanDeviceWrite(q);
+    std::string all;
+    for (const std::string& r : plan.refusals) all += r + "; ";
+    return all;
+  };
+  EXPECT_EQ(reasons([](DeviceWriteRequest*) {}), "");
+  EXPECT_NE(reasons([](DeviceWriteRequest* q) {
+              q->protocol = drivers::Protocol::kXbus;
+            }).find("no public Xbus message"),
+            std::string::npos);
+  EXPECT_NE(reasons([](DeviceWriteRequest* q) {
+              q->gate_passed = false;
+            }).find("has not passed its gate"),
+            std::string::npos);
+  EXPECT_NE(reasons([](DeviceWriteRequest* q) {
+              q->serial_then = "SIM0002";
+            }).find("made on serial SIM0002, the device is serial SIM0001"),
+            std::string::npos);
+  EXPECT_NE(reasons([](DeviceWriteRequest* q) {
+              (*q->stored_now.hard_iron)[1] += 1e-6;
+            }).find("stores other values"),
+            std::string::npos);
+  EXPECT_NE(reasons([](DeviceWriteRequest* q) {
+              q->stored_then.reset();
+            }).find("does not record what the device stored"),
+            std::string::npos);
+  EXPECT_NE(reasons([](DeviceWriteRequest* q) {
+              q->stored_now.soft_iron.reset();
+              q->stored_then->soft_iron.reset();
+            }).find("no hard- and soft-iron commands"),
+            std::string::npos);
+}
+
+TEST(DeviceWritePlan, TheIdentitysStoredCalibrationReadsBack) {
+  const nlohmann::json identity = {
+      {"serial", "SIM0001"},
+      {"stored_calibration",
+       {{"accel_bias_g", {0.001, 0.0, -0.002}},
+        {"gyro_bias_radps", {0.0, 0.0, 0.0}},
+        {"hard_iron_gauss", nullptr},
+        {"soft_iron", {{1.0, 0.0, 0.0}, {0.0, 1.0, 0.0}, {0.0, 0.0, 1.0}}}}}};
+  const auto s = StoredCalibrationFromIdentity(identity);
+  ASSERT_TRUE(s);
+  ASSERT_TRUE(s->accel_bias);
+  EXPECT_EQ(s->accel_bias->z(), -0.002);
+  EXPECT_FALSE(s->hard_iron);
+  ASSERT_TRUE(s->soft_iron);
+  EXPECT_EQ(*s->soft_iron, Eigen::Matrix3d::Identity());
+  EXPECT_FALSE(StoredCalibrationFromIdentity(nlohmann::json()));
+}
+
+}  // namespace
+}  // namespace turncal::daemon
