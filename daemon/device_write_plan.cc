@@ -10,6 +10,7 @@
 #include <limits>
 
 #include "core/frames/reference.h"
+#include "drivers/mip/mip_stored.h"
 
 namespace turncal::daemon {
 
@@ -92,32 +93,8 @@ std::optional<drivers::mip::StoredCalibration> StoredCalibrationFromIdentity(
   const nlohmann::json& s = identity["stored_calibration"];
   if (!s.is_object()) return std::nullopt;
   drivers::mip::StoredCalibration out;
-  const auto vector = [&](const char* key) -> std::optional<Eigen::Vector3d> {
-    if (!s.contains(key) || !s[key].is_array() || s[key].size() != 3) return std::nullopt;
-    Eigen::Vector3d v;
-    for (int i = 0; i < 3; ++i) {
-      const auto& e = s[key][static_cast<std::size_t>(i)];
-      if (!e.is_number()) return std::nullopt;
-      v[i] = e.get<double>();
-    }
-    return v;
-  };
-  out.accel_bias = vector("accel_bias_g");
-  out.gyro_bias = vector("gyro_bias_radps");
-  out.hard_iron = vector("hard_iron_gauss");
-  if (s.contains("soft_iron") && s["soft_iron"].is_array() && s["soft_iron"].size() == 3) {
-    Eigen::Matrix3d m;
-    bool ok = true;
-    for (int r = 0; r < 3 && ok; ++r) {
-      const auto& row = s["soft_iron"][static_cast<std::size_t>(r)];
-      ok = row.is_array() && row.size() == 3;
-      for (int c = 0; c < 3 && ok; ++c) {
-        ok = row[static_cast<std::size_t>(c)].is_number();
-        if (ok) m(r, c) = row[static_cast<std::size_t>(c)].get<double>();
-      }
-    }
-    if (ok) out.soft_iron = m;
-  }
+  std::string error;
+  if (!drivers::mip::ParseStoredCalibration(s, &out, &error)) return std::nullopt;
   return out;
 }
 

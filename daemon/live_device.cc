@@ -7,6 +7,7 @@
 #include "daemon/transport_link.h"
 #include "drivers/decoder_factory.h"
 #include "drivers/mip/mip_dialogue.h"
+#include "drivers/mip/mip_stored.h"
 #include "drivers/xbus/mtdata2.h"
 #include "drivers/xbus/xbus_dialogue.h"
 
@@ -14,20 +15,7 @@ namespace turncal::daemon {
 
 namespace {
 
-nlohmann::json VectorJson(const std::optional<Eigen::Vector3d>& v) {
-  if (!v) return nullptr;
-  return {(*v)[0], (*v)[1], (*v)[2]};
-}
-
 nlohmann::json MipIdentity(const drivers::mip::Configured& c, double rate_hz) {
-  nlohmann::json soft = nullptr;
-  if (c.stored.soft_iron) {
-    soft = nlohmann::json::array();
-    for (int r = 0; r < 3; ++r) {
-      soft.push_back(
-          {(*c.stored.soft_iron)(r, 0), (*c.stored.soft_iron)(r, 1), (*c.stored.soft_iron)(r, 2)});
-    }
-  }
   return {{"protocol", "mip"},
           {"model_name", c.info.model_name},
           {"model_number", c.info.model_number},
@@ -39,11 +27,7 @@ nlohmann::json MipIdentity(const drivers::mip::Configured& c, double rate_hz) {
           {"decimation", c.decimation},
           {"rate_hz", rate_hz},
           // What the device applies itself before output (recorded with every calibration).
-          {"stored_calibration",
-           {{"accel_bias_g", VectorJson(c.stored.accel_bias)},
-            {"gyro_bias_radps", VectorJson(c.stored.gyro_bias)},
-            {"hard_iron_gauss", VectorJson(c.stored.hard_iron)},
-            {"soft_iron", soft}}}};
+          {"stored_calibration", drivers::mip::StoredCalibrationJson(c.stored)}};
 }
 
 // Counter and fine time at every sample, then the calibrated triads, temperature and status.

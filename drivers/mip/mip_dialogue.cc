@@ -111,16 +111,29 @@ bool Dialogue::EnableStream(std::uint8_t data_set, bool on, std::string* error) 
   return Command(mip::EnableStream(data_set, on), "enable stream", error).has_value();
 }
 
+const char* StoredQuantityName(std::uint8_t descriptor) {
+  switch (descriptor) {
+    case 0x37:
+      return "accel bias";
+    case 0x38:
+      return "gyro bias";
+    case 0x3A:
+      return "hard-iron offset";
+    case 0x3B:
+      return "soft-iron matrix";
+    default:
+      return "stored value";
+  }
+}
+
 std::optional<StoredCalibration> Dialogue::ReadStoredCalibration(std::string* error) {
   StoredCalibration stored;
-  const struct {
-    std::uint8_t descriptor;
-    const char* what;
-  } reads[] = {{0x37, "read stored accel bias"},
-               {0x38, "read stored gyro bias"},
-               {0x3A, "read stored hard-iron offset"},
-               {0x3B, "read stored soft-iron matrix"}};
-  for (const auto& r : reads) {
+  for (const std::uint8_t descriptor : {0x37, 0x38, 0x3A, 0x3B}) {
+    const std::string what = fmt::format("read stored {}", StoredQuantityName(descriptor));
+    const struct {
+      std::uint8_t descriptor;
+      const char* what;
+    } r{descriptor, what.c_str()};
     std::uint8_t code = 0;
     std::string step_error;
     const auto fields = Command(mip::ReadStored(r.descriptor), r.what, &step_error, &code);
@@ -158,20 +171,6 @@ std::optional<StoredCalibration> Dialogue::ReadStoredCalibration(std::string* er
 }
 
 namespace {
-const char* StoredName(std::uint8_t descriptor) {
-  switch (descriptor) {
-    case 0x37:
-      return "stored accel bias";
-    case 0x38:
-      return "stored gyro bias";
-    case 0x3A:
-      return "stored hard-iron offset";
-    case 0x3B:
-      return "stored soft-iron matrix";
-    default:
-      return "stored value";
-  }
-}
 const char* FunctionName(std::uint8_t function) {
   switch (function) {
     case 1:
@@ -195,20 +194,23 @@ bool Dialogue::WriteStored(std::uint8_t descriptor, std::span<const double> valu
   if (nack_code) *nack_code = 0xFF;
   const std::size_t want = descriptor == 0x3B ? 9 : 3;
   if (values.size() != want) {
-    if (error) *error = fmt::format("write {}: {} values expected", StoredName(descriptor), want);
+    if (error)
+      *error =
+          fmt::format("write stored {}: {} values expected", StoredQuantityName(descriptor), want);
     return false;
   }
   return Command(mip::WriteStored(descriptor, values),
-                 fmt::format("write {}", StoredName(descriptor)), error, nack_code)
+                 fmt::format("write stored {}", StoredQuantityName(descriptor)), error, nack_code)
       .has_value();
 }
 
 bool Dialogue::StoredFunction(std::uint8_t descriptor, std::uint8_t function, std::string* error,
                               std::uint8_t* nack_code) {
   if (nack_code) *nack_code = 0xFF;
-  return Command(mip::StoredFunction(descriptor, function),
-                 fmt::format("{} {}", FunctionName(function), StoredName(descriptor)), error,
-                 nack_code)
+  return Command(
+             mip::StoredFunction(descriptor, function),
+             fmt::format("{} stored {}", FunctionName(function), StoredQuantityName(descriptor)),
+             error, nack_code)
       .has_value();
 }
 

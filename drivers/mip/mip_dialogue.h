@@ -37,6 +37,9 @@ struct Configured {
 
 // "unknown command", "bad checksum", "bad parameter", "failed", "timeout".
 const char* NackMeaning(std::uint8_t code);
+// A stored quantity's name: "accel bias" (0x37), "gyro bias" (0x38), "hard-iron offset" (0x3A),
+// "soft-iron matrix" (0x3B), "stored value" otherwise.
+const char* StoredQuantityName(std::uint8_t descriptor);
 
 class Dialogue {
  public:

@@ -6,21 +6,6 @@ namespace turncal::drivers::mip {
 
 namespace {
 
-const char* Quantity(std::uint8_t descriptor) {
-  switch (descriptor) {
-    case 0x37:
-      return "accel bias";
-    case 0x38:
-      return "gyro bias";
-    case 0x3A:
-      return "hard-iron offset";
-    case 0x3B:
-      return "soft-iron matrix";
-    default:
-      return "stored value";
-  }
-}
-
 // The first entry where the read-back is not, bit for bit, the float that was sent; -1 when all
 // agree; -2 when the device returned no such quantity.
 int FirstDifference(const StoredCalibration& read, std::uint8_t descriptor,
@@ -44,12 +29,13 @@ bool ReadBackAndCompare(Dialogue* d, const std::vector<StoredWriteStep>& steps, 
     const StoredWriteStep& s = steps[i];
     const int at = FirstDifference(*read, s.descriptor, values(s));
     if (at == -2) {
-      *error = fmt::format("read back {}: the device returned no value", Quantity(s.descriptor));
+      *error = fmt::format("read back {}: the device returned no value",
+                           StoredQuantityName(s.descriptor));
       return false;
     }
     if (at >= 0) {
       *error = fmt::format("read back {}: entry {} is {:.9g}, {:.9g} was written",
-                           Quantity(s.descriptor), at,
+                           StoredQuantityName(s.descriptor), at,
                            StoredValues(*read, s.descriptor)[static_cast<std::size_t>(at)],
                            static_cast<float>(values(s)[static_cast<std::size_t>(at)]));
       return false;
@@ -133,7 +119,7 @@ StoredWriteOutcome WriteStoredCalibration(Dialogue* d, const std::vector<StoredW
       break;
     }
     ++attempted;
-    say(fmt::format("write {}: ok", Quantity(s.descriptor)));
+    say(fmt::format("write {}: ok", StoredQuantityName(s.descriptor)));
   }
   if (!failed) {
     failed = !ReadBackAndCompare(
@@ -148,7 +134,7 @@ StoredWriteOutcome WriteStoredCalibration(Dialogue* d, const std::vector<StoredW
         break;
       }
       ++saves_attempted;
-      say(fmt::format("save {}: ok", Quantity(s.descriptor)));
+      say(fmt::format("save {}: ok", StoredQuantityName(s.descriptor)));
     }
   }
   if (!failed) {
@@ -164,12 +150,12 @@ StoredWriteOutcome WriteStoredCalibration(Dialogue* d, const std::vector<StoredW
   bool rolled = true;
   for (std::size_t i = 0; i < attempted && rolled; ++i) {
     rolled = d->WriteStored(steps[i].descriptor, steps[i].old_values, &r);
-    say(fmt::format("rollback: write the old {}: {}", Quantity(steps[i].descriptor),
+    say(fmt::format("rollback: write the old {}: {}", StoredQuantityName(steps[i].descriptor),
                     rolled ? "ok" : r));
   }
   for (std::size_t i = 0; i < saves_attempted && rolled; ++i) {
     rolled = d->StoredFunction(steps[i].descriptor, 3, &r);
-    say(fmt::format("rollback: save the old {}: {}", Quantity(steps[i].descriptor),
+    say(fmt::format("rollback: save the old {}: {}", StoredQuantityName(steps[i].descriptor),
                     rolled ? "ok" : r));
   }
   if (rolled) {
