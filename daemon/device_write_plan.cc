@@ -284,6 +284,7 @@ nlohmann::json ToJson(const DeviceWritePlan& plan) {
   };
   for (const StoredWrite& w : plan.writes) {
     writes.push_back({{"quantity", w.quantity},
+                      {"name", drivers::mip::StoredQuantityName(w.descriptor)},
                       {"descriptor", fmt::format("0x0C 0x{:02X}", w.descriptor)},
                       {"stored", numbers(w.stored)},
                       {"to_write", numbers(w.to_write)},

@@ -185,7 +185,7 @@ void LiveDevice::OnData(std::span<const std::uint8_t> bytes, std::int64_t t_host
     decoder_->Push(bytes, t_host_ns);
     return;
   }
-  if (link_ && state_ == "configuring") {
+  if (link_ && (state_ == "configuring" || state_ == "writing")) {
     bytes_dialogue_ += bytes.size();
     link_->Deliver(bytes);
     return;
@@ -241,6 +241,60 @@ void LiveDevice::BeginConfigure() {
       EndConfigure(ok, error, identity, layout);
     });
   });
+}
+
+bool LiveDevice::RunStoredWrite(std::vector<drivers::mip::StoredWriteStep> steps, bool save,
+                                StoredWriteDone done, std::string* error) {
+  if (spec_.protocol != drivers::Protocol::kMip) {
+    *error = spec_.name + " is not a MIP device";
+    return false;
+  }
+  if (!settings_.configure || spec_.port.rfind("replay:", 0) == 0) {
+    *error = spec_.name + (settings_.configure ? " replays a capture"
+                                               : " is not configured by "
+                                                 "turncald (configure = "
+                                                 "false)");
+    return false;
+  }
+  if (state_ != "streaming" || !transport_ || !transport_->is_open()) {
+    *error = fmt::format("{} is {}, not streaming", spec_.name, state_);
+    return false;
+  }
+  // The decoder ends here; the dialogue reads the device's bytes until it streams again.
+  if (decoder_) {
+    decoder_->Finish();
+    AddCounters(&retired_, decoder_->counters());
+    decoder_.reset();
+  }
+  JoinWorker();
+  link_ = std::make_shared<TransportLink>(io_, transport_.get());
+  ++stored_writes_;
+  SetState("info", "writing",
+           fmt::format("writing a stored calibration ({} quantities{})", steps.size(),
+                       save ? ", saved" : ""));
+  RecordEvent(R"({"event":"dialogue","state":"begin"})");
+  const std::uint64_t generation = ++generation_;
+  const double rate_hz = settings_.rate_hz;
+  std::shared_ptr<TransportLink> link = link_;
+  worker_ = std::thread(
+      [this, link, generation, rate_hz, steps = std::move(steps), save, done = std::move(done)] {
+        drivers::mip::Dialogue dialogue(link.get());
+        drivers::mip::StoredWriteOutcome outcome =
+            drivers::mip::WriteStoredCalibration(&dialogue, steps, save);
+        std::string configure_error;
+        nlohmann::json identity;
+        if (auto c = dialogue.Configure(rate_hz, &configure_error)) {
+          identity = MipIdentity(*c, c->base_rate_hz / static_cast<double>(c->decimation));
+        }
+        boost::asio::post(
+            io_, [this, generation, outcome = std::move(outcome), identity, configure_error, done] {
+              if (done)
+                done(outcome, identity, identity.is_null() ? configure_error : std::string());
+              if (generation != generation_) return;  // the device went away meanwhile
+              EndConfigure(!identity.is_null(), configure_error, identity, std::nullopt);
+            });
+      });
+  return true;
 }
 
 void LiveDevice::EndConfigure(bool ok, const std::string& error, nlohmann::json identity,
@@ -308,6 +362,7 @@ nlohmann::json LiveDevice::Status() const {
             {"open_failures", t.open_failures},
             {"disconnects", t.disconnects},
             {"configure_failures", configure_failures_},
+            {"stored_writes", stored_writes_},
             {"bytes_ignored", bytes_ignored_},
             // Every byte read is accounted for: bytes_read = bytes_dialogue + bytes_ignored +
             // bytes_decoded, and bytes_decoded = bytes_in_frames + skipped_bytes + pending_bytes.

@@ -5,7 +5,8 @@
 // A device that is absent or whose dialogue fails is reported and retried; the others go on.
 //
 // States: "opening" → "configuring" → "streaming"; "configure failed" (retried after
-// `configure_retry`), "disconnected" (reopened by the transport), "stopped".
+// `configure_retry`), "disconnected" (reopened by the transport), "stopped"; "writing" while a
+// stored calibration is written into a MIP device (RunStoredWrite), then "configuring" again.
 
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/steady_timer.hpp>
@@ -19,6 +20,7 @@
 #include "core/sequencing/sample.h"
 #include "drivers/decoder.h"
 #include "drivers/device_spec.h"
+#include "drivers/mip/mip_stored_write.h"
 #include "drivers/transport/recording.h"
 #include "drivers/transport/transport.h"
 #include "drivers/xbus/xbus_decoder.h"
@@ -70,6 +72,18 @@ class LiveDevice {
   bool Start(std::string* error);
   void Stop();
 
+  // Writes a stored calibration into a streaming MIP device (drivers/mip/mip_stored_write.h) on the
+  // worker thread, then configures it again (its identity then carries what it stores). `done`
+  // runs on the loop with the outcome and the identity after it (null with `configure_error`
+  // when the dialogue after the write failed: the device is then retried as after any failed
+  // dialogue), before the device streams again and its identity handler runs. False with a
+  // message when the device is not a streaming, configured MIP device.
+  using StoredWriteDone =
+      std::function<void(const drivers::mip::StoredWriteOutcome& outcome,
+                         const nlohmann::json& identity, const std::string& configure_error)>;
+  bool RunStoredWrite(std::vector<drivers::mip::StoredWriteStep> steps, bool save,
+                      StoredWriteDone done, std::string* error);
+
   const drivers::DeviceSpec& spec() const { return spec_; }
   const std::string& state() const { return state_; }
   // {"name","protocol","port","baud","state","message","identity","rate_hz","counters":{...}}
@@ -113,7 +127,7 @@ class LiveDevice {
   std::string state_ = "stopped";
   std::string message_;
   nlohmann::json identity_;
-  std::uint64_t samples_ = 0, bytes_ignored_ = 0, configure_failures_ = 0;
+  std::uint64_t samples_ = 0, bytes_ignored_ = 0, configure_failures_ = 0, stored_writes_ = 0;
   std::uint64_t bytes_dialogue_ = 0;  // delivered to a configuration dialogue
   std::uint64_t rate_samples_ = 0;
   std::int64_t rate_t_ns_ = 0;

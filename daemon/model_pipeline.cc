@@ -65,17 +65,44 @@ void ModelPipeline::Apply(int version, const Eigen::VectorXd& theta,
   applied_affine = exact.allFinite() && (exact - affine).norm() <= 1e-12 * (1.0 + exact.norm());
 }
 
-bool ModelPipeline::ApplyStored(const nlohmann::json& stored) {
-  const auto& params = model->parameters();
-  Eigen::VectorXd theta(static_cast<Eigen::Index>(params.size()));
-  bool ok = stored.contains("version") && stored["version"].is_number_integer() &&
-            stored.contains("params") && stored["params"].is_object();
+bool CalibrationValues(const MeasurementModel& model, const nlohmann::json& stored,
+                       Eigen::VectorXd* theta, Eigen::MatrixXd* covariance) {
+  const auto& params = model.parameters();
+  Eigen::VectorXd t(static_cast<Eigen::Index>(params.size()));
+  bool ok = stored.is_object() && stored.contains("params") && stored["params"].is_object();
   for (std::size_t i = 0; ok && i < params.size(); ++i) {
     const auto it = stored["params"].find(params[i].name);
     ok = it != stored["params"].end() && it->is_object() && (*it)["value"].is_number();
-    if (ok) theta[static_cast<Eigen::Index>(i)] = (*it)["value"].get<double>();
+    if (ok) t[static_cast<Eigen::Index>(i)] = (*it)["value"].get<double>();
   }
   if (!ok) return false;
+  *theta = t;
+  covariance->resize(0, 0);
+  const auto& cov = stored.value("covariance", nlohmann::json());
+  if (cov.is_array() && cov.size() == params.size()) {
+    Eigen::MatrixXd c(t.size(), t.size());
+    bool good = true;
+    for (std::size_t r = 0; good && r < params.size(); ++r) {
+      good = cov[r].is_array() && cov[r].size() == params.size();
+      for (std::size_t k = 0; good && k < params.size(); ++k) {
+        good = cov[r][k].is_number();
+        if (good) {
+          c(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(k)) = cov[r][k].get<double>();
+        }
+      }
+    }
+    if (good) *covariance = c;
+  }
+  return true;
+}
+
+bool ModelPipeline::ApplyStored(const nlohmann::json& stored) {
+  Eigen::VectorXd theta;
+  Eigen::MatrixXd covariance;
+  if (!stored.contains("version") || !stored["version"].is_number_integer() ||
+      !CalibrationValues(*model, stored, &theta, &covariance)) {
+    return false;
+  }
   std::optional<TimeWindow> window;
   TimeWindow w;
   if (stored.contains("bias_window") && protocol::ParseTimeWindow(stored["bias_window"], &w)) {
@@ -87,21 +114,7 @@ bool ModelPipeline::ApplyStored(const nlohmann::json& stored) {
     protocol::ParseBiasDrift(stored["calibrator"]["drift"], &drift);
   }
   Apply(stored["version"].get<int>(), theta, Eigen::MatrixXd(), window, drift);
-  const auto& cov = stored.value("covariance", nlohmann::json());
-  if (cov.is_array() && cov.size() == params.size()) {
-    Eigen::MatrixXd c(theta.size(), theta.size());
-    bool good = true;
-    for (std::size_t r = 0; good && r < params.size(); ++r) {
-      good = cov[r].is_array() && cov[r].size() == params.size();
-      for (std::size_t k = 0; good && k < params.size(); ++k) {
-        good = cov[r][k].is_number();
-        if (good) {
-          c(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(k)) = cov[r][k].get<double>();
-        }
-      }
-    }
-    if (good) applied_covariance = c;
-  }
+  if (covariance.size() > 0) applied_covariance = covariance;
   return true;
 }
 

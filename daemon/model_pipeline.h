@@ -34,6 +34,11 @@ Eigen::Vector3d PropagatedSigma(
     const std::function<Eigen::Vector3d(const Eigen::VectorXd&)>& corrected,
     const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance);
 
+// A calibration document's parameter values in `model`'s order, and its covariance (empty when
+// the document has none or it is not the model's size). False when a parameter is missing.
+bool CalibrationValues(const MeasurementModel& model, const nlohmann::json& calibration,
+                       Eigen::VectorXd* theta, Eigen::MatrixXd* covariance);
+
 // What one pose's update computes (on the solve worker when there is one).
 struct ModelUpdate {
   std::size_t device_poses = 0;  // the device's poses when the update was queued, this one included

@@ -11,6 +11,7 @@
 
 #include "daemon/notify.h"
 #include "daemon/persistence.h"
+#include "drivers/mip/mip_stored.h"
 #include "drivers/transport/transport.h"
 #include "protocol/messages.h"
 #include "protocol/sequencer_json.h"
@@ -158,9 +159,8 @@ bool Service::StartStation(std::string* error) {
     worker_->Post(std::move(work), std::move(done));
   });
   for (std::size_t i = 0; i < devices_.size(); ++i) {
-    if (!devices_[i]->Status()["identity"].is_null()) {
-      station_->SetDeviceIdentity(static_cast<int>(i), devices_[i]->Status()["identity"]);
-    }
+    const nlohmann::json identity = devices_[i]->Status()["identity"];
+    if (!identity.is_null()) OnDeviceIdentity(i, identity);
   }
   // Pose indices continue after the journal's.
   for (std::size_t i = 0; i < options_.devices.size(); ++i) {
@@ -210,9 +210,7 @@ void Service::StartDevices() {
           }
           OnEvent({{"class", "DEVICE"}, {"device", name}, {"state", state}, {"message", message}});
         },
-        [this, i](const nlohmann::json& identity) {
-          if (station_) station_->SetDeviceIdentity(static_cast<int>(i), identity);
-        });
+        [this, i](const nlohmann::json& identity) { OnDeviceIdentity(i, identity); });
     // A replayed capture's pose commands go to this device as they would from a controller.
     device->SetCaptureEventHandler([this, i](const std::string& text, std::int64_t t_host_ns) {
       const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
@@ -327,6 +325,7 @@ void Service::Tick() {
       }
     }
   }
+  TickDeviceWrites(now);
   if (now - last_rate_ns_ >= 1000 * kNsPerMs) {
     for (auto& d : devices_) d->UpdateRate(now);
     last_rate_ns_ = now;
@@ -417,8 +416,23 @@ void Service::Reload() {
 }
 
 void Service::OnSample(std::size_t device, const Sample& sample) {
+  // After a write into the device, the station sees its output in the stored values its
+  // calibrations were made with (daemon/device_write.h); `raw` shows what the device sends.
+  const Sample* station_sample = &sample;
+  Sample reexpressed;
+  if (!writes_.empty()) {
+    if (auto it = writes_.find(sample.device); it != writes_.end()) {
+      if (it->second.job) OnWriteSample(device, sample);
+      if (it->second.reexpress) {
+        reexpressed = sample;
+        drivers::mip::ReexpressMipOutput(it->second.record->in_device, it->second.record->as_if,
+                                         &reexpressed);
+        station_sample = &reexpressed;
+      }
+    }
+  }
   if (!station_) return;
-  station_->OnSample(static_cast<int>(device), sample);
+  station_->OnSample(static_cast<int>(device), *station_sample);
   if (server_->sessions().empty()) return;
   // The lines are built once, when somebody wants them, and shared by every subscriber.
   // Four shapes of corrected line: with or without raw, with or without sigma. The lines are
@@ -444,7 +458,8 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
     if (w.corrected) {
       if (!tried ||
           (w.uncertainty && !c.acc_sigma && !c.mag_sigma && !c.gyr_sigma && have_correction)) {
-        have_correction = station_->Correct(static_cast<int>(device), sample, &c, w.uncertainty);
+        have_correction =
+            station_->Correct(static_cast<int>(device), *station_sample, &c, w.uncertainty);
         tried = true;
       }
       if (!have_correction) {

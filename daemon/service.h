@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "daemon/config.h"
+#include "daemon/device_write.h"
 #include "daemon/live_device.h"
 #include "daemon/socket_server.h"
 #include "daemon/solve_worker.h"
@@ -70,6 +71,29 @@ class Service {
                    const nlohmann::json& id);
   void HandlePublish(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request,
                      const nlohmann::json& id);
+
+  // device_write (daemon/service_device_write.cc, docs/protocol.md "Writing a calibration into
+  // the device"): the plan; then a window of the device's output, the write on the device's
+  // worker, a window after it, the verification, the record and the reply.
+  void HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
+                         const nlohmann::json& request, const nlohmann::json& id);
+  // A device's identity after a dialogue: whether its output must be re-expressed in the stored
+  // values the station's calibrations were made with (device_writes/DEVICE.json), and the
+  // identity the station records.
+  void OnDeviceIdentity(std::size_t device, const nlohmann::json& identity);
+  // A device's sample on its way through a write (the windows before and after it).
+  void OnWriteSample(std::size_t device, const Sample& sample);
+  void StartStoredWrite(std::size_t device);
+  void FinishDeviceWrite(const std::string& device, nlohmann::json reply);
+  void TickDeviceWrites(std::int64_t now_ns);
+  struct DeviceWriteJob;
+  // Per device name: the writes in effect, and a write under way.
+  struct DeviceWrites {
+    std::optional<DeviceWriteRecord> record;  // device_writes/DEVICE.json
+    bool reexpress = false;                   // the device holds record->in_device != as_if
+    std::shared_ptr<DeviceWriteJob> job;      // a write under way
+  };
+  std::map<std::string, DeviceWrites> writes_;
 
   ServiceOptions options_;
   boost::asio::io_context io_;

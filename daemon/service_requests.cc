@@ -107,6 +107,8 @@ void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
     HandleReset(client, request, id);
   } else if (cmd == "publish") {
     HandlePublish(client, request, id);
+  } else if (cmd == "device_write") {
+    HandleDeviceWrite(client, request, id);
   }
 }
 

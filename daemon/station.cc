@@ -203,6 +203,16 @@ int Station::DeviceIndex(const std::string& name) const {
   return -1;
 }
 
+const MeasurementModel* Station::ModelOf(const std::string& device,
+                                         const std::string& model) const {
+  const int i = DeviceIndex(device);
+  if (i < 0) return nullptr;
+  for (const ModelState& m : devices_[static_cast<std::size_t>(i)]->models) {
+    if (m.model->name() == model) return m.model.get();
+  }
+  return nullptr;
+}
+
 void Station::SetDeviceIdentity(int device, nlohmann::json identity) {
   devices_[static_cast<std::size_t>(device)]->identity = std::move(identity);
 }

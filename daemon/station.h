@@ -168,6 +168,8 @@ class Station : public ReplayTarget {
   nlohmann::json NextPose(const std::string& device) const;
 
   int DeviceIndex(const std::string& name) const;  // -1 when unknown
+  // DEVICE's model MODEL (a pose model of an announced station), nullptr when it has none.
+  const MeasurementModel* ModelOf(const std::string& device, const std::string& model) const;
 
   // Where pose updates (calibrator solve, data observability, gate) run: `work` off the event
   // loop, then `done` back on it, in order. Unset (replays, tests): both at once, inline. Work

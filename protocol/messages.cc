@@ -41,7 +41,8 @@ bool StringArgument(const nlohmann::json& request, const char* key, std::string*
 }  // namespace
 
 bool IsMutatingCommand(const std::string& cmd) {
-  return cmd == "pose" || cmd == "rate" || cmd == "reset" || cmd == "publish";
+  return cmd == "pose" || cmd == "rate" || cmd == "reset" || cmd == "publish" ||
+         cmd == "device_write";
 }
 
 bool RequestFramer::Push(std::string_view bytes, const LineHandler& on_line,
@@ -139,7 +140,7 @@ bool ParseCommand(const nlohmann::json& request, std::string* cmd, std::string* 
   }
   *cmd = request["cmd"].get<std::string>();
   for (const char* known : {"status", "devices", "pose", "rate", "watch", "result", "next_pose",
-                            "reset", "publish", "version"}) {
+                            "reset", "publish", "device_write", "version"}) {
     if (*cmd == known) return true;
   }
   *error = fmt::format("unknown command '{}' (commands: {})", *cmd, kCommands);
@@ -244,6 +245,45 @@ bool ParsePublishRequest(const nlohmann::json& request, PublishRequest* out, std
     return false;
   }
   *out = p;
+  return true;
+}
+
+bool ParseDeviceWriteRequest(const nlohmann::json& request, DeviceWriteArgs* out,
+                             std::string* error) {
+  DeviceWriteArgs a;
+  const auto flag = [&](const char* key, bool* value) {
+    const auto it = request.find(key);
+    if (it == request.end()) return true;
+    if (!it->is_boolean()) return false;
+    *value = it->get<bool>();
+    return true;
+  };
+  if (!StringArgument(request, "device", &a.device) || a.device.empty()) {
+    *error = "device_write: \"device\" (a device's name) is required";
+    return false;
+  }
+  if (!StringArgument(request, "model", &a.model)) {
+    *error = "device_write: \"model\" must be a string";
+    return false;
+  }
+  if (!flag("save", &a.save) || !flag("dry_run", &a.dry_run) || !flag("restore", &a.restore)) {
+    *error = "device_write: \"save\", \"dry_run\" and \"restore\" are true or false";
+    return false;
+  }
+  if (a.restore == !a.model.empty()) {
+    *error =
+        "device_write: either \"model\" (the calibration to write) or \"restore\":true (put "
+        "back what the device held before turncal wrote into it)";
+    return false;
+  }
+  if (const auto it = request.find("version"); it != request.end() && !it->is_null()) {
+    if (!it->is_number_integer() || it->get<long long>() < 1 || it->get<long long>() > 1000000) {
+      *error = "device_write: \"version\" is the calibration's version, a positive integer";
+      return false;
+    }
+    a.version = it->get<int>();
+  }
+  *out = a;
   return true;
 }
 

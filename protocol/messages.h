@@ -33,8 +33,10 @@ nlohmann::json ErrorMessage(const std::string& message);
 
 // The commands, as an ERROR lists them.
 inline constexpr const char* kCommands =
-    "status, devices, pose, rate, watch, result, next_pose, reset, publish, version";
-// pose, rate, reset and publish change the session: only control peers may send them.
+    "status, devices, pose, rate, watch, result, next_pose, reset, publish, device_write, "
+    "version";
+// pose, rate, reset, publish and device_write change the session or a device: only control peers
+// may send them.
 bool IsMutatingCommand(const std::string& cmd);
 
 // Splits a client's bytes into request lines: '\n' ends a line, a trailing '\r' is removed. A
@@ -108,5 +110,19 @@ struct PublishRequest {
   std::string reason;
 };
 bool ParsePublishRequest(const nlohmann::json& request, PublishRequest* out, std::string* error);
+
+// device_write: DEVICE's active calibration of MODEL into the device's stored calibration (issue
+// 23, docs/protocol.md "Writing a calibration into the device"), or with `restore` the values it
+// held before turncal's writes back into it.
+struct DeviceWriteArgs {
+  std::string device;
+  std::string model;  // not with restore
+  bool save = false;  // also to non-volatile memory
+  bool dry_run = false;
+  bool restore = false;
+  std::optional<int> version;  // the version the plan showed: refused when another is active
+};
+bool ParseDeviceWriteRequest(const nlohmann::json& request, DeviceWriteArgs* out,
+                             std::string* error);
 
 }  // namespace turncal::protocol

@@ -89,10 +89,12 @@ struct EmulatedIdentity {
   std::string lot = "sim";
   std::string options = "";
   std::uint16_t mip_firmware = 1234;
-  // MIP stored calibration the device applies before output (0x37, 0x38, 0x3A, 0x3B); an absent
-  // entry is a command the device does not know (NACK 1).
+  // MIP stored calibration the device applies before output (0x37, 0x38, 0x3A, 0x3B: a GX5-25
+  // has all four, at their factory values); an absent entry is a command the device does not
+  // know (NACK 1).
   drivers::mip::StoredCalibration mip_stored = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
-                                                std::nullopt, std::nullopt};
+                                                Eigen::Vector3d::Zero(),
+                                                Eigen::Matrix3d::Identity()};
   // The simulator's samples carry mip_stored (they are the device's output with those values in
   // use). The device's non-volatile storage: a JSON file that keeps what the host saved, read at
   // power-up, so a saved calibration survives the device's restart (a missing file: nothing

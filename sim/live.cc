@@ -412,6 +412,8 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     ++p;
   };
 
+  bool end_holding = false;  // after the last pose (hold_end_s)
+  double end_hold_until_s = 0;
   auto last_turn = Clock::now();
   auto due_since = Clock::time_point::max();  // pose p could be announced since then (max: not)
   for (;;) {
@@ -562,7 +564,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     bool done = p >= events.size();
     for (Device& d : devices) {
       const auto& samples = d.capture->session.samples;
-      if (holding || start_holding) {
+      if (holding || start_holding || end_holding) {
         while (d.clone_due_s <= vt && !d.hold_samples.empty()) {
           const std::size_t n = d.hold_samples.size();
           const std::size_t at = d.clones % (2 * n);
@@ -642,7 +644,13 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
         Say(said);
       }
     }
-    if (done) break;
+    if (done && options.hold_end_s > 0 && !end_holding && !events.empty()) {
+      end_holding = true;
+      end_hold_until_s = vt + options.hold_end_s;
+      begin_hold(events.back().t_s, events.back().dwell_end_s, vt);
+      Say({{"event", "holding_end"}, {"index", events.size() - 1}, {"for_s", options.hold_end_s}});
+    }
+    if (done && (!end_holding || vt >= end_hold_until_s)) break;
     // Wait for the device's commands (or 1 ms).
     std::vector<pollfd> fds;
     for (const Device& d : devices) fds.push_back({d.fd, POLLIN, 0});  // fd -1: ignored

@@ -57,6 +57,10 @@ struct LiveSimOptions {
   // daemon saves into a device survives an unplug and the next run (sim/mip_storage.h). Empty:
   // saves last until the device's next power-up.
   std::string device_state_dir;
+  // After the last pose the table stays there this many session seconds, the devices streaming
+  // its stationary samples again (and answering dialogues): time for a write into the device
+  // and its verification. An event {"event":"holding_end"} says when it begins.
+  double hold_end_s = 0;
 };
 
 struct LiveSimReport {

@@ -109,6 +109,27 @@ const std::map<std::string, Manual>& Manuals() {
         "calibration. Needs a permitted uid. {socket}",
         "turncal publish imu1 accel13 --operator \"A. Engineer\" --reason \"re-issue after audit\"",
         kClientExit, "docs/protocol.md (publish)"}},
+      {"device-write",
+       {"Writes DEVICE's active calibration of MODEL into the device's stored calibration (MIP: "
+        "accelerometer and gyro bias, hard-iron offset, soft-iron matrix), composed with what "
+        "it stores now. Shows the plan first: the stored values, the values to write with their "
+        "1 sigma, the expected change of the output, what stays in turncald's stream (scale "
+        "factors and misalignments, which MIP cannot hold), and every refusal (gate not passed, "
+        "another serial, other stored values than the calibration was made with, Xbus, GX2). "
+        "Then asks (or --yes), writes, reads back bit for bit, saves only with --save, and "
+        "verifies by measurement: the device's uncorrected output after the write must be the "
+        "output predicted from before it, within 3 sigma. A failure rolls back. The replaced "
+        "values are kept in the state directory (device_writes/); --restore puts back what the "
+        "device held before turncal wrote into it. "
+        "Needs a permitted uid. {socket}",
+        "turncal device-write imu1 --model mag13 --dry-run\n"
+        "turncal device-write imu1 --model mag13 --save\n"
+        "turncal device-write imu1 --restore",
+        "0 written and verified (or --dry-run: the plan may be written); 1 written but not "
+        "verified, not confirmed, or (--dry-run) refused; 2 refused, failed (the device is "
+        "as it was, or the reply says its state), the daemon cannot be reached, or a "
+        "command-line mistake",
+        "docs/protocol.md (Writing a calibration into the device)"}},
       {"capture",
        {"Records a live port into a .tcap capture (bytes with their host times) until Ctrl-C or "
         "SIGTERM. A capture replays through the whole pipeline: turncald --replay FILE --once.",

@@ -59,6 +59,7 @@ struct SimCommandArgs {
   std::vector<std::string> lives;  // ptys (or writable ttys/files) to stream to at real time
   std::string live;                // the first of lives
   double live_speed = 1.0;
+  double hold_end_s = 0;
   std::string controller;  // turncald's socket: play the controller (sim/live.h)
   double answer_timeout_s = 120;
   int retries = 2;
@@ -277,6 +278,7 @@ int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
   live.fault_seed = args.seed * 7919 + 17;
   live.unplug_s = args.unplug_s;
   live.device_state_dir = args.device_state;
+  live.hold_end_s = args.hold_end_s;
   if (!live.device_state_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(live.device_state_dir, ec);
@@ -582,6 +584,10 @@ void AddSimCommand(CLI::App* app) {
                   "with --live: a folder for the MIP devices' non-volatile storage "
                   "(DIR/SIM0001.nvm.json): a calibration the daemon saves into a device survives "
                   "its unplug and the next run");
+  cmd->add_option("--hold-end", args->hold_end_s,
+                  "with --controller: after the last pose the table stays there this many session "
+                  "seconds, the devices streaming (time to write a calibration into a device)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--live-speed", args->live_speed, "time scale of --live (2 = twice as fast)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

@@ -5,6 +5,7 @@
 #include "tools/capture_command.h"
 #include "tools/client_commands.h"
 #include "tools/decode_command.h"
+#include "tools/device_write_command.h"
 #include "tools/free_command.h"
 #include "tools/free_montecarlo.h"
 #include "tools/help_text.h"
@@ -34,6 +35,7 @@ int main(int argc, char** argv) {
   turncal::tools::AddPlanCompareCommand(&app);
   turncal::tools::AddSequenceCommand(&app);
   turncal::tools::AddClientCommands(&app);
+  turncal::tools::AddDeviceWriteCommand(&app);
   // Description, examples, exit status and where to read more under every command's --help
   // (tests/tools/help_test.sh checks that no command lacks them).
   turncal::tools::AddManualFooters(&app);

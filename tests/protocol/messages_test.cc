@@ -168,6 +168,42 @@ TEST(Requests, ArgumentsOfTheWrongTypeAreErrorsNotExceptions) {
   EXPECT_EQ(p.model, "accel13");
 }
 
+TEST(Requests, DeviceWriteTakesAModelOrRestoreAndItsFlags) {
+  std::string cmd, error;
+  ASSERT_TRUE(ParseCommand({{"cmd", "device_write"}}, &cmd, &error));
+  EXPECT_TRUE(IsMutatingCommand("device_write"));  // only control peers may write into a device
+  DeviceWriteArgs a;
+  ASSERT_TRUE(ParseDeviceWriteRequest(
+      {{"device", "imu1"}, {"model", "mag13"}, {"save", true}, {"version", 4}}, &a, &error))
+      << error;
+  EXPECT_EQ(a.device, "imu1");
+  EXPECT_EQ(a.model, "mag13");
+  EXPECT_TRUE(a.save);
+  EXPECT_FALSE(a.dry_run);
+  EXPECT_FALSE(a.restore);
+  ASSERT_TRUE(a.version);
+  EXPECT_EQ(*a.version, 4);
+  ASSERT_TRUE(ParseDeviceWriteRequest({{"device", "imu1"}, {"restore", true}}, &a, &error));
+  EXPECT_TRUE(a.restore);
+  EXPECT_FALSE(a.version);
+  // Refused, each with its reason.
+  EXPECT_FALSE(ParseDeviceWriteRequest({{"model", "mag13"}}, &a, &error));
+  EXPECT_NE(error.find("\"device\""), std::string::npos) << error;
+  EXPECT_FALSE(ParseDeviceWriteRequest({{"device", "imu1"}}, &a, &error));
+  EXPECT_NE(error.find("either"), std::string::npos) << error;
+  EXPECT_FALSE(ParseDeviceWriteRequest({{"device", "imu1"}, {"model", "mag13"}, {"restore", true}},
+                                       &a, &error));
+  EXPECT_NE(error.find("either"), std::string::npos) << error;
+  EXPECT_FALSE(ParseDeviceWriteRequest({{"device", "imu1"}, {"model", "mag13"}, {"save", "yes"}},
+                                       &a, &error));
+  EXPECT_NE(error.find("true or false"), std::string::npos) << error;
+  EXPECT_FALSE(ParseDeviceWriteRequest({{"device", "imu1"}, {"model", "mag13"}, {"version", 0}}, &a,
+                                       &error));
+  EXPECT_NE(error.find("positive integer"), std::string::npos) << error;
+  EXPECT_FALSE(ParseDeviceWriteRequest({{"device", "imu1"}, {"model", 13}}, &a, &error));
+  EXPECT_NE(error.find("string"), std::string::npos) << error;
+}
+
 TEST(Requests, ALineWithANulByteIsNotJson) {
   // nlohmann::json takes a NUL byte for the end of its input: this was a status request
   // (tests/daemon/hostile_clients_test.py; request_fuzz checks it since).

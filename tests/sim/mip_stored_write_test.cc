@@ -180,8 +180,10 @@ TEST_F(MipStoredWrite, ADeviceThatStopsAnsweringMidWriteLeavesAStateReportedUnkn
 }
 
 TEST_F(MipStoredWrite, AFirstWriteRefusedLeavesTheDeviceUnchanged) {
-  // A device without the magnetometer's commands (the default GX5 identity): NACK 1 to 0x3A.
+  // A device without the magnetometer's commands: NACK 1 to 0x3A.
   EmulatedIdentity id;
+  id.mip_stored.hard_iron.reset();
+  id.mip_stored.soft_iron.reset();
   id.mip_nonvolatile_path = Nvm();
   auto device = DeviceEmulator::Make(drivers::Protocol::kMip, id, 100);
   LossyLink link(device.get());

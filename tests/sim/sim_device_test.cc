@@ -122,6 +122,9 @@ bool IsMipCommand(const Bytes& head, std::uint8_t set, std::uint8_t desc) {
 TEST(MipEmulator, ConfigureSucceedsAndReportsTheIdentity) {
   EmulatedIdentity id;
   id.serial = "SIM0042";
+  // A device without the magnetometer's stored-calibration commands (they answer NACK 1).
+  id.mip_stored.hard_iron.reset();
+  id.mip_stored.soft_iron.reset();
   auto device = DeviceEmulator::Make(Protocol::kMip, id, 500.0);
   ASSERT_TRUE(device);
   EXPECT_EQ(device->protocol(), Protocol::kMip);
@@ -144,7 +147,7 @@ TEST(MipEmulator, ConfigureSucceedsAndReportsTheIdentity) {
   ASSERT_TRUE(c->stored.gyro_bias);
   EXPECT_EQ(*c->stored.accel_bias, Eigen::Vector3d::Zero());
   EXPECT_EQ(*c->stored.gyro_bias, Eigen::Vector3d::Zero());
-  EXPECT_FALSE(c->stored.hard_iron);  // NACK 1: the default identity has no such command
+  EXPECT_FALSE(c->stored.hard_iron);  // NACK 1: this identity has no such command
   EXPECT_FALSE(c->stored.soft_iron);
   EXPECT_TRUE(device->streaming());
   ASSERT_TRUE(device->requested_rate_hz());

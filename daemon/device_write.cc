@@ -1,0 +1,265 @@
+#include "daemon/device_write.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/LU>
+#include <cmath>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+
+#include "core/sequencing/stillness.h"
+#include "daemon/atomic_file.h"
+#include "drivers/mip/mip_stored.h"
+#include "drivers/transport/transport.h"
+
+namespace turncal::daemon {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+bool SameVector(const std::optional<Eigen::Vector3d>& a, const std::optional<Eigen::Vector3d>& b) {
+  return a.has_value() == b.has_value() && (!a || *a == *b);
+}
+
+fs::path WritesDir(const std::string& state_dir) { return fs::path(state_dir) / "device_writes"; }
+
+}  // namespace
+
+bool SameStoredCalibration(const StoredCalibration& a, const StoredCalibration& b) {
+  return SameVector(a.accel_bias, b.accel_bias) && SameVector(a.gyro_bias, b.gyro_bias) &&
+         SameVector(a.hard_iron, b.hard_iron) &&
+         a.soft_iron.has_value() == b.soft_iron.has_value() &&
+         (!a.soft_iron || *a.soft_iron == *b.soft_iron);
+}
+
+nlohmann::json ToJson(const DeviceWriteRecord& r) {
+  using drivers::mip::StoredCalibrationJson;
+  return {{"schema", 1},
+          {"class", "DEVICE_WRITE_RECORD"},
+          {"device", r.device},
+          {"serial", r.serial},
+          {"model", r.model},
+          {"version", r.version},
+          {"time", r.time},
+          {"operation", r.operation},
+          {"saved", r.saved},
+          {"as_if", StoredCalibrationJson(r.as_if)},
+          {"in_device", StoredCalibrationJson(r.in_device)},
+          {"replaced", StoredCalibrationJson(r.replaced)}};
+}
+
+bool ParseDeviceWriteRecord(const nlohmann::json& j, DeviceWriteRecord* out, std::string* error) {
+  if (!j.is_object() || j.value("class", "") != "DEVICE_WRITE_RECORD") {
+    *error = "not a device write record (class DEVICE_WRITE_RECORD)";
+    return false;
+  }
+  DeviceWriteRecord r;
+  try {
+    r.device = j.at("device").get<std::string>();
+    r.serial = j.at("serial").get<std::string>();
+    r.model = j.value("model", "");
+    r.version = j.value("version", 0);
+    r.time = j.value("time", "");
+    r.operation = j.value("operation", "");
+    r.saved = j.value("saved", false);
+  } catch (const nlohmann::json::exception& e) {
+    *error = std::string("a device write record: ") + e.what();
+    return false;
+  }
+  std::string why;
+  for (const auto& [key, into] :
+       {std::pair{"as_if", &r.as_if}, std::pair{"in_device", &r.in_device},
+        std::pair{"replaced", &r.replaced}}) {
+    if (!j.contains(key) || !drivers::mip::ParseStoredCalibration(j[key], into, &why)) {
+      *error = fmt::format("a device write record's \"{}\": {}", key,
+                           j.contains(key) ? why : std::string("missing"));
+      return false;
+    }
+  }
+  *out = r;
+  return true;
+}
+
+bool ReadDeviceWriteRecord(const std::string& state_dir, const std::string& device,
+                           DeviceWriteRecord* record, bool* exists, std::string* error) {
+  const fs::path path = WritesDir(state_dir) / (device + ".json");
+  std::error_code ec;
+  *exists = fs::exists(path, ec);
+  if (!*exists) return true;
+  std::ifstream in(path);
+  const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  std::string why;
+  if (j.is_discarded() || !ParseDeviceWriteRecord(j, record, &why)) {
+    *error = fmt::format("'{}': {}", path.string(), j.is_discarded() ? "not JSON" : why);
+    return false;
+  }
+  return true;
+}
+
+bool WriteDeviceWriteRecord(const std::string& state_dir, const DeviceWriteRecord& record,
+                            std::string* error) {
+  std::error_code ec;
+  fs::create_directories(WritesDir(state_dir), ec);
+  return WriteFileAtomically((WritesDir(state_dir) / (record.device + ".json")).string(),
+                             ToJson(record).dump(1) + "\n", error);
+}
+
+bool WriteDeviceWriteHistory(const std::string& state_dir, const std::string& device,
+                             const nlohmann::json& entry, std::string* path, std::string* error) {
+  std::error_code ec;
+  fs::create_directories(WritesDir(state_dir), ec);
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char stamp[32];
+  std::strftime(stamp, sizeof(stamp), "%Y%m%dT%H%M%SZ", &tm);
+  fs::path target = WritesDir(state_dir) / fmt::format("{}.{}.json", device, stamp);
+  for (int n = 2; fs::exists(target, ec); ++n) {
+    target = WritesDir(state_dir) / fmt::format("{}.{}-{}.json", device, stamp, n);
+  }
+  *path = target.string();
+  return WriteFileAtomically(*path, entry.dump(1) + "\n", error);
+}
+
+void OutputWindow::Add(const Sample& s) {
+  const auto add = [](Sums* t, const std::optional<Eigen::Vector3d>& v) {
+    if (!v) return;
+    if (t->n == 0) t->first = *v;
+    const Eigen::Vector3d d = *v - t->first;
+    t->sum += d;
+    t->sum_sq += d.cwiseProduct(d);
+    ++t->n;
+  };
+  add(&acc_, s.acc_mps2);
+  add(&gyr_, s.gyr_radps);
+  add(&mag_, s.mag);
+  ++n_;
+  if (s.t_device_s) {
+    t_device_sum_s_ += *s.t_device_s;
+    ++n_device_time_;
+  }
+  t_host_sum_s_ += static_cast<double>(s.t_host_ns) * 1e-9;
+}
+
+double OutputWindow::MeanTimeS() const {
+  if (n_ == 0) return 0.0;
+  return n_device_time_ == n_ ? t_device_sum_s_ / n_ : t_host_sum_s_ / n_;
+}
+
+double WanderSigma(double sigma, double tau_s, double dt_s) {
+  if (!(sigma > 0) || !(tau_s > 0)) return 0.0;
+  return sigma * std::sqrt(2.0 * (1.0 - std::exp(-std::abs(dt_s) / tau_s)));
+}
+
+Sample OutputWindow::Mean() const {
+  Sample m;
+  const auto mean = [&](const Sums& t) -> std::optional<Eigen::Vector3d> {
+    if (t.n == 0 || t.n != n_) return std::nullopt;
+    return t.first + t.sum / t.n;
+  };
+  m.acc_mps2 = mean(acc_);
+  m.gyr_radps = mean(gyr_);
+  m.mag = mean(mag_);
+  return m;
+}
+
+std::optional<Eigen::Vector3d> OutputWindow::MeanVariance(int triad) const {
+  const Sums& t = triad == kTriadAcc ? acc_ : triad == kTriadGyr ? gyr_ : mag_;
+  if (t.n < 2 || t.n != n_) return std::nullopt;
+  const Eigen::Vector3d mean = t.sum / t.n;
+  const Eigen::Vector3d var =
+      ((t.sum_sq - t.n * mean.cwiseProduct(mean)) / (t.n - 1)).cwiseMax(0.0);
+  return var / t.n;
+}
+
+nlohmann::json VerifyWrite(const OutputWindow& before, const OutputWindow& after,
+                           const StoredCalibration& replaced, const StoredCalibration& written,
+                           const WriteAllowance& allowance) {
+  Sample predicted = before.Mean();
+  drivers::mip::ReexpressMipOutput(replaced, written, &predicted);
+  const Sample measured = after.Mean();
+  // The re-expression is affine: its linear part carries the before-mean's scatter.
+  const auto linear = [&](int triad) {
+    if (triad != kTriadMag) return Eigen::Matrix3d::Identity().eval();
+    const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
+    return (written.soft_iron.value_or(identity) * replaced.soft_iron.value_or(identity).inverse())
+        .eval();
+  };
+  const auto changed = [&](int triad) {
+    switch (triad) {
+      case kTriadAcc:
+        return !SameVector(replaced.accel_bias, written.accel_bias);
+      case kTriadGyr:
+        return !SameVector(replaced.gyro_bias, written.gyro_bias);
+      default:
+        return !SameVector(replaced.hard_iron, written.hard_iron) ||
+               replaced.soft_iron.has_value() != written.soft_iron.has_value() ||
+               (replaced.soft_iron && *replaced.soft_iron != *written.soft_iron);
+    }
+  };
+  nlohmann::json triads = nlohmann::json::object();
+  bool pass = true;
+  double worst = 0.0;
+  std::string worst_at;
+  for (int triad : {kTriadAcc, kTriadGyr, kTriadMag}) {
+    if (!changed(triad)) continue;
+    const auto& m = triad == kTriadAcc   ? measured.acc_mps2
+                    : triad == kTriadGyr ? measured.gyr_radps
+                                         : measured.mag;
+    const auto& p = triad == kTriadAcc   ? predicted.acc_mps2
+                    : triad == kTriadGyr ? predicted.gyr_radps
+                                         : predicted.mag;
+    const auto vb = before.MeanVariance(triad), va = after.MeanVariance(triad);
+    const auto& cal = allowance.calibration_sigma[triad];
+    const double wander = allowance.wander_sigma[triad];
+    if (!m || !p || !vb || !va) {
+      pass = false;
+      triads[TriadName(triad)] = {{"error", "the device's output lacks this triad"}};
+      continue;
+    }
+    const Eigen::Matrix3d L = linear(triad);
+    const Eigen::Vector3d noise_var = (L * vb->asDiagonal() * L.transpose()).diagonal() + *va;
+    const Eigen::Vector3d sigma_noise = noise_var.cwiseSqrt();
+    Eigen::Vector3d var = noise_var + Eigen::Vector3d::Constant(wander * wander);
+    if (cal) var += cal->cwiseProduct(*cal);
+    const Eigen::Vector3d sigma = var.cwiseSqrt();
+    const Eigen::Vector3d difference = *m - *p;
+    Eigen::Vector3d z;
+    for (int i = 0; i < 3; ++i) {
+      z[i] = sigma[i] > 0 ? difference[i] / sigma[i] : (difference[i] == 0 ? 0.0 : INFINITY);
+      if (std::abs(z[i]) > worst) {
+        worst = std::abs(z[i]);
+        worst_at = fmt::format("{} {}", TriadName(triad), "xyz"[i]);
+      }
+    }
+    const auto vec = [](const Eigen::Vector3d& v) { return nlohmann::json{v[0], v[1], v[2]}; };
+    triads[TriadName(triad)] = {{"measured", vec(*m)},
+                                {"predicted", vec(*p)},
+                                {"difference", vec(difference)},
+                                {"sigma", vec(sigma)},
+                                {"sigma_noise", vec(sigma_noise)},
+                                {"sigma_calibration", cal ? vec(*cal) : nlohmann::json()},
+                                {"sigma_wander", wander},
+                                {"z", vec(z)},
+                                {"unit", TriadUnit(triad)}};
+    pass = pass && z.cwiseAbs().maxCoeff() <= 3.0;
+  }
+  std::string summary =
+      triads.empty()
+          ? "nothing written changes the output"
+          : fmt::format(
+                "{}: the uncorrected output after the write is {} the prediction (largest "
+                "|z| {:.2f} at {}; {} samples before, {} after)",
+                pass ? "verified" : "NOT verified", pass ? "within 3 sigma of" : "off", worst,
+                worst_at, before.count(), after.count());
+  return {{"pass", pass && !triads.empty()},
+          {"samples_before", before.count()},
+          {"samples_after", after.count()},
+          {"seconds_between", after.MeanTimeS() - before.MeanTimeS()},
+          {"triads", triads},
+          {"summary", summary}};
+}
+
+}  // namespace turncal::daemon

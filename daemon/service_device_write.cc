@@ -1,0 +1,533 @@
+// device_write (issue 23, docs/protocol.md "Writing a calibration into the device"): a device's
+// active calibration into its stored calibration, or (restore) what it held before turncal wrote
+// into it. The plan first (daemon/device_write_plan.h); then a window of the device's output, the
+// write on the device's worker (LiveDevice::RunStoredWrite: idle, write, read back, save, resume,
+// configure again), a window after it, the verification by measurement, the record in the state
+// directory (daemon/device_write.h) and the reply. Every step goes to the log and the history.
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/estimation/sensor_class.h"
+#include "core/sequencing/stillness.h"
+#include "daemon/device_write_plan.h"
+#include "daemon/persistence.h"
+#include "daemon/service.h"
+#include "drivers/mip/mip_stored.h"
+#include "drivers/transport/transport.h"
+#include "protocol/messages.h"
+
+namespace turncal::daemon {
+
+namespace {
+
+// The device's output is averaged over this long before and after a write (at least 20 samples,
+// at most 1000).
+constexpr double kWindowSeconds = 2.0;
+// A window that does not fill in this long ends the verification (a device that stopped).
+constexpr std::int64_t kWindowTimeoutNs = 30'000'000'000;
+
+nlohmann::json Numbers(const std::vector<double>& v) {
+  nlohmann::json a = nlohmann::json::array();
+  for (double x : v) a.push_back(x);
+  return a;
+}
+
+const char* KeyOf(std::uint8_t descriptor) {
+  switch (descriptor) {
+    case 0x37:
+      return "accel_bias_g";
+    case 0x38:
+      return "gyro_bias_radps";
+    case 0x3A:
+      return "hard_iron_gauss";
+    default:
+      return "soft_iron";
+  }
+}
+
+const char* UnitOf(std::uint8_t descriptor) {
+  switch (descriptor) {
+    case 0x37:
+      return "g";
+    case 0x38:
+      return "rad/s";
+    case 0x3A:
+      return "Gauss";
+    default:
+      return "";
+  }
+}
+
+// `stored` with `descriptor`'s values replaced by `values`.
+void SetStored(StoredCalibration* stored, std::uint8_t descriptor, const std::vector<double>& v) {
+  if (descriptor == 0x3B && v.size() == 9) {
+    Eigen::Matrix3d m;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) m(r, c) = v[static_cast<std::size_t>(3 * r + c)];
+    }
+    stored->soft_iron = m;
+    return;
+  }
+  if (v.size() != 3) return;
+  const Eigen::Vector3d x(v[0], v[1], v[2]);
+  if (descriptor == 0x37) stored->accel_bias = x;
+  if (descriptor == 0x38) stored->gyro_bias = x;
+  if (descriptor == 0x3A) stored->hard_iron = x;
+}
+
+std::string Join(const std::vector<std::string>& parts, const char* separator) {
+  std::string out;
+  for (const auto& p : parts) out += (out.empty() ? "" : separator) + p;
+  return out;
+}
+
+}  // namespace
+
+struct Service::DeviceWriteJob {
+  std::weak_ptr<ClientSession> client;
+  nlohmann::json id;
+  protocol::DeviceWriteArgs args;
+  nlohmann::json plan;  // as shown to the client
+  std::vector<drivers::mip::StoredWriteStep> steps;
+  bool save = false;
+  std::string serial;
+  int version = 0;
+  StoredCalibration device_before;  // what the device holds now
+  StoredCalibration device_after;   // what it holds once written
+  StoredCalibration as_if;          // the stored values the station's calibrations see
+  enum class Phase { kBefore, kWriting, kAfter } phase = Phase::kBefore;
+  OutputWindow before, after;
+  int window = 20;
+  std::int64_t phase_started_ns = 0;
+  WriteAllowance allowance;  // the corrected output's sigma (set before the write), the wander
+  nlohmann::json entry;      // the history entry
+};
+
+void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
+                                const nlohmann::json& request, const nlohmann::json& id) {
+  const auto reply = [&](nlohmann::json message) {
+    if (!id.is_null()) message["id"] = id;
+    client->Reply(message);
+  };
+  const auto fail = [&](const std::string& message, const nlohmann::json& plan = nullptr) {
+    nlohmann::json e = protocol::ErrorMessage("device_write: " + message);
+    if (!plan.is_null()) e["plan"] = plan;
+    reply(e);
+  };
+  protocol::DeviceWriteArgs args;
+  std::string why;
+  if (!protocol::ParseDeviceWriteRequest(request, &args, &why)) {
+    reply(protocol::ErrorMessage(why));
+    return;
+  }
+  if (options_.state_dir.empty()) {
+    fail("turncald has no state directory, and the values a write replaces must be kept there");
+    return;
+  }
+  std::size_t index = devices_.size();
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    if (devices_[i]->spec().name == args.device) index = i;
+  }
+  if (index == devices_.size() || !station_) {
+    fail("no device '" + args.device + "'");
+    return;
+  }
+  LiveDevice& device = *devices_[index];
+  DeviceWrites& writes = writes_[args.device];
+  if (writes.job) {
+    fail("a write into " + args.device + " is under way");
+    return;
+  }
+  const nlohmann::json identity = device.Status()["identity"];
+  const std::optional<StoredCalibration> actual = StoredCalibrationFromIdentity(identity);
+  // What the station's calibrations see the output in.
+  const StoredCalibration as_if_now =
+      writes.reexpress ? writes.record->as_if : actual.value_or(StoredCalibration{});
+
+  auto job = std::make_shared<DeviceWriteJob>();
+  job->client = client;
+  job->id = id;
+  job->args = args;
+  job->serial = identity.is_object() ? identity.value("serial", "") : "";
+  std::vector<std::string> refusals;
+  if (!args.restore) {
+    nlohmann::json calibration;
+    const MeasurementModel* model = station_->ModelOf(args.device, args.model);
+    if (!model) {
+      fail(
+          fmt::format("{} has no pose model '{}' (free-mode calibrations cannot be written into "
+                      "a device yet)",
+                      args.device, args.model));
+      return;
+    }
+    if (!ReadActiveCalibration(options_.state_dir, args.device, args.model, &calibration)) {
+      fail(
+          fmt::format("{} has no active calibration of {} (one that passed its gate, or was "
+                      "published)",
+                      args.device, args.model));
+      return;
+    }
+    DeviceWriteRequest q;
+    q.device = args.device;
+    q.protocol = device.spec().protocol;
+    q.serial_now = job->serial;
+    q.stored_now = as_if_now;
+    q.model = model;
+    if (!CalibrationValues(*model, calibration, &q.theta, &q.covariance)) {
+      fail("the active calibration's document lacks a parameter of " + args.model);
+      return;
+    }
+    q.version = calibration.value("version", 0);
+    q.gate_passed = calibration.contains("gate") && calibration["gate"].is_object() &&
+                    calibration["gate"].value("pass", false) && !calibration.contains("override");
+    const nlohmann::json then = calibration.contains("provenance") &&
+                                        calibration["provenance"].is_object() &&
+                                        calibration["provenance"].contains("device_identity")
+                                    ? calibration["provenance"]["device_identity"]
+                                    : nlohmann::json();
+    q.serial_then = then.is_object() ? then.value("serial", "") : "";
+    q.stored_then = StoredCalibrationFromIdentity(then);
+    const DeviceWritePlan plan = PlanDeviceWrite(q);
+    job->plan = ToJson(plan);
+    job->plan["operation"] = "write";
+    refusals = plan.refusals;
+    if (!actual && q.protocol == drivers::Protocol::kMip) {
+      refusals.push_back(args.device + " has not told its stored calibration yet (state " +
+                         device.state() + ")");
+    }
+    if (args.version && *args.version != q.version) {
+      refusals.push_back(fmt::format(
+          "the plan shown was for version {}; version {} is active now: look at it again",
+          *args.version, q.version));
+    }
+    job->version = q.version;
+    job->device_before = actual.value_or(StoredCalibration{});
+    job->device_after = job->device_before;
+    for (const StoredWrite& w : plan.writes) {
+      job->steps.push_back(
+          {w.descriptor, w.to_write, drivers::mip::StoredValues(job->device_before, w.descriptor)});
+      SetStored(&job->device_after, w.descriptor, w.to_write);
+    }
+    job->as_if = as_if_now;
+    job->save = args.save;
+  } else {
+    if (!writes.record) {
+      bool exists = false;
+      DeviceWriteRecord record;
+      if (!ReadDeviceWriteRecord(options_.state_dir, args.device, &record, &exists, &why)) {
+        fail(why);
+        return;
+      }
+      if (exists) writes.record = record;
+    }
+    if (!writes.record) {
+      fail("nothing to restore: no write into " + args.device + " is recorded in " +
+           options_.state_dir + "/device_writes");
+      return;
+    }
+    const DeviceWriteRecord& r = *writes.record;
+    job->device_before = actual.value_or(StoredCalibration{});
+    job->device_after = r.as_if;
+    job->as_if = r.as_if;
+    job->version = r.version;
+    job->save = args.save || r.saved;
+    nlohmann::json list = nlohmann::json::array();
+    for (const std::uint8_t d : {0x37, 0x38, 0x3A, 0x3B}) {
+      const auto now = drivers::mip::StoredValues(job->device_before, d);
+      const auto back = drivers::mip::StoredValues(r.as_if, d);
+      if (back.empty() || now == back) continue;
+      job->steps.push_back({d, back, now});
+      list.push_back({{"quantity", KeyOf(d)},
+                      {"name", drivers::mip::StoredQuantityName(d)},
+                      {"descriptor", fmt::format("0x0C 0x{:02X}", d)},
+                      {"stored", Numbers(now)},
+                      {"to_write", Numbers(back)},
+                      {"unit", UnitOf(d)}});
+    }
+    if (!actual) refusals.push_back(args.device + " has not told its stored calibration yet");
+    if (actual && !SameStoredCalibration(*actual, r.in_device)) {
+      refusals.push_back(args.device +
+                         " holds other values than the last write left: nothing is restored "
+                         "(device_writes/" +
+                         args.device + ".json has what was written)");
+    }
+    if (!job->serial.empty() && job->serial != r.serial) {
+      refusals.push_back(fmt::format("the record is of serial {}; {} is serial {}", r.serial,
+                                     args.device, job->serial));
+    }
+    if (job->steps.empty() && refusals.empty()) {
+      refusals.push_back(args.device +
+                         " already holds the values its calibrations were made "
+                         "with: nothing to restore");
+    }
+    job->plan = {{"device", args.device},
+                 {"operation", "restore"},
+                 {"serial", job->serial},
+                 {"restores_write", {{"model", r.model}, {"version", r.version}, {"time", r.time}}},
+                 {"writes", list},
+                 {"save", job->save},
+                 {"ok", refusals.empty()},
+                 {"refusals", refusals}};
+  }
+  if (writes.reexpress && actual) {
+    job->plan["device_holds"] = drivers::mip::StoredCalibrationJson(*actual);
+  }
+  job->plan["refusals"] = refusals;
+  job->plan["ok"] = refusals.empty();
+  if (args.dry_run) {
+    reply({{"class", "DEVICE_WRITE_PLAN"}, {"dry_run", true}, {"plan", job->plan}});
+    return;
+  }
+  if (!refusals.empty()) {
+    fail("refused: " + Join(refusals, "; "), job->plan);
+    return;
+  }
+  if (device.state() != "streaming") {
+    fail(fmt::format("{} is {}, not streaming", args.device, device.state()));
+    return;
+  }
+  const double rate_hz = identity.is_object() && identity.value("rate_hz", 0.0) > 0
+                             ? identity.value("rate_hz", 0.0)
+                             : DefaultRateHz(device.spec().protocol);
+  job->window = std::clamp(static_cast<int>(std::lround(rate_hz * kWindowSeconds)), 20, 1000);
+  job->phase_started_ns = drivers::MonotonicNowNs();
+  job->entry = {{"schema", 1},
+                {"class", "DEVICE_WRITE"},
+                {"device", args.device},
+                {"operation", args.restore ? "restore" : "write"},
+                {"model", args.model},
+                {"version", job->version},
+                {"serial", job->serial},
+                {"save", job->save},
+                {"time", drivers::UtcNowIso8601()},
+                {"uid", client->uid()},
+                {"plan", job->plan}};
+  writes.job = job;
+  spdlog::info("{}: {} {} v{} requested by uid {}: averaging {} samples of the output first",
+               args.device, args.restore ? "restore" : "write", args.model, job->version,
+               client->uid(), job->window);
+}
+
+void Service::OnWriteSample(std::size_t device, const Sample& sample) {
+  DeviceWrites& writes = writes_[sample.device];
+  DeviceWriteJob& job = *writes.job;
+  if (job.phase == DeviceWriteJob::Phase::kBefore) {
+    job.before.Add(sample);
+    if (job.before.count() >= job.window) StartStoredWrite(device);
+  } else if (job.phase == DeviceWriteJob::Phase::kAfter) {
+    job.after.Add(sample);
+    if (job.after.count() < job.window) return;
+    // The bias wanders between the windows as the sensor class (or the configured prior) says.
+    SensorClass sensor;
+    if (!SensorClassByName(options_.station.sensor_class, &sensor)) sensor = IndustrialClass();
+    const StationOptions& so = options_.station;
+    const double tau_s = so.bias_tau_s > 0 ? so.bias_tau_s : sensor.bias_tau_s;
+    const double dt_s = job.after.MeanTimeS() - job.before.MeanTimeS();
+    job.allowance.wander_sigma[kTriadAcc] = WanderSigma(
+        so.acc_bias_instability >= 0 ? so.acc_bias_instability : sensor.acc_bias_instability, tau_s,
+        dt_s);
+    job.allowance.wander_sigma[kTriadGyr] = WanderSigma(sensor.gyr_bias_instability, tau_s, dt_s);
+    job.allowance.wander_sigma[kTriadMag] = WanderSigma(
+        so.mag_bias_instability >= 0 ? so.mag_bias_instability : sensor.mag_bias_instability, tau_s,
+        dt_s);
+    nlohmann::json verification =
+        VerifyWrite(job.before, job.after, job.device_before, job.device_after, job.allowance);
+    job.entry["verification"] = verification;
+    FinishDeviceWrite(sample.device, nullptr);
+  }
+}
+
+void Service::StartStoredWrite(std::size_t index) {
+  LiveDevice& device = *devices_[index];
+  const std::string name = device.spec().name;
+  std::shared_ptr<DeviceWriteJob> job = writes_[name].job;
+  // The corrected output's sigma from the calibration, at the window's mean, as the station sees
+  // it (the prediction the device's new output is checked against carries it).
+  if (station_) {
+    Sample mean = job->before.Mean();
+    drivers::mip::ReexpressMipOutput(job->device_before, job->as_if, &mean);
+    Station::Corrected c;
+    if (station_->Correct(static_cast<int>(index), mean, &c, true)) {
+      job->allowance.calibration_sigma[kTriadAcc] = c.acc_sigma;
+      job->allowance.calibration_sigma[kTriadGyr] = c.gyr_sigma;
+      job->allowance.calibration_sigma[kTriadMag] = c.mag_sigma;
+    }
+  }
+  job->phase = DeviceWriteJob::Phase::kWriting;
+  job->phase_started_ns = drivers::MonotonicNowNs();
+  std::string error;
+  const bool started = device.RunStoredWrite(
+      job->steps, job->save,
+      [this, name, job](const drivers::mip::StoredWriteOutcome& outcome,
+                        const nlohmann::json& identity, const std::string& configure_error) {
+        for (const auto& line : outcome.log) spdlog::info("{}: {}", name, line);
+        job->entry["state"] = drivers::mip::ToString(outcome.state);
+        job->entry["ok"] = outcome.ok();
+        job->entry["error"] = outcome.error;
+        job->entry["rollback_error"] = outcome.rollback_error;
+        job->entry["log"] = outcome.log;
+        job->entry["identity_after"] = identity;
+        job->entry["configure_error"] = configure_error;
+        if (const auto now = StoredCalibrationFromIdentity(identity)) {
+          job->entry["device_holds"] = drivers::mip::StoredCalibrationJson(*now);
+        }
+        if (!outcome.ok()) {
+          spdlog::error("{}: the {} failed ({}): {}{}", name, job->entry.value("operation", ""),
+                        drivers::mip::ToString(outcome.state), outcome.error,
+                        outcome.rollback_error.empty()
+                            ? std::string()
+                            : "; the rollback failed too: " + outcome.rollback_error);
+          FinishDeviceWrite(name, nullptr);
+          return;
+        }
+        DeviceWriteRecord record;
+        record.device = name;
+        record.serial = job->serial;
+        record.model = job->args.restore ? std::string() : job->args.model;
+        record.version = job->version;
+        record.time = drivers::UtcNowIso8601();
+        record.operation = job->args.restore ? "restore" : "write";
+        record.as_if = job->as_if;
+        record.in_device = outcome.read_back.value_or(job->device_after);
+        record.replaced = job->device_before;
+        record.saved = job->save;
+        std::string record_error;
+        if (!WriteDeviceWriteRecord(options_.state_dir, record, &record_error)) {
+          job->entry["record_error"] = record_error;
+          spdlog::error("{}: {}", name, record_error);
+        }
+        DeviceWrites& writes = writes_[name];
+        writes.record = record;
+        writes.reexpress = record.reexpress();
+        if (!configure_error.empty()) {
+          job->entry["verification"] = {
+              {"pass", false},
+              {"summary", "not verified: the dialogue after the write failed (" + configure_error +
+                              "); the device is retried, and device_writes/" + name +
+                              ".json says what it holds"}};
+          FinishDeviceWrite(name, nullptr);
+          return;
+        }
+        job->phase = DeviceWriteJob::Phase::kAfter;
+        job->phase_started_ns = drivers::MonotonicNowNs();
+      },
+      &error);
+  if (!started) {
+    job->entry["state"] = "unchanged";
+    job->entry["ok"] = false;
+    job->entry["error"] = error;
+    FinishDeviceWrite(name, nullptr);
+  }
+}
+
+void Service::FinishDeviceWrite(const std::string& name, nlohmann::json reply) {
+  DeviceWrites& writes = writes_[name];
+  std::shared_ptr<DeviceWriteJob> job = std::move(writes.job);
+  if (!job) return;
+  nlohmann::json& entry = job->entry;
+  if (!reply.is_null()) entry["error"] = reply;
+  std::string path, error;
+  if (!WriteDeviceWriteHistory(options_.state_dir, name, entry, &path, &error)) {
+    entry["history_error"] = error;
+    spdlog::error("{}: {}", name, error);
+  } else {
+    entry["history"] = path;
+  }
+  const bool ok = entry.value("ok", false);
+  const nlohmann::json verification = entry.value("verification", nlohmann::json());
+  spdlog::log(ok ? spdlog::level::info : spdlog::level::err, "{}: {} {}: {}{}", name,
+              entry.value("operation", ""), entry.value("state", ""),
+              ok ? std::string("done") : entry.value("error", std::string("failed")),
+              verification.is_object() ? "; " + verification.value("summary", std::string())
+                                       : std::string());
+  nlohmann::json message = entry;
+  message["class"] = "DEVICE_WRITTEN";
+  message.erase("identity_after");
+  OnEvent(message);
+  if (auto client = job->client.lock()) {
+    if (!job->id.is_null()) message["id"] = job->id;
+    client->Reply(message);
+  }
+}
+
+void Service::TickDeviceWrites(std::int64_t now_ns) {
+  for (auto& [name, writes] : writes_) {
+    if (!writes.job || writes.job->phase == DeviceWriteJob::Phase::kWriting) continue;
+    if (now_ns - writes.job->phase_started_ns < kWindowTimeoutNs) continue;
+    DeviceWriteJob& job = *writes.job;
+    if (job.phase == DeviceWriteJob::Phase::kBefore) {
+      job.entry["state"] = "unchanged";
+      job.entry["ok"] = false;
+      job.entry["error"] = fmt::format(
+          "nothing was written: {} sent {} of the {} samples averaged before a write in {} s", name,
+          job.before.count(), job.window, kWindowTimeoutNs / 1'000'000'000);
+    } else {
+      job.entry["verification"] = {
+          {"pass", false},
+          {"summary",
+           fmt::format("not verified: {} sent {} of {} samples after the write in {} s", name,
+                       job.after.count(), job.window, kWindowTimeoutNs / 1'000'000'000)}};
+    }
+    const std::string device = name;
+    FinishDeviceWrite(device, nullptr);
+    return;  // the map may not be touched while iterating after a finish
+  }
+}
+
+void Service::OnDeviceIdentity(std::size_t index, const nlohmann::json& identity) {
+  const std::string& name = devices_[index]->spec().name;
+  nlohmann::json station_identity = identity;
+  const std::optional<StoredCalibration> actual = StoredCalibrationFromIdentity(identity);
+  if (!options_.state_dir.empty() && actual) {
+    DeviceWriteRecord record;
+    bool exists = false;
+    std::string error;
+    if (!ReadDeviceWriteRecord(options_.state_dir, name, &record, &exists, &error)) {
+      spdlog::error("{}: {}; the device's output is taken as it is", name, error);
+    } else if (exists) {
+      DeviceWrites& writes = writes_[name];
+      writes.record = record;
+      writes.reexpress = false;
+      const std::string serial = identity.value("serial", "");
+      if (serial != record.serial) {
+        spdlog::warn("{}: device_writes/{}.json is of serial {}, the device is {}: not used", name,
+                     name, record.serial, serial);
+        writes.record.reset();
+      } else if (SameStoredCalibration(*actual, record.in_device)) {
+        writes.reexpress = record.reexpress();
+      } else if (SameStoredCalibration(*actual, record.as_if)) {
+        spdlog::warn(
+            "{}: holds the values its calibrations were made with, not those the last {} "
+            "left (not saved, and the device restarted?)",
+            name, record.operation);
+        record.in_device = *actual;
+        writes.record = record;
+        if (!WriteDeviceWriteRecord(options_.state_dir, record, &error)) {
+          spdlog::error("{}: {}", name, error);
+        }
+      } else {
+        spdlog::error(
+            "{}: holds other stored values than turncal wrote or its calibrations were "
+            "made with: its calibrations do not describe its output (recalibrate)",
+            name);
+      }
+      if (writes.reexpress) {
+        station_identity["stored_calibration"] = drivers::mip::StoredCalibrationJson(record.as_if);
+        station_identity["stored_calibration_in_device"] = identity["stored_calibration"];
+        station_identity["output_reexpressed"] =
+            "turncald re-expresses the output in stored_calibration (device_writes/" + name +
+            ".json)";
+        spdlog::info(
+            "{}: its output is re-expressed in the stored values its calibrations were "
+            "made with (the {} of {})",
+            name, record.operation, record.time);
+      }
+    }
+  }
+  if (station_) station_->SetDeviceIdentity(static_cast<int>(index), station_identity);
+}
+
+}  // namespace turncal::daemon
