@@ -47,7 +47,8 @@ nlohmann::json ToJson(const DeviceWriteRecord& r) {
           {"saved", r.saved},
           {"as_if", StoredCalibrationJson(r.as_if)},
           {"in_device", StoredCalibrationJson(r.in_device)},
-          {"replaced", StoredCalibrationJson(r.replaced)}};
+          {"replaced", StoredCalibrationJson(r.replaced)},
+          {"pending", r.pending ? StoredCalibrationJson(*r.pending) : nlohmann::json()}};
 }
 
 bool ParseDeviceWriteRecord(const nlohmann::json& j, DeviceWriteRecord* out, std::string* error) {
@@ -77,6 +78,14 @@ bool ParseDeviceWriteRecord(const nlohmann::json& j, DeviceWriteRecord* out, std
                            j.contains(key) ? why : std::string("missing"));
       return false;
     }
+  }
+  if (j.contains("pending") && !j["pending"].is_null()) {
+    StoredCalibration pending;
+    if (!drivers::mip::ParseStoredCalibration(j["pending"], &pending, &why)) {
+      *error = "a device write record's \"pending\": " + why;
+      return false;
+    }
+    r.pending = pending;
   }
   *out = r;
   return true;

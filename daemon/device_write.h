@@ -42,6 +42,9 @@ struct DeviceWriteRecord {
   StoredCalibration in_device;  // what the device holds after the last operation
   StoredCalibration replaced;   // what the last operation replaced (restore writes these back)
   bool saved = false;           // the last operation saved to non-volatile memory
+  // What a write under way puts into the device (written before it starts): a turncald that
+  // stops mid-write finds, at the device's next dialogue, whether the device holds these.
+  std::optional<StoredCalibration> pending;
   // The re-expression is needed while the device holds other values than `as_if`.
   bool reexpress() const { return !SameStoredCalibration(in_device, as_if); }
 };

@@ -359,6 +359,30 @@ void Service::StartStoredWrite(std::size_t index) {
   job->phase = DeviceWriteJob::Phase::kWriting;
   job->phase_started_ns = drivers::MonotonicNowNs();
   std::string error;
+  // Before anything is written: what the write puts in, so that a turncald stopped mid-write
+  // knows at the device's next dialogue what it holds (OnDeviceIdentity).
+  {
+    DeviceWrites& writes = writes_[name];
+    DeviceWriteRecord pending;
+    if (writes.record) pending = *writes.record;
+    pending.device = name;
+    pending.serial = job->serial;
+    pending.as_if = job->as_if;
+    pending.in_device = job->device_before;
+    if (!writes.record) {
+      pending.replaced = job->device_before;
+      pending.operation = "none yet";
+    }
+    pending.pending = job->device_after;
+    if (!WriteDeviceWriteRecord(options_.state_dir, pending, &error)) {
+      job->entry["state"] = "unchanged";
+      job->entry["ok"] = false;
+      job->entry["error"] = "nothing was written: " + error;
+      FinishDeviceWrite(name, nullptr);
+      return;
+    }
+    writes.record = pending;
+  }
   const bool started = device.RunStoredWrite(
       job->steps, job->save,
       [this, name, job](const drivers::mip::StoredWriteOutcome& outcome,
@@ -375,6 +399,20 @@ void Service::StartStoredWrite(std::size_t index) {
           job->entry["device_holds"] = drivers::mip::StoredCalibrationJson(*now);
         }
         if (!outcome.ok()) {
+          // What the device holds now (the dialogue after the write read it back) is in effect:
+          // the old values after a rollback, or whatever a failed rollback left.
+          DeviceWrites& writes = writes_[name];
+          if (writes.record) {
+            DeviceWriteRecord record = *writes.record;
+            record.pending.reset();
+            if (const auto now = StoredCalibrationFromIdentity(identity)) record.in_device = *now;
+            std::string record_error;
+            if (!WriteDeviceWriteRecord(options_.state_dir, record, &record_error)) {
+              job->entry["record_error"] = record_error;
+            }
+            writes.record = record;
+            writes.reexpress = record.reexpress();
+          }
           spdlog::error("{}: the {} failed ({}): {}{}", name, job->entry.value("operation", ""),
                         drivers::mip::ToString(outcome.state), outcome.error,
                         outcome.rollback_error.empty()
@@ -496,6 +534,19 @@ void Service::OnDeviceIdentity(std::size_t index, const nlohmann::json& identity
         spdlog::warn("{}: device_writes/{}.json is of serial {}, the device is {}: not used", name,
                      name, record.serial, serial);
         writes.record.reset();
+      } else if (record.pending && !writes.job && SameStoredCalibration(*actual, *record.pending)) {
+        spdlog::warn(
+            "{}: a write was under way when turncald stopped; the device holds what it "
+            "was writing (device_writes/{}.json)",
+            name, name);
+        record.replaced = record.in_device;
+        record.in_device = *actual;
+        record.pending.reset();
+        writes.record = record;
+        writes.reexpress = record.reexpress();
+        if (!WriteDeviceWriteRecord(options_.state_dir, record, &error)) {
+          spdlog::error("{}: {}", name, error);
+        }
       } else if (SameStoredCalibration(*actual, record.in_device)) {
         writes.reexpress = record.reexpress();
       } else if (SameStoredCalibration(*actual, record.as_if)) {

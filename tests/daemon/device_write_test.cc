@@ -59,6 +59,7 @@ TEST_F(DeviceWrite, TheRecordRoundTripsBitForBitAndTheHistoryNeverOverwrites) {
   r.replaced = Factory();
   r.in_device = Written();
   r.saved = true;
+  r.pending = Factory();
   std::string error;
   ASSERT_TRUE(WriteDeviceWriteRecord(dir_.string(), r, &error)) << error;
   DeviceWriteRecord back;
@@ -70,6 +71,8 @@ TEST_F(DeviceWrite, TheRecordRoundTripsBitForBitAndTheHistoryNeverOverwrites) {
   EXPECT_EQ(back.version, 7);
   EXPECT_TRUE(back.saved);
   EXPECT_TRUE(back.reexpress());
+  ASSERT_TRUE(back.pending);  // a write under way when turncald stopped
+  EXPECT_TRUE(SameStoredCalibration(*back.pending, Factory()));
   // None for another device; a corrupt record is an error naming the file.
   ASSERT_TRUE(ReadDeviceWriteRecord(dir_.string(), "imu2", &back, &exists, &error));
   EXPECT_FALSE(exists);

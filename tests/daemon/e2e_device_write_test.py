@@ -201,6 +201,11 @@ def main(d):
         f"{d}/nvm/SIM0001.nvm.json") else {}
     check(written != original and all(nvm.get(k) == written[k] for k in written),
           f"the device holds the new values, and its non-volatile file too: {nvm}")
+    record = json.load(open(f"{d}/state/device_writes/imu.json"))
+    check(record.get("pending") is None and record.get("in_device") == written and
+          record.get("as_if") == original,
+          "device_writes/imu.json: the device holds the written values, its calibrations see the "
+          "output in the original ones, no write pending")
     records = [f for f in os.listdir(f"{d}/state/device_writes")
                if f.startswith("imu.") and f != "imu.json"]
     check(len(records) == 3, f"3 writes in the state directory's history: {records}")
