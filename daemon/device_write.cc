@@ -3,7 +3,9 @@
 #include <fmt/format.h>
 
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -130,6 +132,40 @@ bool WriteDeviceWriteHistory(const std::string& state_dir, const std::string& de
   }
   *path = target.string();
   return WriteFileAtomically(*path, entry.dump(1) + "\n", error);
+}
+
+std::vector<nlohmann::json> ReadDeviceWriteHistory(const std::string& state_dir,
+                                                   const std::string& device) {
+  std::vector<std::string> paths;
+  std::error_code ec;
+  const std::string prefix = device + ".";
+  for (const auto& entry : fs::directory_iterator(WritesDir(state_dir), ec)) {
+    const std::string name = entry.path().filename().string();
+    // DEVICE.UTCTIME.json and DEVICE.UTCTIME-N.json; not DEVICE.json (the record).
+    if (name.rfind(prefix, 0) == 0 && name != device + ".json" && name.size() > prefix.size() &&
+        name[prefix.size()] >= '0' && name[prefix.size()] <= '9') {
+      paths.push_back(entry.path().string());
+    }
+  }
+  // By time, then by the -N suffix (DEVICE.T.json, DEVICE.T-2.json, ...).
+  const auto key = [&](const std::string& path) {
+    std::string stem = fs::path(path).stem().string().substr(prefix.size());
+    int n = 1;
+    if (const auto dash = stem.find('-'); dash != std::string::npos) {
+      n = std::atoi(stem.c_str() + dash + 1);
+      stem.resize(dash);
+    }
+    return std::pair(stem, n);
+  };
+  std::sort(paths.begin(), paths.end(),
+            [&](const std::string& a, const std::string& b) { return key(a) < key(b); });
+  std::vector<nlohmann::json> entries;
+  for (const auto& path : paths) {
+    std::ifstream in(path);
+    nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+    if (!j.is_discarded() && j.is_object()) entries.push_back(std::move(j));
+  }
+  return entries;
 }
 
 void OutputWindow::Add(const Sample& s) {

@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/sequencing/sample.h"
 #include "drivers/mip/mip_dialogue.h"
@@ -62,6 +63,10 @@ bool WriteDeviceWriteRecord(const std::string& state_dir, const DeviceWriteRecor
 // receives it.
 bool WriteDeviceWriteHistory(const std::string& state_dir, const std::string& device,
                              const nlohmann::json& entry, std::string* path, std::string* error);
+
+// Every entry of device_writes/DEVICE.UTCTIME.json, oldest first (unreadable ones are skipped).
+std::vector<nlohmann::json> ReadDeviceWriteHistory(const std::string& state_dir,
+                                                   const std::string& device);
 
 // The mean and scatter of a device's output over a window of samples (per triad).
 class OutputWindow {

@@ -11,6 +11,7 @@
 #include <fstream>
 
 #include "daemon/atomic_file.h"
+#include "daemon/device_write.h"
 #include "protocol/sequencer_json.h"
 #include "report/html.h"
 
@@ -180,6 +181,7 @@ bool WriteDeviceReport(const std::string& state_dir, const std::string& device,
   report::ReportOptions options;
   options.source = state_dir;
   options.generated_utc = generated_utc;
+  options.device_writes = ReadDeviceWriteHistory(state_dir, device);
   if (!report::RenderReportHtml(calibrations, options, &html, &why)) {
     *error = fmt::format("report of {}: {}", device, why);
     return false;

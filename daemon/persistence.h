@@ -9,6 +9,7 @@
 //   sessions/UTCTIME/              earlier sessions' journals and noise profiles (`reset`)
 //   reports/DEVICE.html            the calibration report of the device's active calibrations
 //                                  (report/html.h), rewritten after activations
+//   device_writes/                 what turncal wrote into the device (daemon/device_write.h)
 //
 // A kill -9 can leave the journal's last line incomplete; loading skips it and says so.
 

@@ -474,6 +474,18 @@ void Service::FinishDeviceWrite(const std::string& name, nlohmann::json reply) {
   } else {
     entry["history"] = path;
   }
+  // The device's report shows the write (report/device_writes.h): rewritten now, on the loop (a
+  // write is rare; the render re-solves each calibration, tens of ms).
+  std::vector<std::string> models = options_.station.models;
+  if (const auto it = options_.station.per_device.find(name);
+      it != options_.station.per_device.end() && it->second.models) {
+    models = *it->second.models;
+  }
+  std::string report_error;
+  if (!WriteDeviceReport(options_.state_dir, name, models, drivers::UtcNowIso8601(),
+                         &report_error)) {
+    spdlog::warn("{}: {}", name, report_error);
+  }
   const bool ok = entry.value("ok", false);
   const nlohmann::json verification = entry.value("verification", nlohmann::json());
   spdlog::log(ok ? spdlog::level::info : spdlog::level::err, "{}: {} {}: {}{}", name,

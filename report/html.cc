@@ -8,6 +8,7 @@
 #include "protocol/calibration_json.h"
 #include "protocol/free_json.h"
 #include "report/analysis.h"
+#include "report/device_writes.h"
 #include "report/free_report.h"
 #include "report/plots.h"
 #include "report/sections.h"
@@ -309,6 +310,7 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   o += "</header>\n";
   for (const auto& d : docs) o += ModelSection(d);
   o += TriadAngleHtml(docs);
+  o += DeviceWritesHtml(options.device_writes);
   o += free_body;
   o += "</body>\n</html>\n";
   *html = std::move(o);

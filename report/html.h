@@ -24,6 +24,9 @@ struct ReportOptions {
   std::string source;
   // When the report was made, shown as given (protocol/ reads no clock); may be empty.
   std::string generated_utc;
+  // What turncal wrote into the device (the state directory's device_writes/DEVICE.UTCTIME.json
+  // entries, oldest first): a section "Written into the device" when there are any.
+  std::vector<nlohmann::json> device_writes;
 };
 
 // Renders the report of the device all `calibrations` belong to (one per model, any order; the

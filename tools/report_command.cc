@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/atomic_file.h"
+#include "daemon/device_write.h"
 #include "drivers/transport/transport.h"
 #include "report/html.h"
 #include "tools/client_connection.h"
@@ -67,6 +68,7 @@ int RunHtmlReport(const HtmlReportArgs& args) {
       const std::string note = AttachJournalRecords(state_dir, &d.calibrations[i]);
       if (!note.empty()) fmt::print(stderr, "turncal report: {}: {}\n", d.paths[i], note);
     }
+    options.device_writes = daemon::ReadDeviceWriteHistory(state_dir, device);
     std::string html;
     if (!report::RenderReportHtml(d.calibrations, options, &html, &error)) {
       std::string files;

@@ -206,6 +206,12 @@ def main(d):
           record.get("as_if") == original,
           "device_writes/imu.json: the device holds the written values, its calibrations see the "
           "output in the original ones, no write pending")
+    html = open(f"{d}/state/reports/imu.html").read() if os.path.exists(
+        f"{d}/state/reports/imu.html") else ""
+    check('id="device-writes"' in html and html.count('class="device-write"') == 3 and
+          "rolled_back" in html and "mag13 v" in html and "accel13 v" in html and
+          "verified: the uncorrected output" in html,
+          "the device's report shows the three writes with their outcome and verification")
     records = [f for f in os.listdir(f"{d}/state/device_writes")
                if f.startswith("imu.") and f != "imu.json"]
     check(len(records) == 3, f"3 writes in the state directory's history: {records}")

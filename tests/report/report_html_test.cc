@@ -166,7 +166,7 @@ TEST_F(CalibrationReport, IsOneWellFormedScriptFreeDocumentWithEveryPlotAndParam
     std::string html, error;
     const auto start = std::chrono::steady_clock::now();
     ASSERT_TRUE(
-        report::RenderReportHtml(s.calibrations, {s.dir, "2030-01-01T00:00:00Z"}, &html, &error))
+        report::RenderReportHtml(s.calibrations, {s.dir, "2030-01-01T00:00:00Z", {}}, &html, &error))
         << error;
     const double render_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
@@ -302,7 +302,7 @@ TEST_F(CalibrationReport, WithoutRecordsThePlotsSayWhatIsMissing) {
 TEST(GyroReport, SaysWhichSourceDeterminedWhatAndTheTriadAngle) {
   const Session s = RunSession("gyro", drivers::Protocol::kMip, "accel13", "mag13", 9, "gyro12");
   std::string html, error;
-  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, ""}, &html, &error)) << error;
+  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}}, &html, &error)) << error;
   std::filesystem::remove_all(s.dir);
   EXPECT_NE(html.find("G (gyroscope)"), std::string::npos);
   ASSERT_NE(html.find("id=\"sources-gyro12\""), std::string::npos);
@@ -350,7 +350,7 @@ TEST(GyroReport, MovesAloneSayWhatTheyDetermine) {
   const Session s =
       RunSession("gyro_moves", drivers::Protocol::kXbus, "accel13", "mag13", 11, "gyro12", false);
   std::string html, error;
-  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, ""}, &html, &error)) << error;
+  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}}, &html, &error)) << error;
   std::filesystem::remove_all(s.dir);
   EXPECT_NE(html.find("from static poses alone (26)"), std::string::npos);
   EXPECT_NE(html.find("from moves alone (25)"), std::string::npos);
