@@ -12,6 +12,7 @@
 
 #include "core/sequencing/stillness.h"
 #include "daemon/atomic_file.h"
+#include "daemon/model_pipeline.h"
 #include "drivers/mip/mip_stored.h"
 #include "drivers/transport/transport.h"
 
@@ -47,6 +48,7 @@ nlohmann::json ToJson(const DeviceWriteRecord& r) {
           {"time", r.time},
           {"operation", r.operation},
           {"saved", r.saved},
+          {"nonvolatile_changed", r.nonvolatile_changed},
           {"as_if", StoredCalibrationJson(r.as_if)},
           {"in_device", StoredCalibrationJson(r.in_device)},
           {"replaced", StoredCalibrationJson(r.replaced)},
@@ -67,6 +69,7 @@ bool ParseDeviceWriteRecord(const nlohmann::json& j, DeviceWriteRecord* out, std
     r.time = j.value("time", "");
     r.operation = j.value("operation", "");
     r.saved = j.value("saved", false);
+    r.nonvolatile_changed = j.value("nonvolatile_changed", false);
   } catch (const nlohmann::json::exception& e) {
     *error = std::string("a device write record: ") + e.what();
     return false;
@@ -293,18 +296,105 @@ nlohmann::json VerifyWrite(const OutputWindow& before, const OutputWindow& after
   }
   std::string summary =
       triads.empty()
-          ? "nothing written changes the output"
+          ? "nothing to verify: the values written are those the device held, its output does not "
+            "change"
           : fmt::format(
                 "{}: the uncorrected output after the write is {} the prediction (largest "
                 "|z| {:.2f} at {}; {} samples before, {} after)",
                 pass ? "verified" : "NOT verified", pass ? "within 3 sigma of" : "off", worst,
                 worst_at, before.count(), after.count());
-  return {{"pass", pass && !triads.empty()},
+  return {{"pass", pass},
           {"samples_before", before.count()},
           {"samples_after", after.count()},
           {"seconds_between", after.MeanTimeS() - before.MeanTimeS()},
           {"triads", triads},
           {"summary", summary}};
+}
+
+bool WindowMoved(const OutputWindow& window, int triad, const std::optional<Eigen::Vector3d>& sigma,
+                 double factor) {
+  const auto var_mean = window.MeanVariance(triad);
+  if (!sigma || !var_mean) return false;
+  const Eigen::Vector3d std_dev = (*var_mean * window.count()).cwiseSqrt();
+  return (std_dev.array() > factor * sigma->array()).any();
+}
+
+nlohmann::json VerifyAtPose(const MeasurementModel& model, const Eigen::VectorXd& theta,
+                            const Eigen::MatrixXd& covariance, const PoseRecord& record,
+                            const StoredCalibration& as_if, const StoredCalibration& in_device,
+                            double wander_sigma) {
+  const int triad = model.sensor() == SensorKind::kMagnetometer    ? kTriadMag
+                    : model.sensor() == SensorKind::kAccelerometer ? kTriadAcc
+                                                                   : kTriadGyr;
+  const std::optional<TriadStats>& stats = triad == kTriadAcc   ? record.acc
+                                           : triad == kTriadGyr ? record.gyr
+                                                                : record.mag;
+  const auto vec = [](const Eigen::Vector3d& v) { return nlohmann::json{v[0], v[1], v[2]}; };
+  nlohmann::json pose = {{"phi_deg", record.pose.phi_rad * 180 / M_PI},
+                         {"gamma_deg", record.pose.gamma_rad * 180 / M_PI},
+                         {"psi_deg", record.pose.psi_rad * 180 / M_PI}};
+  if (!stats || stats->count < 2) {
+    return {{"pass", false},
+            {"pose", pose},
+            {"summary", "not verified: the pose's record lacks the calibrated triad"}};
+  }
+  // In the device's output: both re-expressed from the station's stored values into the device's.
+  const auto in_device_output = [&](const Eigen::Vector3d& v) {
+    Sample s;
+    (triad == kTriadAcc ? s.acc_mps2 : triad == kTriadGyr ? s.gyr_radps : s.mag) = v;
+    drivers::mip::ReexpressMipOutput(as_if, in_device, &s);
+    return *(triad == kTriadAcc ? s.acc_mps2 : triad == kTriadGyr ? s.gyr_radps : s.mag);
+  };
+  const Eigen::Vector3d predicted_station = model.Predict(theta, record.pose);
+  const Eigen::Vector3d measured = in_device_output(stats->mean);
+  const Eigen::Vector3d predicted = in_device_output(predicted_station);
+  const Eigen::Matrix3d mean_cov = stats->mean_covariance
+                                       ? *stats->mean_covariance
+                                       : Eigen::Matrix3d(stats->covariance / stats->count);
+  Eigen::Vector3d prediction_sigma = Eigen::Vector3d::Zero();
+  if (covariance.rows() == theta.size() && covariance.cols() == theta.size()) {
+    prediction_sigma = PropagatedSigma(
+        [&](const Eigen::VectorXd& t) { return model.Predict(t, record.pose); }, theta, covariance);
+  }
+  // The re-expression's linear part (the identity but for the soft iron).
+  Eigen::Matrix3d L = Eigen::Matrix3d::Identity();
+  if (triad == kTriadMag) {
+    const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
+    L = in_device.soft_iron.value_or(identity) * as_if.soft_iron.value_or(identity).inverse();
+  }
+  const Eigen::Vector3d noise_var = (L * mean_cov * L.transpose()).diagonal();
+  const Eigen::Vector3d var =
+      noise_var +
+      (L * prediction_sigma.cwiseProduct(prediction_sigma).asDiagonal() * L.transpose())
+          .diagonal() +
+      Eigen::Vector3d::Constant(wander_sigma * wander_sigma);
+  const Eigen::Vector3d sigma = var.cwiseSqrt();
+  const Eigen::Vector3d difference = measured - predicted;
+  Eigen::Vector3d z;
+  for (int i = 0; i < 3; ++i) z[i] = sigma[i] > 0 ? difference[i] / sigma[i] : INFINITY;
+  const bool pass = z.cwiseAbs().maxCoeff() <= 3.0;
+  Eigen::Index worst = 0;
+  z.cwiseAbs().maxCoeff(&worst);
+  return {{"pass", pass},
+          {"pose", pose},
+          {"triads",
+           {{TriadName(triad),
+             {{"measured", vec(measured)},
+              {"predicted", vec(predicted)},
+              {"difference", vec(difference)},
+              {"sigma", vec(sigma)},
+              {"sigma_noise", vec(noise_var.cwiseSqrt())},
+              {"sigma_calibration", vec(prediction_sigma)},
+              {"sigma_wander", wander_sigma},
+              {"z", vec(z)},
+              {"unit", TriadUnit(triad)}}}}},
+          {"summary",
+           fmt::format("{} at the pose (phi {:.1f} gamma {:.1f} psi {:.1f} deg): the uncorrected "
+                       "output is {} the calibration's prediction (largest |z| {:.2f} at {} {})",
+                       pass ? "verified" : "NOT verified", pose["phi_deg"].get<double>(),
+                       pose["gamma_deg"].get<double>(), pose["psi_deg"].get<double>(),
+                       pass ? "within 3 sigma of" : "off", std::abs(z[worst]), TriadName(triad),
+                       "xyz"[worst])}};
 }
 
 }  // namespace turncal::daemon

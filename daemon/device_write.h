@@ -24,6 +24,8 @@
 #include <string>
 #include <vector>
 
+#include "core/estimation/pose_record.h"
+#include "core/modeling/measurement_model.h"
 #include "core/sequencing/sample.h"
 #include "drivers/mip/mip_dialogue.h"
 
@@ -43,6 +45,9 @@ struct DeviceWriteRecord {
   StoredCalibration in_device;  // what the device holds after the last operation
   StoredCalibration replaced;   // what the last operation replaced (restore writes these back)
   bool saved = false;           // the last operation saved to non-volatile memory
+  // A write since the device held `as_if` saved to non-volatile memory (a restore then saves
+  // too, so that the device starts with `as_if` again).
+  bool nonvolatile_changed = false;
   // What a write under way puts into the device (written before it starts): a turncald that
   // stops mid-write finds, at the device's next dialogue, whether the device holds these.
   std::optional<StoredCalibration> pending;
@@ -112,5 +117,21 @@ double WanderSigma(double sigma, double tau_s, double dt_s);
 nlohmann::json VerifyWrite(const OutputWindow& before, const OutputWindow& after,
                            const StoredCalibration& replaced, const StoredCalibration& written,
                            const WriteAllowance& allowance);
+
+// Whether a window's scatter says the device moved: any axis of `triad` scattering more than
+// `factor` times its per-sample noise `sigma` (false without one).
+bool WindowMoved(const OutputWindow& window, int triad, const std::optional<Eigen::Vector3d>& sigma,
+                 double factor = 3.0);
+
+// Verification at a captured pose, when the table moved across the write: the pose's measured
+// mean of `model`'s triad against the calibration's prediction (model.Predict(theta, pose)), both
+// re-expressed from `as_if` (the station's) into the device's output with `in_device` applied --
+// what the device reads, uncorrected, against what the calibration predicted. Per axis: the
+// difference, sigma (the record mean's, the prediction's from `covariance`, `wander_sigma`) and z;
+// it passes when every |z| <= 3. The same shape as VerifyWrite's, with "pose".
+nlohmann::json VerifyAtPose(const MeasurementModel& model, const Eigen::VectorXd& theta,
+                            const Eigen::MatrixXd& covariance, const PoseRecord& record,
+                            const StoredCalibration& as_if, const StoredCalibration& in_device,
+                            double wander_sigma);
 
 }  // namespace turncal::daemon

@@ -530,6 +530,7 @@ void Service::OnSample(std::size_t device, const Sample& sample) {
 
 void Service::OnEvent(const nlohmann::json& event) {
   const std::string kind = event.value("class", "");
+  if (kind == "POSE_CAPTURED" && !writes_.empty()) VerifyWriteAtPose(event);
   if (kind == "POSE_CAPTURED" || kind == "POSE_REJECTED" || kind == "CALIBRATION_ACTIVE" ||
       kind == "NOISE_MEASURED" || kind == "NOISE_RETRY" || kind == "SESSION_RESUMED" ||
       (kind == "ERROR" && event.contains("device"))) {

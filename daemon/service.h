@@ -86,12 +86,22 @@ class Service {
   void StartStoredWrite(std::size_t device);
   void FinishDeviceWrite(const std::string& device, nlohmann::json reply);
   void TickDeviceWrites(std::int64_t now_ns);
+  // A write whose verification waits for the next captured pose (daemon/service_device_verify.cc).
+  void VerifyWriteAtPose(const nlohmann::json& pose_captured);
   struct DeviceWriteJob;
   // Per device name: the writes in effect, and a write under way.
   struct DeviceWrites {
     std::optional<DeviceWriteRecord> record;  // device_writes/DEVICE.json
     bool reexpress = false;                   // the device holds record->in_device != as_if
     std::shared_ptr<DeviceWriteJob> job;      // a write under way
+    // A write whose verification waits for the next captured pose (the device moved across it).
+    struct PoseCheckT {
+      std::string model;
+      int version = 0;
+      std::string history;   // its history entry's file, completed then
+      nlohmann::json entry;  // that entry
+    };
+    std::optional<PoseCheckT> at_pose;
   };
   std::map<std::string, DeviceWrites> writes_;
 

@@ -233,7 +233,7 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
     job->device_after = r.as_if;
     job->as_if = r.as_if;
     job->version = r.version;
-    job->save = args.save || r.saved;
+    job->save = args.save || r.nonvolatile_changed;
     nlohmann::json list = nlohmann::json::array();
     for (const std::uint8_t d : {0x37, 0x38, 0x3A, 0x3B}) {
       const auto now = drivers::mip::StoredValues(job->device_before, d);
@@ -335,6 +335,27 @@ void Service::OnWriteSample(std::size_t device, const Sample& sample) {
         dt_s);
     nlohmann::json verification =
         VerifyWrite(job.before, job.after, job.device_before, job.device_after, job.allowance);
+    // A table that moved across the write: verified at the next captured pose instead.
+    if (!verification.value("pass", false) && !job.args.restore && station_) {
+      const NoiseProfile* noise = station_->NoiseOf(static_cast<int>(device));
+      const MeasurementModel* model = station_->ModelOf(sample.device, job.args.model);
+      bool moved = false;
+      for (int triad : {kTriadAcc, kTriadGyr, kTriadMag}) {
+        if (!noise || !verification["triads"].contains(TriadName(triad))) continue;
+        moved = moved ||
+                WindowMoved(job.before, triad, noise->sigma[static_cast<std::size_t>(triad)]) ||
+                WindowMoved(job.after, triad, noise->sigma[static_cast<std::size_t>(triad)]);
+      }
+      if (moved && model) {
+        verification["deferred"] = true;
+        verification["summary"] =
+            "not verified yet: the device moved across the write (its output scattered more than "
+            "3 times its noise); it is verified at the next captured pose (" +
+            verification.value("summary", std::string()) + ")";
+        writes.at_pose =
+            DeviceWrites::PoseCheckT{job.args.model, job.version, std::string(), job.entry};
+      }
+    }
     job.entry["verification"] = verification;
     FinishDeviceWrite(sample.device, nullptr);
   }
@@ -432,6 +453,9 @@ void Service::StartStoredWrite(std::size_t index) {
         record.in_device = outcome.read_back.value_or(job->device_after);
         record.replaced = job->device_before;
         record.saved = job->save;
+        const bool was_changed = writes_[name].record && writes_[name].record->nonvolatile_changed;
+        record.nonvolatile_changed =
+            job->args.restore ? (job->save ? false : was_changed) : (was_changed || job->save);
         std::string record_error;
         if (!WriteDeviceWriteRecord(options_.state_dir, record, &record_error)) {
           job->entry["record_error"] = record_error;
@@ -473,6 +497,10 @@ void Service::FinishDeviceWrite(const std::string& name, nlohmann::json reply) {
     spdlog::error("{}: {}", name, error);
   } else {
     entry["history"] = path;
+  }
+  if (writes.at_pose && writes.at_pose->history.empty()) {
+    writes.at_pose->history = path;
+    writes.at_pose->entry = entry;
   }
   // The device's report shows the write (report/device_writes.h): rewritten now, on the loop (a
   // write is rare; the render re-solves each calibration, tens of ms).
@@ -525,72 +553,6 @@ void Service::TickDeviceWrites(std::int64_t now_ns) {
     FinishDeviceWrite(device, nullptr);
     return;  // the map may not be touched while iterating after a finish
   }
-}
-
-void Service::OnDeviceIdentity(std::size_t index, const nlohmann::json& identity) {
-  const std::string& name = devices_[index]->spec().name;
-  nlohmann::json station_identity = identity;
-  const std::optional<StoredCalibration> actual = StoredCalibrationFromIdentity(identity);
-  if (!options_.state_dir.empty() && actual) {
-    DeviceWriteRecord record;
-    bool exists = false;
-    std::string error;
-    if (!ReadDeviceWriteRecord(options_.state_dir, name, &record, &exists, &error)) {
-      spdlog::error("{}: {}; the device's output is taken as it is", name, error);
-    } else if (exists) {
-      DeviceWrites& writes = writes_[name];
-      writes.record = record;
-      writes.reexpress = false;
-      const std::string serial = identity.value("serial", "");
-      if (serial != record.serial) {
-        spdlog::warn("{}: device_writes/{}.json is of serial {}, the device is {}: not used", name,
-                     name, record.serial, serial);
-        writes.record.reset();
-      } else if (record.pending && !writes.job && SameStoredCalibration(*actual, *record.pending)) {
-        spdlog::warn(
-            "{}: a write was under way when turncald stopped; the device holds what it "
-            "was writing (device_writes/{}.json)",
-            name, name);
-        record.replaced = record.in_device;
-        record.in_device = *actual;
-        record.pending.reset();
-        writes.record = record;
-        writes.reexpress = record.reexpress();
-        if (!WriteDeviceWriteRecord(options_.state_dir, record, &error)) {
-          spdlog::error("{}: {}", name, error);
-        }
-      } else if (SameStoredCalibration(*actual, record.in_device)) {
-        writes.reexpress = record.reexpress();
-      } else if (SameStoredCalibration(*actual, record.as_if)) {
-        spdlog::warn(
-            "{}: holds the values its calibrations were made with, not those the last {} "
-            "left (not saved, and the device restarted?)",
-            name, record.operation);
-        record.in_device = *actual;
-        writes.record = record;
-        if (!WriteDeviceWriteRecord(options_.state_dir, record, &error)) {
-          spdlog::error("{}: {}", name, error);
-        }
-      } else {
-        spdlog::error(
-            "{}: holds other stored values than turncal wrote or its calibrations were "
-            "made with: its calibrations do not describe its output (recalibrate)",
-            name);
-      }
-      if (writes.reexpress) {
-        station_identity["stored_calibration"] = drivers::mip::StoredCalibrationJson(record.as_if);
-        station_identity["stored_calibration_in_device"] = identity["stored_calibration"];
-        station_identity["output_reexpressed"] =
-            "turncald re-expresses the output in stored_calibration (device_writes/" + name +
-            ".json)";
-        spdlog::info(
-            "{}: its output is re-expressed in the stored values its calibrations were "
-            "made with (the {} of {})",
-            name, record.operation, record.time);
-      }
-    }
-  }
-  if (station_) station_->SetDeviceIdentity(static_cast<int>(index), station_identity);
 }
 
 }  // namespace turncal::daemon

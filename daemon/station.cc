@@ -203,6 +203,10 @@ int Station::DeviceIndex(const std::string& name) const {
   return -1;
 }
 
+const NoiseProfile* Station::NoiseOf(int device) const {
+  return devices_[static_cast<std::size_t>(device)]->sequencer->noise();
+}
+
 const MeasurementModel* Station::ModelOf(const std::string& device,
                                          const std::string& model) const {
   const int i = DeviceIndex(device);

@@ -157,6 +157,8 @@ class Station : public ReplayTarget {
   // Per device: poses, the pose being collected (its last progress), sample counts, and per model
   // the gate's verdict and the active version (`status` on the socket).
   nlohmann::json Status(int device) const;
+  // The noise the device's sequencer measured (nullptr before it has).
+  const NoiseProfile* NoiseOf(int device) const;
 
   // Makes the current estimate of DEVICE's MODEL active although the gate refused it (the
   // operator's explicit override). `who` (operator, reason, peer uid) is recorded in the

@@ -155,5 +155,48 @@ TEST_F(DeviceWrite, AWriteTheDeviceAppliesIsVerifiedAndOneItDoesNotIsNot) {
   EXPECT_EQ(WanderSigma(0.0, 100.0, 5.0), 0.0);
 }
 
+// The verification at the next pose (the device moved across the write): the pose's record, in
+// the station's stored values, against the calibration's prediction, both as the device outputs
+// them with the written values.
+TEST_F(DeviceWrite, AtTheNextPoseTheRecordIsCheckedAgainstTheCalibrationsPrediction) {
+  std::string error;
+  const auto model = MakeModel("mag13", ModelContext{}, &error);
+  ASSERT_TRUE(model) << error;
+  const Eigen::VectorXd theta = model->nominal();
+  const Eigen::MatrixXd covariance = Eigen::MatrixXd::Identity(theta.size(), theta.size()) * 1e-10;
+  PoseRecord record;
+  record.pose.phi_rad = 0.3;
+  record.pose.gamma_rad = -0.7;
+  record.pose.psi_rad = 1.9;
+  const double noise = 5e-4;  // per sample
+  TriadStats mag;
+  mag.count = 1500;
+  mag.covariance = Eigen::Matrix3d::Identity() * noise * noise;
+  const double sigma_mean = noise / std::sqrt(1500.0);
+  mag.mean = model->Predict(theta, record.pose) + Eigen::Vector3d(1, -1, 0.5) * sigma_mean;
+  record.mag = mag;
+  nlohmann::json v = VerifyAtPose(*model, theta, covariance, record, Factory(), Written(), 0.0);
+  EXPECT_TRUE(v["pass"].get<bool>()) << v.dump();
+  // The values are the device's: the written soft and hard iron applied to the station's.
+  Sample expect;
+  expect.mag = mag.mean;
+  drivers::mip::ReexpressMipOutput(Factory(), Written(), &expect);
+  EXPECT_NEAR(v["triads"]["mag"]["measured"][0].get<double>(), expect.mag->x(), 1e-12);
+  // A device whose output is 6 sigma off is not verified.
+  record.mag->mean += Eigen::Vector3d(0, 6 * sigma_mean, 0);
+  v = VerifyAtPose(*model, theta, covariance, record, Factory(), Written(), 0.0);
+  EXPECT_FALSE(v["pass"].get<bool>()) << v.dump();
+  EXPECT_NE(v["summary"].get<std::string>().find("NOT verified at the pose"), std::string::npos);
+  // ... unless the bias may have wandered that far since the calibration.
+  v = VerifyAtPose(*model, theta, covariance, record, Factory(), Written(), 10 * sigma_mean);
+  EXPECT_TRUE(v["pass"].get<bool>()) << v.dump();
+  // A window whose scatter is many times the noise says the device moved.
+  std::mt19937 rng(5);
+  const OutputWindow still = Window(Factory(), 0.01, 200, &rng, 0.0);
+  EXPECT_FALSE(WindowMoved(still, kTriadAcc, Eigen::Vector3d::Constant(0.01)));
+  EXPECT_TRUE(WindowMoved(still, kTriadAcc, Eigen::Vector3d::Constant(0.001)));
+  EXPECT_FALSE(WindowMoved(still, kTriadAcc, std::nullopt));
+}
+
 }  // namespace
 }  // namespace turncal::daemon

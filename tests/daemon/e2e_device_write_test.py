@@ -278,6 +278,35 @@ def main(d):
           "and so does its non-volatile file")
     sim2.terminate()
     sim2.wait(timeout=30)
+
+    # 6. A write as the table leaves a pose (a third run; the device starts with what it held
+    #    before): verified at once if the windows were still, else at the next captured pose.
+    watch = subprocess.Popen([TURNCAL, "watch", "--json", "--socket", f"{d}/t.sock"],
+                             stdout=open(f"{d}/watch3.jsonl", "w"))
+    sim3 = start_sim(d, f"{d}/poses2.csv", "3")
+    end = time.time() + 120
+    while time.time() < end and '"POSE_CAPTURED"' not in open(f"{d}/watch3.jsonl").read():
+        time.sleep(0.02)
+    r, lines = write(d, "--model", "mag13")
+    reply = lines[-1] if lines else {}
+    verification = reply.get("verification") or {}
+    deferred = bool(verification.get("deferred"))
+    check((r.returncode == 0 and verification.get("pass")) or (r.returncode == 1 and deferred),
+          f"mag13 written as the table leaves a pose: exit {r.returncode}, "
+          f"{verification.get('summary')}")
+    check(wait_holding(d, "3"), "the third run's poses were answered")
+    watch.terminate()
+    watch.wait()
+    if deferred:
+        events = [json.loads(x) for x in open(f"{d}/watch3.jsonl")]
+        verified = [e for e in events if e.get("class") == "DEVICE_WRITE_VERIFIED"]
+        check(len(verified) == 1 and verified[0]["verification"]["pass"],
+              "verified at the next captured pose: " +
+              (verified[0]["verification"]["summary"] if verified else "no DEVICE_WRITE_VERIFIED"))
+        entry = json.load(open(verified[0]["history"])) if verified else {}
+        check("verification_at_pose" in entry, "the history entry holds it")
+    sim3.terminate()
+    sim3.wait(timeout=30)
     daemon.terminate()
     daemon.wait(timeout=30)
 

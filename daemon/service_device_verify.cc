@@ -1,0 +1,151 @@
+// Issue 23: what turncald learns of a device's writes after the fact -- at each configuration,
+// whether the device holds what device_writes/DEVICE.json says (and so whether its output must be
+// re-expressed), and, for a write the device moved across, the verification at the next captured
+// pose (daemon/device_write.h VerifyAtPose).
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "core/estimation/sensor_class.h"
+#include "daemon/atomic_file.h"
+#include "daemon/device_write_plan.h"
+#include "daemon/persistence.h"
+#include "daemon/service.h"
+#include "drivers/mip/mip_stored.h"
+#include "drivers/transport/transport.h"
+#include "protocol/sequencer_json.h"
+
+namespace turncal::daemon {
+
+void Service::VerifyWriteAtPose(const nlohmann::json& event) {
+  const std::string device = event.value("device", "");
+  auto it = writes_.find(device);
+  if (it == writes_.end() || !it->second.at_pose || !it->second.record || !station_) return;
+  DeviceWrites& writes = it->second;
+  DeviceWrites::PoseCheckT check = *writes.at_pose;
+  writes.at_pose.reset();
+  PoseRecord record;
+  std::string error;
+  nlohmann::json verification;
+  nlohmann::json calibration;
+  Eigen::VectorXd theta;
+  Eigen::MatrixXd covariance;
+  const MeasurementModel* model = station_->ModelOf(device, check.model);
+  if (!event.contains("record") || !protocol::ParsePoseRecord(event["record"], &record, &error)) {
+    verification = {{"pass", false}, {"summary", "not verified: the pose's record: " + error}};
+  } else if (!model ||
+             !ReadActiveCalibration(options_.state_dir, device, check.model, &calibration) ||
+             calibration.value("version", 0) != check.version ||
+             !CalibrationValues(*model, calibration, &theta, &covariance)) {
+    verification = {{"pass", false},
+                    {"summary", fmt::format("not verified: {} v{} is no longer the active "
+                                            "calibration",
+                                            check.model, check.version)}};
+  } else {
+    SensorClass sensor;
+    if (!SensorClassByName(options_.station.sensor_class, &sensor)) sensor = IndustrialClass();
+    const StationOptions& so = options_.station;
+    const double instability =
+        model->sensor() == SensorKind::kAccelerometer
+            ? (so.acc_bias_instability >= 0 ? so.acc_bias_instability : sensor.acc_bias_instability)
+        : model->sensor() == SensorKind::kMagnetometer
+            ? (so.mag_bias_instability >= 0 ? so.mag_bias_instability : sensor.mag_bias_instability)
+            : sensor.gyr_bias_instability;
+    // The bias since the calibration: at most the Gauss-Markov process's whole spread.
+    verification = VerifyAtPose(*model, theta, covariance, record, writes.record->as_if,
+                                writes.record->in_device, instability * std::sqrt(2.0));
+  }
+  verification["index"] = event.value("index", -1);
+  check.entry["verification_at_pose"] = verification;
+  if (!check.history.empty() &&
+      !WriteFileAtomically(check.history, check.entry.dump(1) + "\n", &error)) {
+    spdlog::error("{}: {}", device, error);
+  }
+  spdlog::log(verification.value("pass", false) ? spdlog::level::info : spdlog::level::err,
+              "{}: {} v{} written into the device: {}", device, check.model, check.version,
+              verification.value("summary", std::string()));
+  std::string report_error;
+  std::vector<std::string> models = options_.station.models;
+  if (const auto pd = options_.station.per_device.find(device);
+      pd != options_.station.per_device.end() && pd->second.models) {
+    models = *pd->second.models;
+  }
+  if (!WriteDeviceReport(options_.state_dir, device, models, drivers::UtcNowIso8601(),
+                         &report_error)) {
+    spdlog::warn("{}: {}", device, report_error);
+  }
+  OnEvent({{"class", "DEVICE_WRITE_VERIFIED"},
+           {"device", device},
+           {"model", check.model},
+           {"version", check.version},
+           {"verification", verification},
+           {"history", check.history}});
+}
+
+void Service::OnDeviceIdentity(std::size_t index, const nlohmann::json& identity) {
+  const std::string& name = devices_[index]->spec().name;
+  nlohmann::json station_identity = identity;
+  const std::optional<StoredCalibration> actual = StoredCalibrationFromIdentity(identity);
+  if (!options_.state_dir.empty() && actual) {
+    DeviceWriteRecord record;
+    bool exists = false;
+    std::string error;
+    if (!ReadDeviceWriteRecord(options_.state_dir, name, &record, &exists, &error)) {
+      spdlog::error("{}: {}; the device's output is taken as it is", name, error);
+    } else if (exists) {
+      DeviceWrites& writes = writes_[name];
+      writes.record = record;
+      writes.reexpress = false;
+      const std::string serial = identity.value("serial", "");
+      if (serial != record.serial) {
+        spdlog::warn("{}: device_writes/{}.json is of serial {}, the device is {}: not used", name,
+                     name, record.serial, serial);
+        writes.record.reset();
+      } else if (record.pending && !writes.job && SameStoredCalibration(*actual, *record.pending)) {
+        spdlog::warn(
+            "{}: a write was under way when turncald stopped; the device holds what it "
+            "was writing (device_writes/{}.json)",
+            name, name);
+        record.replaced = record.in_device;
+        record.in_device = *actual;
+        record.pending.reset();
+        writes.record = record;
+        writes.reexpress = record.reexpress();
+        if (!WriteDeviceWriteRecord(options_.state_dir, record, &error)) {
+          spdlog::error("{}: {}", name, error);
+        }
+      } else if (SameStoredCalibration(*actual, record.in_device)) {
+        writes.reexpress = record.reexpress();
+      } else if (SameStoredCalibration(*actual, record.as_if)) {
+        spdlog::warn(
+            "{}: holds the values its calibrations were made with, not those the last {} "
+            "left (not saved, and the device restarted?)",
+            name, record.operation);
+        record.in_device = *actual;
+        record.nonvolatile_changed = false;  // it started with them
+        writes.record = record;
+        if (!WriteDeviceWriteRecord(options_.state_dir, record, &error)) {
+          spdlog::error("{}: {}", name, error);
+        }
+      } else {
+        spdlog::error(
+            "{}: holds other stored values than turncal wrote or its calibrations were "
+            "made with: its calibrations do not describe its output (recalibrate)",
+            name);
+      }
+      if (writes.reexpress) {
+        station_identity["stored_calibration"] = drivers::mip::StoredCalibrationJson(record.as_if);
+        station_identity["stored_calibration_in_device"] = identity["stored_calibration"];
+        station_identity["output_reexpressed"] =
+            "turncald re-expresses the output in stored_calibration (device_writes/" + name +
+            ".json)";
+        spdlog::info(
+            "{}: its output is re-expressed in the stored values its calibrations were "
+            "made with (the {} of {})",
+            name, record.operation, record.time);
+      }
+    }
+  }
+  if (station_) station_->SetDeviceIdentity(static_cast<int>(index), station_identity);
+}
+
+}  // namespace turncal::daemon
