@@ -34,7 +34,9 @@ bool SameStoredCalibration(const StoredCalibration& a, const StoredCalibration& 
   return SameVector(a.accel_bias, b.accel_bias) && SameVector(a.gyro_bias, b.gyro_bias) &&
          SameVector(a.hard_iron, b.hard_iron) &&
          a.soft_iron.has_value() == b.soft_iron.has_value() &&
-         (!a.soft_iron || *a.soft_iron == *b.soft_iron);
+         (!a.soft_iron || *a.soft_iron == *b.soft_iron) &&
+         a.transform.has_value() == b.transform.has_value() &&
+         (!a.transform || *a.transform == *b.transform);
 }
 
 nlohmann::json ToJson(const DeviceWriteRecord& r) {
@@ -230,12 +232,13 @@ nlohmann::json VerifyWrite(const OutputWindow& before, const OutputWindow& after
   const Sample measured = after.Mean();
   // The re-expression is affine: its linear part carries the before-mean's scatter.
   const auto linear = [&](int triad) {
-    if (triad != kTriadMag) return Eigen::Matrix3d::Identity().eval();
-    const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
-    return (written.soft_iron.value_or(identity) * replaced.soft_iron.value_or(identity).inverse())
-        .eval();
+    return drivers::mip::ReexpressLinear(replaced, written, triad == kTriadMag);
   };
+  const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
+  const bool transform_changed =
+      replaced.transform.value_or(identity) != written.transform.value_or(identity);
   const auto changed = [&](int triad) {
+    if (transform_changed) return true;
     switch (triad) {
       case kTriadAcc:
         return !SameVector(replaced.accel_bias, written.accel_bias);
@@ -356,12 +359,8 @@ nlohmann::json VerifyAtPose(const MeasurementModel& model, const Eigen::VectorXd
     prediction_sigma = PropagatedSigma(
         [&](const Eigen::VectorXd& t) { return model.Predict(t, record.pose); }, theta, covariance);
   }
-  // The re-expression's linear part (the identity but for the soft iron).
-  Eigen::Matrix3d L = Eigen::Matrix3d::Identity();
-  if (triad == kTriadMag) {
-    const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
-    L = in_device.soft_iron.value_or(identity) * as_if.soft_iron.value_or(identity).inverse();
-  }
+  // The re-expression's linear part.
+  const Eigen::Matrix3d L = drivers::mip::ReexpressLinear(as_if, in_device, triad == kTriadMag);
   const Eigen::Vector3d noise_var = (L * mean_cov * L.transpose()).diagonal();
   const Eigen::Vector3d var =
       noise_var +

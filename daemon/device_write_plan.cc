@@ -135,7 +135,9 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
   } else if (!SameF32(q.stored_then->accel_bias, now.accel_bias) ||
              !SameF32(q.stored_then->gyro_bias, now.gyro_bias) ||
              !SameF32(q.stored_then->hard_iron, now.hard_iron) ||
-             !SameF32(q.stored_then->soft_iron, now.soft_iron)) {
+             !SameF32(q.stored_then->soft_iron, now.soft_iron) ||
+             // A calibration recorded before turncal read the transform says nothing of it.
+             (q.stored_then->transform && !SameF32(q.stored_then->transform, now.transform))) {
     refuse(
         "the device stores other values than when the calibration was made (written or restored "
         "since): calibrate again");
@@ -151,6 +153,30 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
   std::vector<StoredWrite> writes;
   Composition compose;
   const SensorKind kind = q.model->sensor();
+  // The device turns its output by its sensor-to-vehicle transform M after its own calibration.
+  const Eigen::Matrix3d M_old = now.transform.value_or(Eigen::Matrix3d::Identity());
+  if (!(std::abs(M_old.determinant()) > 1e-9)) {
+    refuse("the stored sensor-to-vehicle transform is singular");
+    return plan;
+  }
+  if (q.transform && !now.transform) {
+    refuse(
+        "the device has no sensor-to-vehicle transform command (it answered \"unknown command\" "
+        "to 0x33)");
+    return plan;
+  }
+  Eigen::Matrix3d R_model, P_model;
+  if (!Polar(a.A, &R_model, &P_model)) {
+    refuse(fmt::format("{}'s correction is a reflection", plan.model));
+    return plan;
+  }
+  // With the transform: the device's output turns by R (the rotation of the calibration's
+  // correction) on top of what it stores, M_new = R M_old.
+  const auto transform_values = [M_old](const AffineCorrection& x) {
+    Eigen::Matrix3d r, p;
+    Polar(x.A, &r, &p);
+    return Values(Eigen::Matrix3d(r * M_old));
+  };
   if (kind == SensorKind::kAccelerometer || kind == SensorKind::kGyroscope) {
     const bool acc = kind == SensorKind::kAccelerometer;
     const std::optional<Eigen::Vector3d>& old = acc ? now.accel_bias : now.gyro_bias;
@@ -167,12 +193,13 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
                       {},
                       {},
                       acc ? "g" : "rad/s"});
-    compose = [old_value, unit](const AffineCorrection& x) {
+    compose = [old_value, unit, M_old](const AffineCorrection& x) {
       const Eigen::Vector3d b = -x.A.inverse() * x.c;
-      return Values(Eigen::Vector3d(old_value + b / unit));
+      return Values(Eigen::Vector3d(old_value + M_old.inverse() * b / unit));
     };
     const Eigen::Vector3d b = -a.A.inverse() * a.c;
-    plan.stream.A = a.A;
+    // New output m' = M_new M_old^-1 (m - b): y = A m' without the transform, A R^T with it.
+    plan.stream.A = q.transform ? Eigen::Matrix3d(a.A * R_model.transpose()) : a.A;
     plan.stream.c.setZero();
     plan.changes.push_back(fmt::format("every {} sample changes by {} {}",
                                        acc ? "accelerometer" : "gyro", Vec(-b, 1.0 / unit, 6),
@@ -204,12 +231,15 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
     }
     writes.push_back({"hard_iron_gauss", 0x3A, Values(h_old), {}, {}, "Gauss"});
     writes.push_back({"soft_iron", 0x3B, Values(S_old), {}, {}, ""});
-    compose = [S_old, h_old](const AffineCorrection& x) {
+    // New output m' = M_new S_new (raw - h_new) = M_new M_old^-1 P (m - b) with
+    // h_new = h_old + S_old^-1 M_old^-1 b and S_new = M_old^-1 P M_old S_old.
+    compose = [S_old, h_old, M_old](const AffineCorrection& x) {
       Eigen::Matrix3d r, p;
       Polar(x.A, &r, &p);
       const Eigen::Vector3d b = -x.A.inverse() * x.c;
-      std::vector<double> v = Values(Eigen::Vector3d(h_old + S_old.inverse() * b));
-      const std::vector<double> m = Values(Eigen::Matrix3d(p * S_old));
+      std::vector<double> v =
+          Values(Eigen::Vector3d(h_old + S_old.inverse() * M_old.inverse() * b));
+      const std::vector<double> m = Values(Eigen::Matrix3d(M_old.inverse() * p * M_old * S_old));
       v.insert(v.end(), m.begin(), m.end());
       return v;
     };
@@ -217,16 +247,36 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
     const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(P).singularValues();
     const double angle_deg =
         std::acos(std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / M_PI;
-    plan.stream.A = R;
+    plan.stream.A = q.transform ? Eigen::Matrix3d::Identity().eval() : R;
     plan.stream.c.setZero();
     plan.changes.push_back(
         fmt::format("the magnetometer's output: offset {} Gauss at zero field, scale {:+.3f} % to "
                     "{:+.3f} % along the soft iron's axes",
                     Vec(-P * b, 1.0, 5), (sv.minCoeff() - 1) * 100, (sv.maxCoeff() - 1) * 100));
-    plan.kept_in_stream.push_back(fmt::format(
-        "the rotation between the magnetometer's axes and the frame {} corrects into ({:.3f} "
-        "deg): writing it would turn the device's output frame; turncald keeps it in its stream",
-        plan.model, angle_deg));
+    if (!q.transform) {
+      plan.kept_in_stream.push_back(fmt::format(
+          "the rotation between the magnetometer's axes and the frame {} corrects into ({:.3f} "
+          "deg): writing it would turn the device's output frame (--transform does); turncald "
+          "keeps it in its stream",
+          plan.model, angle_deg));
+    }
+  }
+  if (q.transform) {
+    const double turn_deg =
+        std::acos(std::clamp((R_model.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / M_PI;
+    writes.push_back({"sensor_to_vehicle", 0x33, Values(M_old), {}, {}, ""});
+    const Composition triad = compose;
+    compose = [triad, transform_values](const AffineCorrection& x) {
+      std::vector<double> v = triad(x);
+      const std::vector<double> m = transform_values(x);
+      v.insert(v.end(), m.begin(), m.end());
+      return v;
+    };
+    plan.changes.push_back(fmt::format(
+        "every output of the device (accelerometer, gyroscope, magnetometer) turns by {:.3f} deg "
+        "(sensor-to-vehicle transform): it outputs in the frame {} corrects into; turncald "
+        "re-expresses the output for the device's other calibrations",
+        turn_deg, plan.model));
   }
 
   // The values, rounded to f32, and their sigma through the composition's Jacobian.

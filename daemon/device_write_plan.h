@@ -2,21 +2,24 @@
 // What a calibration writes into a MIP device's stored calibration, before anything is written
 // (issue 23; docs/protocol.md "Writing a calibration into the device").
 //
-// The device applies its stored values before it outputs scaled data: accel out = raw - b_a (g),
-// gyro out = raw - b_g (rad/s), mag out = S (raw - h) (Gauss). turncal calibrated from that output
-// (the values then stored are in the calibration's provenance), so the values to write are the
-// composition of the calibration with what is stored. Every model's correction of a sample is
-// affine, y = A m + c (found from the model's own Correct(), checked at a fifth point); its bias
-// in the measurement is b = -A^-1 c. Then:
+// The device applies its stored values before it outputs scaled data: accel out = M (raw - b_a)
+// (g), gyro out = M (raw - b_g) (rad/s), mag out = M S (raw - h) (Gauss), M its sensor-to-vehicle
+// transform (0x33; the identity when it has none). turncal calibrated from that output (the values
+// then stored are in the calibration's provenance), so the values to write are the composition of
+// the calibration with what is stored. Every model's correction of a sample is affine,
+// y = A m + c (found from the model's own Correct(), checked at a fifth point); its bias in the
+// measurement is b = -A^-1 c, and A = R P (polar decomposition: R a rotation, P symmetric positive
+// definite). Then:
 //
-// - accelerometer, gyroscope: the device holds a bias only. Write b_old + b (the accelerometer's
-//   in g); the scale factors and misalignments (A) have no MIP command and stay in turncald's
-//   stream, which then corrects the new output m' = m - b as y = A m'.
-// - magnetometer: A = R P (polar decomposition: R a rotation, P symmetric positive definite).
-//   Write the soft iron P S_old and the hard iron h_old + S_old^-1 b; the new output is
-//   m' = P (m - b), and the rotation R (between the magnetometer and the frame the calibration
-//   corrects into) stays in the stream: y = R m'. Writing R would turn the magnetometer's output
-//   frame, which only the sensor-to-vehicle transform should do.
+// - accelerometer, gyroscope: the device holds a bias only. Write b_old + M^-1 b (the
+//   accelerometer's in g); the new output is m' = m - b, and the scale factors and misalignments
+//   (A) have no MIP command and stay in turncald's stream: y = A m'.
+// - magnetometer: write the soft iron M^-1 P M S_old and the hard iron h_old + S_old^-1 M^-1 b;
+//   the new output is m' = P (m - b), and the rotation R (between the magnetometer and the frame
+//   the calibration corrects into) stays in the stream: y = R m'.
+// - with `transform`, also M_new = R M: the device's every output turns by R, the new output of
+//   the calibrated triad is R (m - b) (accelerometer, gyroscope: y = R P R^T m'; magnetometer:
+//   y = m'), and turncald re-expresses the other triads' output for their calibrations.
 //
 // The values are rounded to f32, as the device holds them; their 1 sigma comes from the
 // calibration's covariance through the composition's Jacobian (central differences).
@@ -52,8 +55,9 @@ bool AffineCorrectionOf(const MeasurementModel& model, const Eigen::VectorXd& th
 
 // One stored quantity: what the device holds and what to write.
 struct StoredWrite {
-  std::string quantity;          // accel_bias_g, gyro_bias_radps, hard_iron_gauss, soft_iron
-  std::uint8_t descriptor = 0;   // 0x37, 0x38, 0x3A, 0x3B
+  std::string quantity;          // accel_bias_g, gyro_bias_radps, hard_iron_gauss, soft_iron,
+                                 // sensor_to_vehicle
+  std::uint8_t descriptor = 0;   // 0x37, 0x38, 0x3A, 0x3B, 0x33
   std::vector<double> stored;    // now in the device (3, or 9 row-major)
   std::vector<double> to_write;  // rounded to f32
   std::vector<double> sigma;     // 1 sigma of to_write (NaN without a covariance)
@@ -87,6 +91,10 @@ struct DeviceWriteRequest {
   bool gate_passed = false;
   std::string serial_then;                                     // provenance.device_identity.serial
   std::optional<drivers::mip::StoredCalibration> stored_then;  // its stored_calibration
+  // Also write the sensor-to-vehicle transform (0x33): the rotation R of the calibration's
+  // correction A = R P, composed with the stored one (M_new = R M_old), so that the device
+  // outputs in the frame the calibration corrects into. Off by default: it turns every output.
+  bool transform = false;
 };
 
 DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& request);

@@ -43,6 +43,8 @@ const char* KeyOf(std::uint8_t descriptor) {
       return "gyro_bias_radps";
     case 0x3A:
       return "hard_iron_gauss";
+    case 0x33:
+      return "sensor_to_vehicle";
     default:
       return "soft_iron";
   }
@@ -63,12 +65,12 @@ const char* UnitOf(std::uint8_t descriptor) {
 
 // `stored` with `descriptor`'s values replaced by `values`.
 void SetStored(StoredCalibration* stored, std::uint8_t descriptor, const std::vector<double>& v) {
-  if (descriptor == 0x3B && v.size() == 9) {
+  if ((descriptor == 0x3B || descriptor == 0x33) && v.size() == 9) {
     Eigen::Matrix3d m;
     for (int r = 0; r < 3; ++r) {
       for (int c = 0; c < 3; ++c) m(r, c) = v[static_cast<std::size_t>(3 * r + c)];
     }
-    stored->soft_iron = m;
+    (descriptor == 0x3B ? stored->soft_iron : stored->transform) = m;
     return;
   }
   if (v.size() != 3) return;
@@ -176,6 +178,7 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
     q.serial_now = job->serial;
     q.stored_now = as_if_now;
     q.model = model;
+    q.transform = args.transform;
     if (!CalibrationValues(*model, calibration, &q.theta, &q.covariance)) {
       fail("the active calibration's document lacks a parameter of " + args.model);
       return;
@@ -235,7 +238,7 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
     job->version = r.version;
     job->save = args.save || r.nonvolatile_changed;
     nlohmann::json list = nlohmann::json::array();
-    for (const std::uint8_t d : {0x37, 0x38, 0x3A, 0x3B}) {
+    for (const std::uint8_t d : {0x37, 0x38, 0x3A, 0x3B, 0x33}) {
       const auto now = drivers::mip::StoredValues(job->device_before, d);
       const auto back = drivers::mip::StoredValues(r.as_if, d);
       if (back.empty() || now == back) continue;

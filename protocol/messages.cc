@@ -266,8 +266,9 @@ bool ParseDeviceWriteRequest(const nlohmann::json& request, DeviceWriteArgs* out
     *error = "device_write: \"model\" must be a string";
     return false;
   }
-  if (!flag("save", &a.save) || !flag("dry_run", &a.dry_run) || !flag("restore", &a.restore)) {
-    *error = "device_write: \"save\", \"dry_run\" and \"restore\" are true or false";
+  if (!flag("save", &a.save) || !flag("dry_run", &a.dry_run) || !flag("restore", &a.restore) ||
+      !flag("transform", &a.transform)) {
+    *error = "device_write: \"save\", \"dry_run\", \"restore\" and \"transform\" are true or false";
     return false;
   }
   if (a.restore == !a.model.empty()) {

@@ -120,6 +120,7 @@ struct DeviceWriteArgs {
   bool save = false;  // also to non-volatile memory
   bool dry_run = false;
   bool restore = false;
+  bool transform = false;      // also the sensor-to-vehicle transform (0x33)
   std::optional<int> version;  // the version the plan showed: refused when another is active
 };
 bool ParseDeviceWriteRequest(const nlohmann::json& request, DeviceWriteArgs* out,

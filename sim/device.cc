@@ -230,7 +230,9 @@ class MipEmulator final : public ScanningEmulator {
       case 0x3A:
         return Stored(0x9C, &drivers::mip::StoredCalibration::hard_iron, data);
       case 0x3B:
-        return StoredMatrix(data);
+        return StoredMatrix(0x9D, &drivers::mip::StoredCalibration::soft_iron, data);
+      case 0x33:
+        return StoredMatrix(0xB3, &drivers::mip::StoredCalibration::transform, data);
       default:
         return {kUnknownCommand, {}};
     }
@@ -341,8 +343,10 @@ class MipEmulator final : public ScanningEmulator {
     }
   }
 
-  Result StoredMatrix(std::span<const std::uint8_t> data) {
-    std::optional<Eigen::Matrix3d>& m = stored_.soft_iron;
+  using MatrixEntry = std::optional<Eigen::Matrix3d> drivers::mip::StoredCalibration::*;
+  Result StoredMatrix(std::uint8_t reply_desc, MatrixEntry entry,
+                      std::span<const std::uint8_t> data) {
+    std::optional<Eigen::Matrix3d>& m = stored_.*entry;
     if (!m) return {kUnknownCommand, {}};
     if (data.empty()) return {kBadParameter, {}};
     switch (data[0]) {
@@ -351,15 +355,15 @@ class MipEmulator final : public ScanningEmulator {
         for (int i = 0; i < 9; ++i) (*m)(i / 3, i % 3) = drivers::LoadF32(data.data() + 1 + 4 * i);
         return {};
       case 2: {
-        drivers::mip::Field f{0x9D, {}};
+        drivers::mip::Field f{reply_desc, {}};
         for (int i = 0; i < 9; ++i)
           drivers::PutF32(&f.data, static_cast<float>((*m)(i / 3, i % 3)));
         return {kAck, {std::move(f)}};
       }
       case 3:
-        return Save(&drivers::mip::StoredCalibration::soft_iron);
+        return Save(entry);
       case 4:
-        m = nonvolatile_.soft_iron;
+        m = nonvolatile_.*entry;
         return {};
       case 5:
         *m = Eigen::Matrix3d::Identity();

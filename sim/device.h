@@ -89,12 +89,12 @@ struct EmulatedIdentity {
   std::string lot = "sim";
   std::string options = "";
   std::uint16_t mip_firmware = 1234;
-  // MIP stored calibration the device applies before output (0x37, 0x38, 0x3A, 0x3B: a GX5-25
-  // has all four, at their factory values); an absent entry is a command the device does not
-  // know (NACK 1).
-  drivers::mip::StoredCalibration mip_stored = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
-                                                Eigen::Vector3d::Zero(),
-                                                Eigen::Matrix3d::Identity()};
+  // MIP stored calibration the device applies before output (0x37, 0x38, 0x3A, 0x3B and the
+  // sensor-to-vehicle transform 0x33: a GX5-25 has all five, at their factory values); an absent
+  // entry is a command the device does not know (NACK 1).
+  drivers::mip::StoredCalibration mip_stored = {
+      Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
+      Eigen::Matrix3d::Identity(), Eigen::Matrix3d::Identity()};
   // The simulator's samples carry mip_stored (they are the device's output with those values in
   // use). The device's non-volatile storage: a JSON file that keeps what the host saved, read at
   // power-up, so a saved calibration survives the device's restart (a missing file: nothing

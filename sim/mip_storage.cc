@@ -18,6 +18,7 @@ StoredCalibration MipFactoryDefaults(const StoredCalibration& known) {
   if (known.gyro_bias) d.gyro_bias = Eigen::Vector3d::Zero();
   if (known.hard_iron) d.hard_iron = Eigen::Vector3d::Zero();
   if (known.soft_iron) d.soft_iron = Eigen::Matrix3d::Identity();
+  if (known.transform) d.transform = Eigen::Matrix3d::Identity();
   return d;
 }
 
@@ -46,6 +47,7 @@ bool ReadMipNonvolatile(const std::string& path, const StoredCalibration& known,
   if (known.gyro_bias && saved.gyro_bias) read.gyro_bias = saved.gyro_bias;
   if (known.hard_iron && saved.hard_iron) read.hard_iron = saved.hard_iron;
   if (known.soft_iron && saved.soft_iron) read.soft_iron = saved.soft_iron;
+  if (known.transform && saved.transform) read.transform = saved.transform;
   *out = read;
   return true;
 }

@@ -17,7 +17,7 @@ struct DeviceWriteArgs {
   std::string socket = DefaultSocketPath();
   bool json = false;
   std::string device, model;
-  bool save = false, dry_run = false, restore = false, yes = false;
+  bool save = false, dry_run = false, restore = false, yes = false, transform = false;
   double timeout_s = 120.0;
 };
 
@@ -103,6 +103,7 @@ int Run(const DeviceWriteArgs& a) {
     request["restore"] = true;
   } else {
     request["model"] = a.model;
+    if (a.transform) request["transform"] = true;
   }
   nlohmann::json ask = request;
   ask["dry_run"] = true;
@@ -155,6 +156,9 @@ void AddDeviceWriteCommand(CLI::App* app) {
   cmd->add_option("--model", args->model, "the calibration to write, e.g. mag13");
   cmd->add_flag("--save", args->save, "also save to non-volatile memory (survives a restart)");
   cmd->add_flag("--dry-run", args->dry_run, "show the plan only; write nothing");
+  cmd->add_flag("--transform", args->transform,
+                "also write the sensor-to-vehicle transform (0x33): the device then outputs in "
+                "the frame the calibration corrects into (it turns every output)");
   cmd->add_flag("--restore", args->restore,
                 "put back the values the device held before turncal wrote into it");
   cmd->add_flag("--yes", args->yes, "write without asking (scripts)");

@@ -121,6 +121,8 @@ const char* StoredQuantityName(std::uint8_t descriptor) {
       return "hard-iron offset";
     case 0x3B:
       return "soft-iron matrix";
+    case 0x33:
+      return "sensor-to-vehicle transform";
     default:
       return "stored value";
   }
@@ -128,7 +130,7 @@ const char* StoredQuantityName(std::uint8_t descriptor) {
 
 std::optional<StoredCalibration> Dialogue::ReadStoredCalibration(std::string* error) {
   StoredCalibration stored;
-  for (const std::uint8_t descriptor : {0x37, 0x38, 0x3A, 0x3B}) {
+  for (const std::uint8_t descriptor : {0x37, 0x38, 0x3A, 0x3B, 0x33}) {
     const std::string what = fmt::format("read stored {}", StoredQuantityName(descriptor));
     const struct {
       std::uint8_t descriptor;
@@ -148,14 +150,14 @@ std::optional<StoredCalibration> Dialogue::ReadStoredCalibration(std::string* er
     }
     const auto& data = fields->front().second;
     auto f = [&](int i) { return static_cast<double>(LoadF32(data.data() + 4 * i)); };
-    if (r.descriptor == 0x3B) {
+    if (r.descriptor == 0x3B || r.descriptor == 0x33) {
       if (data.size() < 36) {
         if (error) *error = std::string(r.what) + ": 9 floats expected";
         return std::nullopt;
       }
       Eigen::Matrix3d m;
       for (int i = 0; i < 9; ++i) m(i / 3, i % 3) = f(i);
-      stored.soft_iron = m;
+      (r.descriptor == 0x3B ? stored.soft_iron : stored.transform) = m;
     } else {
       if (data.size() < 12) {
         if (error) *error = std::string(r.what) + ": 3 floats expected";
@@ -192,7 +194,7 @@ const char* FunctionName(std::uint8_t function) {
 bool Dialogue::WriteStored(std::uint8_t descriptor, std::span<const double> values,
                            std::string* error, std::uint8_t* nack_code) {
   if (nack_code) *nack_code = 0xFF;
-  const std::size_t want = descriptor == 0x3B ? 9 : 3;
+  const std::size_t want = descriptor == 0x3B || descriptor == 0x33 ? 9 : 3;
   if (values.size() != want) {
     if (error)
       *error =

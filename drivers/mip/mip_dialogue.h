@@ -26,6 +26,9 @@ struct StoredCalibration {
   std::optional<Eigen::Vector3d> gyro_bias;   // rad/s
   std::optional<Eigen::Vector3d> hard_iron;   // Gauss
   std::optional<Eigen::Matrix3d> soft_iron;
+  // 0x33: the sensor-to-vehicle transform (direction cosine matrix, row-major): the device turns
+  // every scaled output by it, after its biases and soft and hard iron.
+  std::optional<Eigen::Matrix3d> transform;
 };
 
 struct Configured {
@@ -38,7 +41,7 @@ struct Configured {
 // "unknown command", "bad checksum", "bad parameter", "failed", "timeout".
 const char* NackMeaning(std::uint8_t code);
 // A stored quantity's name: "accel bias" (0x37), "gyro bias" (0x38), "hard-iron offset" (0x3A),
-// "soft-iron matrix" (0x3B), "stored value" otherwise.
+// "soft-iron matrix" (0x3B), "sensor-to-vehicle transform" (0x33), "stored value" otherwise.
 const char* StoredQuantityName(std::uint8_t descriptor);
 
 class Dialogue {

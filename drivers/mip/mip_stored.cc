@@ -49,12 +49,17 @@ nlohmann::json StoredCalibrationJson(const StoredCalibration& s, bool nulls) {
   put("accel_bias_g", s.accel_bias);
   put("gyro_bias_radps", s.gyro_bias);
   put("hard_iron_gauss", s.hard_iron);
-  if (s.soft_iron) {
-    j["soft_iron"] = Json::array();
-    for (int r = 0; r < 3; ++r) j["soft_iron"].push_back(VectorJson(s.soft_iron->row(r)));
-  } else if (nulls) {
-    j["soft_iron"] = nullptr;
-  }
+  const auto put_matrix = [&](const char* key, const std::optional<Eigen::Matrix3d>& m) {
+    if (m) {
+      j[key] = Json::array();
+      for (int r = 0; r < 3; ++r) j[key].push_back(VectorJson(m->row(r)));
+    } else if (nulls) {
+      j[key] = nullptr;
+    }
+  };
+  put_matrix("soft_iron", s.soft_iron);
+  // Only a device that has one: identities that predate the transform keep their shape.
+  if (s.transform) put_matrix("sensor_to_vehicle", s.transform);
   return j;
 }
 
@@ -75,36 +80,56 @@ bool ParseStoredCalibration(const nlohmann::json& j, StoredCalibration* out, std
     }
     *value = v;
   }
-  if (j.contains("soft_iron") && !j["soft_iron"].is_null()) {
+  for (const auto& [key, value] :
+       {std::pair{"soft_iron", &read.soft_iron}, std::pair{"sensor_to_vehicle", &read.transform}}) {
+    if (!j.contains(key) || j[key].is_null()) continue;
     Eigen::Matrix3d m;
-    if (!ReadMatrix(j["soft_iron"], &m)) {
-      *error = "soft_iron: a stored value is not 3 (or 3 x 3) finite numbers";
+    if (!ReadMatrix(j[key], &m)) {
+      *error = std::string(key) + ": a stored value is not 3 (or 3 x 3) finite numbers";
       return false;
     }
-    read.soft_iron = m;
+    *value = m;
   }
   *out = read;
   return true;
 }
 
+Eigen::Matrix3d ReexpressLinear(const StoredCalibration& applied, const StoredCalibration& as_if,
+                                bool magnetometer) {
+  const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d m_applied = applied.transform.value_or(identity);
+  const Eigen::Matrix3d m_as_if = as_if.transform.value_or(identity);
+  if (!magnetometer) return m_as_if * m_applied.inverse();
+  return m_as_if * as_if.soft_iron.value_or(identity) *
+         applied.soft_iron.value_or(identity).inverse() * m_applied.inverse();
+}
+
 void ReexpressMipOutput(const StoredCalibration& applied, const StoredCalibration& as_if,
                         Sample* s) {
-  if (s->acc_mps2 && !Same(applied.accel_bias, as_if.accel_bias)) {
-    const Eigen::Vector3d delta_g = applied.accel_bias.value_or(Eigen::Vector3d::Zero()) -
-                                    as_if.accel_bias.value_or(Eigen::Vector3d::Zero());
-    *s->acc_mps2 += delta_g * kStandardGravity_mps2;
-  }
-  if (s->gyr_radps && !Same(applied.gyro_bias, as_if.gyro_bias)) {
-    *s->gyr_radps += applied.gyro_bias.value_or(Eigen::Vector3d::Zero()) -
-                     as_if.gyro_bias.value_or(Eigen::Vector3d::Zero());
-  }
   const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
+  const bool same_transform =
+      applied.transform.value_or(identity) == as_if.transform.value_or(identity);
+  const Eigen::Matrix3d m_applied = applied.transform.value_or(identity);
+  const Eigen::Matrix3d m_as_if = as_if.transform.value_or(identity);
+  // accel out = M (raw - b) in g; gyro likewise in rad/s.
+  const auto bias_triad = [&](std::optional<Eigen::Vector3d>* out,
+                              const std::optional<Eigen::Vector3d>& b_applied,
+                              const std::optional<Eigen::Vector3d>& b_as_if, double unit) {
+    if (!*out || (same_transform && Same(b_applied, b_as_if))) return;
+    const Eigen::Vector3d raw =
+        m_applied.inverse() * **out + b_applied.value_or(Eigen::Vector3d::Zero()) * unit;
+    **out = m_as_if * (raw - b_as_if.value_or(Eigen::Vector3d::Zero()) * unit);
+  };
+  bias_triad(&s->acc_mps2, applied.accel_bias, as_if.accel_bias, kStandardGravity_mps2);
+  bias_triad(&s->gyr_radps, applied.gyro_bias, as_if.gyro_bias, 1.0);
   const Eigen::Matrix3d s_applied = applied.soft_iron.value_or(identity);
   const Eigen::Matrix3d s_as_if = as_if.soft_iron.value_or(identity);
-  if (s->mag && (!Same(applied.hard_iron, as_if.hard_iron) || s_applied != s_as_if)) {
-    const Eigen::Vector3d raw =
-        s_applied.inverse() * *s->mag + applied.hard_iron.value_or(Eigen::Vector3d::Zero());
-    *s->mag = s_as_if * (raw - as_if.hard_iron.value_or(Eigen::Vector3d::Zero()));
+  if (s->mag &&
+      (!same_transform || !Same(applied.hard_iron, as_if.hard_iron) || s_applied != s_as_if)) {
+    // mag out = M S (raw - h).
+    const Eigen::Vector3d raw = (m_applied * s_applied).inverse() * *s->mag +
+                                applied.hard_iron.value_or(Eigen::Vector3d::Zero());
+    *s->mag = m_as_if * s_as_if * (raw - as_if.hard_iron.value_or(Eigen::Vector3d::Zero()));
   }
 }
 

@@ -3,16 +3,17 @@
 // offset, 0x3B soft-iron matrix): what it does to the output, and its JSON.
 //
 // The device's convention (docs/protocol.md "Writing a calibration into the device"): accel out
-// = raw - bias (g), gyro out = raw - bias (rad/s), mag out = S (raw - h) (Gauss).
+// = M (raw - bias) (g), gyro out = M (raw - bias) (rad/s), mag out = M S (raw - h) (Gauss), M the
+// sensor-to-vehicle transform (0x33; the identity when the device has none).
 //
 // The JSON, one shape wherever it is kept: the identity a
 // configuration dialogue records ("stored_calibration"), the simulated device's non-volatile
 // file, and the state directory's record of a write into the device (issue 23).
 //
 //   {"accel_bias_g":[x,y,z], "gyro_bias_radps":[x,y,z], "hard_iron_gauss":[x,y,z],
-//    "soft_iron":[[r0],[r1],[r2]]}
+//    "soft_iron":[[r0],[r1],[r2]], "sensor_to_vehicle":[[r0],[r1],[r2]]}
 //
-// A quantity the device has no command for is null (or absent).
+// A quantity the device has no command for is null (or absent; the transform is left out then).
 
 #include <nlohmann/json.hpp>
 #include <string>
@@ -36,5 +37,9 @@ bool ParseStoredCalibration(const nlohmann::json& j, StoredCalibration* out, std
 // are left bit for bit as they are. A quantity the device lacks counts as zero (identity).
 void ReexpressMipOutput(const StoredCalibration& applied, const StoredCalibration& as_if,
                         Sample* s);
+// The linear part of that re-expression for one triad: M' M^-1 (accelerometer, gyroscope), or
+// M' S' S^-1 M^-1 (magnetometer), primes of `as_if`.
+Eigen::Matrix3d ReexpressLinear(const StoredCalibration& applied, const StoredCalibration& as_if,
+                                bool magnetometer);
 
 }  // namespace turncal::drivers::mip

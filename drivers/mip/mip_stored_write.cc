@@ -73,10 +73,13 @@ std::vector<double> StoredValues(const StoredCalibration& stored, std::uint8_t d
       return vector(stored.gyro_bias);
     case 0x3A:
       return vector(stored.hard_iron);
-    case 0x3B: {
+    case 0x3B:
+    case 0x33: {
+      const std::optional<Eigen::Matrix3d>& m =
+          descriptor == 0x3B ? stored.soft_iron : stored.transform;
       std::vector<double> out;
-      if (stored.soft_iron) {
-        for (int i = 0; i < 9; ++i) out.push_back((*stored.soft_iron)(i / 3, i % 3));
+      if (m) {
+        for (int i = 0; i < 9; ++i) out.push_back((*m)(i / 3, i % 3));
       }
       return out;
     }

@@ -11,6 +11,7 @@
 
 #include "core/frames/reference.h"
 #include "core/frames/table_pose.h"
+#include "drivers/mip/mip_stored.h"
 
 namespace turncal::daemon {
 namespace {
@@ -141,6 +142,76 @@ TEST(DeviceWritePlan, TheAccelerometerAndGyroWriteTheirBiasAndKeepTheRestInTheSt
     ASSERT_FALSE(plan.kept_in_stream.empty());
     EXPECT_NE(plan.kept_in_stream.front().find("no command"), std::string::npos);
   }
+}
+
+// With a sensor-to-vehicle transform M stored (the device outputs M (raw - b), M S (raw - h)), and
+// with --transform (M_new = R M): the device's new output, as the emulator's convention computes
+// it (drivers/mip/mip_stored.h), corrected by what stays in the stream, is the calibration's
+// correction of the old output; with --transform the magnetometer needs no stream at all.
+TEST(DeviceWritePlan, ATransformStoredOrWrittenComposesWithEveryQuantity) {
+  StoredCalibration old = Gx5WithMagnetometer();
+  old.transform =
+      Eigen::AngleAxisd(0.09, Eigen::Vector3d(0.3, -0.5, 0.8).normalized()).toRotationMatrix();
+  for (const bool transform : {false, true}) {
+    for (const std::string name : {"mag13", "mag22", "accel13", "gyro12"}) {
+      auto model = Model(name);
+      const Eigen::VectorXd theta = Perturbed(*model, 13);
+      DeviceWriteRequest q = Request(model.get(), theta);
+      q.stored_now = old;
+      q.stored_then = old;
+      q.transform = transform;
+      const DeviceWritePlan plan = PlanDeviceWrite(q);
+      ASSERT_TRUE(plan.ok()) << name << ": " << plan.refusals.front();
+      EXPECT_EQ(Find(plan, "sensor_to_vehicle") != nullptr, transform) << name;
+      StoredCalibration now = old;
+      for (const StoredWrite& w : plan.writes) {
+        const std::vector<double>& v = w.to_write;
+        Eigen::Matrix3d m;
+        if (v.size() == 9) {
+          for (int i = 0; i < 9; ++i) m(i / 3, i % 3) = v[static_cast<std::size_t>(i)];
+        }
+        if (w.descriptor == 0x37) now.accel_bias = V(v);
+        if (w.descriptor == 0x38) now.gyro_bias = V(v);
+        if (w.descriptor == 0x3A) now.hard_iron = V(v);
+        if (w.descriptor == 0x3B) now.soft_iron = m;
+        if (w.descriptor == 0x33) now.transform = m;
+      }
+      if (transform) {
+        const Eigen::Matrix3d M = *now.transform;
+        EXPECT_LT((M.transpose() * M - Eigen::Matrix3d::Identity()).norm(), 1e-6) << "a rotation";
+      }
+      const SensorKind kind = model->sensor();
+      for (int k = 0; k < 12; ++k) {
+        const TablePose pose{k * 0.7, k * 0.3 - 1.0, k * 1.1};
+        const Eigen::Vector3d m_old = kind == SensorKind::kGyroscope
+                                          ? Eigen::Vector3d(0.3 * k - 2, 0.1 * k, 1.0 - 0.2 * k)
+                                          : model->Predict(theta, pose);
+        Sample s;
+        (kind == SensorKind::kAccelerometer ? s.acc_mps2
+         : kind == SensorKind::kGyroscope   ? s.gyr_radps
+                                            : s.mag) = m_old;
+        drivers::mip::ReexpressMipOutput(old, now, &s);  // what the device outputs now
+        const Eigen::Vector3d m_new = kind == SensorKind::kAccelerometer ? *s.acc_mps2
+                                      : kind == SensorKind::kGyroscope   ? *s.gyr_radps
+                                                                         : *s.mag;
+        const Eigen::Vector3d want = model->Correct(theta, m_old);
+        const Eigen::Vector3d got = plan.stream.A * m_new + plan.stream.c;
+        EXPECT_LT((got - want).norm(), 2e-6 * (1 + want.norm()))
+            << name << (transform ? " --transform" : "") << " sample " << k;
+      }
+      if (transform && kind == SensorKind::kMagnetometer) {
+        EXPECT_LT((plan.stream.A - Eigen::Matrix3d::Identity()).norm(), 1e-12) << name;
+      }
+    }
+  }
+  // A device without the transform command refuses --transform.
+  auto mag = Model("mag13");
+  DeviceWriteRequest q = Request(mag.get(), Perturbed(*mag, 2));
+  q.transform = true;
+  const DeviceWritePlan plan = PlanDeviceWrite(q);
+  ASSERT_FALSE(plan.ok());
+  EXPECT_NE(plan.refusals.front().find("no sensor-to-vehicle transform command"),
+            std::string::npos);
 }
 
 TEST(DeviceWritePlan, TheSigmaOfABiasIsTheCalibrationsCarriedThrough) {

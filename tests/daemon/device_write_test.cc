@@ -34,7 +34,7 @@ class DeviceWrite : public ::testing::Test {
 
 StoredCalibration Factory() {
   return {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
-          Eigen::Matrix3d::Identity()};
+          Eigen::Matrix3d::Identity(), Eigen::Matrix3d::Identity()};
 }
 
 StoredCalibration Written() {

@@ -152,8 +152,8 @@ TEST(MipEmulator, ConfigureSucceedsAndReportsTheIdentity) {
   EXPECT_TRUE(device->streaming());
   ASSERT_TRUE(device->requested_rate_hz());
   EXPECT_DOUBLE_EQ(*device->requested_rate_hz(), 500.0);
-  EXPECT_EQ(link.writes, 10);  // every command answered at the first attempt
-  EXPECT_EQ(device->counters().commands, 10u);
+  EXPECT_EQ(link.writes, 11);  // every command answered at the first attempt
+  EXPECT_EQ(device->counters().commands, 11u);
   EXPECT_EQ(device->counters().unknown_commands, 2u);  // hard and soft iron
   EXPECT_EQ(device->counters().bad_frames, 0u);
   EXPECT_EQ(device->counters().ignored_bytes, 0u);
@@ -165,7 +165,7 @@ TEST(MipEmulator, DoesNotStreamBetweenIdleAndResume) {
   mip::Dialogue dialogue(&link, kOptions);
   std::string error;
   ASSERT_TRUE(dialogue.Configure(100.0, &error)) << error;
-  ASSERT_EQ(link.log.size(), 10u);
+  ASSERT_EQ(link.log.size(), 11u);
   EXPECT_TRUE(IsMipCommand(link.log.front().first, 0x01, 0x02));
   EXPECT_TRUE(IsMipCommand(link.log.back().first, 0x01, 0x06));
   for (std::size_t i = 0; i + 1 < link.log.size(); ++i) {
@@ -201,8 +201,8 @@ TEST(MipEmulator, AnswersCommandsDeliveredOneByteAtATime) {
   ASSERT_TRUE(c) << error;
   EXPECT_EQ(c->info.serial, "SIM0001");
   EXPECT_EQ(c->decimation, 10);
-  EXPECT_EQ(link.writes, 10);
-  EXPECT_EQ(device->counters().commands, 10u);
+  EXPECT_EQ(link.writes, 11);
+  EXPECT_EQ(device->counters().commands, 11u);
   EXPECT_EQ(device->counters().bad_frames, 0u);
 }
 
@@ -215,11 +215,11 @@ TEST(MipEmulator, ACorruptedCommandIsCountedAndNotAnsweredAndTheRetrySucceeds) {
   const auto c = dialogue.Configure(100.0, &error);
   ASSERT_TRUE(c) << error;
   EXPECT_EQ(c->base_rate_hz, 1000);
-  EXPECT_EQ(link.writes, 11);  // the base rate request was sent twice
+  EXPECT_EQ(link.writes, 12);  // the base rate request was sent twice
   EXPECT_TRUE(IsMipCommand(link.log[2].first, 0x0C, 0x06));
   EXPECT_TRUE(IsMipCommand(link.log[3].first, 0x0C, 0x06));
   EXPECT_EQ(device->counters().bad_frames, 1u);
-  EXPECT_EQ(device->counters().commands, 10u);
+  EXPECT_EQ(device->counters().commands, 11u);
   EXPECT_EQ(device->counters().ignored_bytes, 8u);  // the corrupted command's bytes
 }
 
@@ -230,7 +230,7 @@ TEST(MipEmulator, ACorruptedCommandWhileStreamingIsRetriedToo) {
   mip::Dialogue dialogue(&link, kOptions);
   std::string error;
   ASSERT_TRUE(dialogue.Configure(100.0, &error)) << error;
-  EXPECT_EQ(link.writes, 11);
+  EXPECT_EQ(link.writes, 12);
   EXPECT_TRUE(link.log[0].second);  // still streaming after the corrupted set to idle
   EXPECT_FALSE(link.log[1].second);
   EXPECT_EQ(device->counters().bad_frames, 1u);
