@@ -1,8 +1,8 @@
 #pragma once
 // The stored calibration of an emulated MIP device (3DM set 0x0C: 0x37 accelerometer bias, 0x38
-// gyro bias, 0x3A hard-iron offset, 0x3B soft-iron matrix) and what it does to the output, as a
-// real device keeps and applies it (issue 23, docs/SIMULATOR.md "A device that stores a
-// calibration"):
+// gyro bias, 0x3A hard-iron offset, 0x3B soft-iron matrix, 0x33 sensor-to-vehicle transform) and
+// what it does to the output, as a real device keeps and applies it (issue 23,
+// docs/SIMULATOR.md "Stored calibration"):
 //
 // - the values in use ("RAM"): what write (function 1), load (4) and default (5) change and read
 //   (2) returns; the device applies them before it outputs scaled data;
@@ -11,9 +11,9 @@
 //   mip_nonvolatile_path): a JSON object written atomically at every save.
 //
 // The device's convention (docs/protocol.md "Writing a calibration into the device"): accel out
-// = raw - bias (g), gyro out = raw - bias (rad/s), mag out = S (raw - h) (Gauss, S row-major as
-// on the wire). Values travel as big-endian f32, so the device holds floats: a read returns
-// bit for bit what was written.
+// = M (raw - bias) (g), gyro out = M (raw - bias) (rad/s), mag out = M S (raw - h) (Gauss; S and
+// the transform M row-major as on the wire). Values travel as big-endian f32, so the device holds
+// floats: a read returns bit for bit what was written.
 
 #include <optional>
 #include <string>

@@ -116,9 +116,12 @@ const std::map<std::string, Manual>& Manuals() {
         "1 sigma, the expected change of the output, what stays in turncald's stream (scale "
         "factors and misalignments, which MIP cannot hold), and every refusal (gate not passed, "
         "another serial, other stored values than the calibration was made with, Xbus, GX2). "
+        "With --transform it also writes the sensor-to-vehicle transform (0x33), so that the "
+        "device outputs in the frame the calibration corrects into (every output turns). "
         "Then asks (or --yes), writes, reads back bit for bit, saves only with --save, and "
         "verifies by measurement: the device's uncorrected output after the write must be the "
-        "output predicted from before it, within 3 sigma. A failure rolls back. The replaced "
+        "output predicted from before it, within 3 sigma (a device that moved: at the next "
+        "captured pose). A failure rolls back. The replaced "
         "values are kept in the state directory (device_writes/); --restore puts back what the "
         "device held before turncal wrote into it. "
         "Needs a permitted uid. {socket}",
