@@ -63,24 +63,53 @@ using Composition = std::function<std::vector<double>(const AffineCorrection&)>;
 
 }  // namespace
 
+TriadCorrection CorrectionOf(const MeasurementModel& model) {
+  TriadCorrection c;
+  c.name = model.name();
+  c.sensor = model.sensor();
+  c.scale = model.excitation_ned().norm();
+  c.correct = [&model](const Eigen::VectorXd& theta, const Eigen::Vector3d& m) {
+    return model.Correct(theta, m);
+  };
+  if (model.index_of("Bg_xx") >= 0) c.also_in_stream = "the gyroscope's g-sensitivity";
+  return c;
+}
+
+TriadCorrection CorrectionOf(const FreeModel& model, double scale) {
+  TriadCorrection c;
+  c.name = model.name();
+  c.sensor = model.sensor();
+  c.scale = scale;
+  c.correct = [&model](const Eigen::VectorXd& theta, const Eigen::Vector3d& m) {
+    return model.Correct(theta, m);
+  };
+  if (model.index_of("g11") >= 0) c.also_in_stream = "the gyroscope's g-sensitivity";
+  return c;
+}
+
 bool AffineCorrectionOf(const MeasurementModel& model, const Eigen::VectorXd& theta,
                         AffineCorrection* out, std::string* error) {
-  double s = model.excitation_ned().norm();
+  return AffineCorrectionOf(CorrectionOf(model), theta, out, error);
+}
+
+bool AffineCorrectionOf(const TriadCorrection& model, const Eigen::VectorXd& theta,
+                        AffineCorrection* out, std::string* error) {
+  double s = model.scale;
   if (!(s > 0) || !std::isfinite(s)) s = 1.0;
   AffineCorrection a;
-  a.c = model.Correct(theta, Eigen::Vector3d::Zero());
+  a.c = model.correct(theta, Eigen::Vector3d::Zero());
   for (int i = 0; i < 3; ++i) {
-    a.A.col(i) = (model.Correct(theta, s * Eigen::Vector3d::Unit(i)) - a.c) / s;
+    a.A.col(i) = (model.correct(theta, s * Eigen::Vector3d::Unit(i)) - a.c) / s;
   }
   const Eigen::Vector3d p = s * Eigen::Vector3d(0.3, -0.7, 0.5);
-  const Eigen::Vector3d y = model.Correct(theta, p);
+  const Eigen::Vector3d y = model.correct(theta, p);
   if (!y.allFinite() || !a.A.allFinite() || !a.c.allFinite() ||
       (y - (a.A * p + a.c)).norm() > 1e-9 * (y.norm() + s)) {
-    *error = fmt::format("{}'s correction is not affine in the sample", model.name());
+    *error = fmt::format("{}'s correction is not affine in the sample", model.name);
     return false;
   }
   if (!(std::abs(a.A.determinant()) > 1e-9)) {
-    *error = fmt::format("{}'s correction is singular", model.name());
+    *error = fmt::format("{}'s correction is singular", model.name);
     return false;
   }
   *out = a;
@@ -101,7 +130,9 @@ std::optional<drivers::mip::StoredCalibration> StoredCalibrationFromIdentity(
 DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
   DeviceWritePlan plan;
   plan.device = q.device;
-  plan.model = q.model ? q.model->name() : "";
+  std::optional<TriadCorrection> given = q.correction;
+  if (q.model) given = CorrectionOf(*q.model);
+  plan.model = given ? given->name : "";
   plan.serial = q.serial_now;
   plan.version = q.version;
   auto refuse = [&](std::string why) { plan.refusals.push_back(std::move(why)); };
@@ -118,10 +149,11 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
         "commands; turncald keeps correcting in its stream");
     return plan;
   }
-  if (q.model == nullptr) {
+  if (!given || !given->correct) {
     refuse("no calibration");
     return plan;
   }
+  const TriadCorrection& model = *given;
   if (!q.gate_passed) refuse(fmt::format("{} v{} has not passed its gate", plan.model, q.version));
   if (q.serial_then.empty()) {
     refuse("the calibration does not record the device's serial (a replay?)");
@@ -145,14 +177,14 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
 
   AffineCorrection a;
   std::string error;
-  if (!AffineCorrectionOf(*q.model, q.theta, &a, &error)) {
+  if (!AffineCorrectionOf(model, q.theta, &a, &error)) {
     refuse(error);
     return plan;
   }
 
   std::vector<StoredWrite> writes;
   Composition compose;
-  const SensorKind kind = q.model->sensor();
+  const SensorKind kind = model.sensor;
   // The device turns its output by its sensor-to-vehicle transform M after its own calibration.
   const Eigen::Matrix3d M_old = now.transform.value_or(Eigen::Matrix3d::Identity());
   if (!(std::abs(M_old.determinant()) > 1e-9)) {
@@ -208,8 +240,8 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
         "the {}'s scale factors and misalignments: MIP has no command for them; turncald keeps "
         "correcting them in its stream",
         acc ? "accelerometer" : "gyroscope"));
-    if (q.model->name() == "gyro21") {
-      plan.kept_in_stream.push_back("the gyroscope's g-sensitivity: likewise, in the stream");
+    if (!model.also_in_stream.empty()) {
+      plan.kept_in_stream.push_back(model.also_in_stream + ": likewise, in the stream");
     }
   } else {
     if (!now.hard_iron || !now.soft_iron) {
@@ -294,8 +326,7 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
       minus[j] -= h;
       AffineCorrection ap, am;
       std::string e;
-      ok = AffineCorrectionOf(*q.model, plus, &ap, &e) &&
-           AffineCorrectionOf(*q.model, minus, &am, &e);
+      ok = AffineCorrectionOf(model, plus, &ap, &e) && AffineCorrectionOf(model, minus, &am, &e);
       if (!ok) break;
       const std::vector<double> vp = compose(ap), vm = compose(am);
       for (std::size_t i = 0; i < values.size(); ++i) {

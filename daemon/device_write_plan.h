@@ -30,16 +30,33 @@
 // (it answered NACK 1 "unknown command" when configured), a correction that is not affine.
 
 #include <cstdint>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "core/modeling/free_model.h"
 #include "core/modeling/measurement_model.h"
 #include "drivers/device_spec.h"
 #include "drivers/mip/mip_dialogue.h"
 
 namespace turncal::daemon {
+
+// A calibration's correction of its triad, as the plan needs it: from a pose model
+// (core/modeling/measurement_model.h) or a free one (core/modeling/free_model.h: accel9, gyro9,
+// gyro9g, magellipsoid, magsphere).
+struct TriadCorrection {
+  std::string name;  // the model's
+  SensorKind sensor = SensorKind::kAccelerometer;
+  double scale = 1.0;  // the excitation's magnitude: where the correction is probed
+  std::function<Eigen::Vector3d(const Eigen::VectorXd& theta, const Eigen::Vector3d& m)> correct;
+  // What else the model corrects that stays in the stream (a gyroscope's g-sensitivity); "" none.
+  std::string also_in_stream;
+};
+TriadCorrection CorrectionOf(const MeasurementModel& model);
+// `scale`: the excitation's magnitude (gravity, the field's; 1 when not known).
+TriadCorrection CorrectionOf(const FreeModel& model, double scale);
 
 // y = A m + c.
 struct AffineCorrection {
@@ -51,6 +68,8 @@ struct AffineCorrection {
 // scaled to the excitation's magnitude; false with a message when a fifth point is off it by
 // more than 1e-9 relative (a correction that is not affine) or A is singular.
 bool AffineCorrectionOf(const MeasurementModel& model, const Eigen::VectorXd& theta,
+                        AffineCorrection* out, std::string* error);
+bool AffineCorrectionOf(const TriadCorrection& correction, const Eigen::VectorXd& theta,
                         AffineCorrection* out, std::string* error);
 
 // One stored quantity: what the device holds and what to write.
@@ -83,8 +102,9 @@ struct DeviceWriteRequest {
   drivers::Protocol protocol = drivers::Protocol::kMip;
   std::string serial_now;                      // the connected device's serial
   drivers::mip::StoredCalibration stored_now;  // what it holds now (read at configuration)
-  // The calibration.
+  // The calibration: a pose model's, or (when `model` is null) any other correction's.
   const MeasurementModel* model = nullptr;
+  std::optional<TriadCorrection> correction;
   Eigen::VectorXd theta;
   Eigen::MatrixXd covariance;  // empty: no sigma
   int version = 0;

@@ -1,7 +1,8 @@
-// Issue 23: what turncald learns of a device's writes after the fact -- at each configuration,
-// whether the device holds what device_writes/DEVICE.json says (and so whether its output must be
-// re-expressed), and, for a write the device moved across, the verification at the next captured
-// pose (daemon/device_write.h VerifyAtPose).
+// Issue 23: a device write's end and what turncald learns of it after the fact -- the history
+// entry, the reply and the report when a write ends (or its window times out); at each
+// configuration, whether the device holds what device_writes/DEVICE.json says (and so whether its
+// output must be re-expressed); and, for a write the device moved across, the verification at the
+// next captured pose (daemon/device_write.h VerifyAtPose).
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
@@ -10,11 +11,87 @@
 #include "daemon/device_write_plan.h"
 #include "daemon/persistence.h"
 #include "daemon/service.h"
+#include "daemon/service_device_write_job.h"
 #include "drivers/mip/mip_stored.h"
 #include "drivers/transport/transport.h"
 #include "protocol/sequencer_json.h"
 
 namespace turncal::daemon {
+
+namespace {
+// A window that does not fill in this long ends the verification (a device that stopped).
+constexpr std::int64_t kWindowTimeoutNs = 30'000'000'000;
+}  // namespace
+
+void Service::FinishDeviceWrite(const std::string& name, nlohmann::json reply) {
+  DeviceWrites& writes = writes_[name];
+  std::shared_ptr<DeviceWriteJob> job = std::move(writes.job);
+  if (!job) return;
+  nlohmann::json& entry = job->entry;
+  if (!reply.is_null()) entry["error"] = reply;
+  std::string path, error;
+  if (!WriteDeviceWriteHistory(options_.state_dir, name, entry, &path, &error)) {
+    entry["history_error"] = error;
+    spdlog::error("{}: {}", name, error);
+  } else {
+    entry["history"] = path;
+  }
+  if (writes.at_pose && writes.at_pose->history.empty()) {
+    writes.at_pose->history = path;
+    writes.at_pose->entry = entry;
+  }
+  // The device's report shows the write (report/device_writes.h): rewritten now, on the loop (a
+  // write is rare; the render re-solves each calibration, tens of ms).
+  std::vector<std::string> models = options_.station.models;
+  if (const auto it = options_.station.per_device.find(name);
+      it != options_.station.per_device.end() && it->second.models) {
+    models = *it->second.models;
+  }
+  std::string report_error;
+  if (!WriteDeviceReport(options_.state_dir, name, models, drivers::UtcNowIso8601(),
+                         &report_error)) {
+    spdlog::warn("{}: {}", name, report_error);
+  }
+  const bool ok = entry.value("ok", false);
+  const nlohmann::json verification = entry.value("verification", nlohmann::json());
+  spdlog::log(ok ? spdlog::level::info : spdlog::level::err, "{}: {} {}: {}{}", name,
+              entry.value("operation", ""), entry.value("state", ""),
+              ok ? std::string("done") : entry.value("error", std::string("failed")),
+              verification.is_object() ? "; " + verification.value("summary", std::string())
+                                       : std::string());
+  nlohmann::json message = entry;
+  message["class"] = "DEVICE_WRITTEN";
+  message.erase("identity_after");
+  OnEvent(message);
+  if (auto client = job->client.lock()) {
+    if (!job->id.is_null()) message["id"] = job->id;
+    client->Reply(message);
+  }
+}
+
+void Service::TickDeviceWrites(std::int64_t now_ns) {
+  for (auto& [name, writes] : writes_) {
+    if (!writes.job || writes.job->phase == DeviceWriteJob::Phase::kWriting) continue;
+    if (now_ns - writes.job->phase_started_ns < kWindowTimeoutNs) continue;
+    DeviceWriteJob& job = *writes.job;
+    if (job.phase == DeviceWriteJob::Phase::kBefore) {
+      job.entry["state"] = "unchanged";
+      job.entry["ok"] = false;
+      job.entry["error"] = fmt::format(
+          "nothing was written: {} sent {} of the {} samples averaged before a write in {} s", name,
+          job.before.count(), job.window, kWindowTimeoutNs / 1'000'000'000);
+    } else {
+      job.entry["verification"] = {
+          {"pass", false},
+          {"summary",
+           fmt::format("not verified: {} sent {} of {} samples after the write in {} s", name,
+                       job.after.count(), job.window, kWindowTimeoutNs / 1'000'000'000)}};
+    }
+    const std::string device = name;
+    FinishDeviceWrite(device, nullptr);
+    return;  // the map may not be touched while iterating after a finish
+  }
+}
 
 void Service::VerifyWriteAtPose(const nlohmann::json& event) {
   const std::string device = event.value("device", "");

@@ -15,8 +15,10 @@
 #include "daemon/device_write_plan.h"
 #include "daemon/persistence.h"
 #include "daemon/service.h"
+#include "daemon/service_device_write_job.h"
 #include "drivers/mip/mip_stored.h"
 #include "drivers/transport/transport.h"
+#include "protocol/free_json.h"
 #include "protocol/messages.h"
 
 namespace turncal::daemon {
@@ -26,8 +28,6 @@ namespace {
 // The device's output is averaged over this long before and after a write (at least 20 samples,
 // at most 1000).
 constexpr double kWindowSeconds = 2.0;
-// A window that does not fill in this long ends the verification (a device that stopped).
-constexpr std::int64_t kWindowTimeoutNs = 30'000'000'000;
 
 nlohmann::json Numbers(const std::vector<double>& v) {
   nlohmann::json a = nlohmann::json::array();
@@ -88,26 +88,6 @@ std::string Join(const std::vector<std::string>& parts, const char* separator) {
 
 }  // namespace
 
-struct Service::DeviceWriteJob {
-  std::weak_ptr<ClientSession> client;
-  nlohmann::json id;
-  protocol::DeviceWriteArgs args;
-  nlohmann::json plan;  // as shown to the client
-  std::vector<drivers::mip::StoredWriteStep> steps;
-  bool save = false;
-  std::string serial;
-  int version = 0;
-  StoredCalibration device_before;  // what the device holds now
-  StoredCalibration device_after;   // what it holds once written
-  StoredCalibration as_if;          // the stored values the station's calibrations see
-  enum class Phase { kBefore, kWriting, kAfter } phase = Phase::kBefore;
-  OutputWindow before, after;
-  int window = 20;
-  std::int64_t phase_started_ns = 0;
-  WriteAllowance allowance;  // the corrected output's sigma (set before the write), the wander
-  nlohmann::json entry;      // the history entry
-};
-
 void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
                                 const nlohmann::json& request, const nlohmann::json& id) {
   const auto reply = [&](nlohmann::json message) {
@@ -157,14 +137,6 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
   std::vector<std::string> refusals;
   if (!args.restore) {
     nlohmann::json calibration;
-    const MeasurementModel* model = station_->ModelOf(args.device, args.model);
-    if (!model) {
-      fail(
-          fmt::format("{} has no pose model '{}' (free-mode calibrations cannot be written into "
-                      "a device yet)",
-                      args.device, args.model));
-      return;
-    }
     if (!ReadActiveCalibration(options_.state_dir, args.device, args.model, &calibration)) {
       fail(
           fmt::format("{} has no active calibration of {} (one that passed its gate, or was "
@@ -177,11 +149,46 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
     q.protocol = device.spec().protocol;
     q.serial_now = job->serial;
     q.stored_now = as_if_now;
-    q.model = model;
     q.transform = args.transform;
-    if (!CalibrationValues(*model, calibration, &q.theta, &q.covariance)) {
-      fail("the active calibration's document lacks a parameter of " + args.model);
-      return;
+    // A pose model's calibration, or a free one's (issue 22: accel9, gyro9, gyro9g,
+    // magellipsoid, magsphere); the free model lives until the plan is made.
+    std::unique_ptr<FreeModel> free_model;
+    if (protocol::IsFreeCalibration(calibration)) {
+      protocol::FreeCalibrationDocument doc;
+      if (!protocol::ParseFreeCalibration(calibration, &doc, &why)) {
+        fail("the active calibration of " + args.model + ": " + why);
+        return;
+      }
+      if (doc.model == "accmag") {
+        fail(
+            "accmag calibrates two triads and the rotation between them: write accel9 and "
+            "magellipsoid (or magsphere) instead");
+        return;
+      }
+      free_model = MakeFreeModel(doc.model, doc.context, &why);
+      if (!free_model) {
+        fail(why);
+        return;
+      }
+      const double scale =
+          free_model->sensor() == SensorKind::kAccelerometer ? doc.context.gravity_mps2
+          : free_model->sensor() == SensorKind::kMagnetometer && doc.context.field_magnitude > 0
+              ? doc.context.field_magnitude
+              : 1.0;
+      q.correction = CorrectionOf(*free_model, scale);
+      q.theta = doc.theta;
+      q.covariance = doc.covariance;
+    } else {
+      const MeasurementModel* model = station_->ModelOf(args.device, args.model);
+      if (!model) {
+        fail(fmt::format("{} has no model '{}' in this station", args.device, args.model));
+        return;
+      }
+      q.model = model;
+      if (!CalibrationValues(*model, calibration, &q.theta, &q.covariance)) {
+        fail("the active calibration's document lacks a parameter of " + args.model);
+        return;
+      }
     }
     q.version = calibration.value("version", 0);
     q.gate_passed = calibration.contains("gate") && calibration["gate"].is_object() &&
@@ -193,14 +200,24 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
                                     : nlohmann::json();
     q.serial_then = then.is_object() ? then.value("serial", "") : "";
     q.stored_then = StoredCalibrationFromIdentity(then);
-    const DeviceWritePlan plan = PlanDeviceWrite(q);
-    job->plan = ToJson(plan);
-    job->plan["operation"] = "write";
-    refusals = plan.refusals;
+    DeviceWritePlan plan;
     if (!actual && q.protocol == drivers::Protocol::kMip) {
-      refusals.push_back(args.device + " has not told its stored calibration yet (state " +
-                         device.state() + ")");
+      // Nothing to compose with: the device never said what it stores.
+      job->plan = {{"device", args.device},
+                   {"model", args.model},
+                   {"version", calibration.value("version", 0)},
+                   {"serial", job->serial},
+                   {"writes", nlohmann::json::array()}};
+      refusals.push_back(args.device + " has not told turncald what it stores (state " +
+                         device.state() +
+                         "; a device turncald only listens to, configure = false, never does): "
+                         "nothing to compose the values with");
+    } else {
+      plan = PlanDeviceWrite(q);
+      job->plan = ToJson(plan);
+      refusals = plan.refusals;
     }
+    job->plan["operation"] = "write";
     if (args.version && *args.version != q.version) {
       refusals.push_back(fmt::format(
           "the plan shown was for version {}; version {} is active now: look at it again",
@@ -349,7 +366,12 @@ void Service::OnWriteSample(std::size_t device, const Sample& sample) {
                 WindowMoved(job.before, triad, noise->sigma[static_cast<std::size_t>(triad)]) ||
                 WindowMoved(job.after, triad, noise->sigma[static_cast<std::size_t>(triad)]);
       }
-      if (moved && model) {
+      if (moved && !model) {
+        verification["summary"] =
+            "not verified: the device moved across the write, and a calibration without a "
+            "turntable has no pose to verify it at: write it with the device still (" +
+            verification.value("summary", std::string()) + ")";
+      } else if (moved) {
         verification["deferred"] = true;
         verification["summary"] =
             "not verified yet: the device moved across the write (its output scattered more than "
@@ -485,76 +507,6 @@ void Service::StartStoredWrite(std::size_t index) {
     job->entry["ok"] = false;
     job->entry["error"] = error;
     FinishDeviceWrite(name, nullptr);
-  }
-}
-
-void Service::FinishDeviceWrite(const std::string& name, nlohmann::json reply) {
-  DeviceWrites& writes = writes_[name];
-  std::shared_ptr<DeviceWriteJob> job = std::move(writes.job);
-  if (!job) return;
-  nlohmann::json& entry = job->entry;
-  if (!reply.is_null()) entry["error"] = reply;
-  std::string path, error;
-  if (!WriteDeviceWriteHistory(options_.state_dir, name, entry, &path, &error)) {
-    entry["history_error"] = error;
-    spdlog::error("{}: {}", name, error);
-  } else {
-    entry["history"] = path;
-  }
-  if (writes.at_pose && writes.at_pose->history.empty()) {
-    writes.at_pose->history = path;
-    writes.at_pose->entry = entry;
-  }
-  // The device's report shows the write (report/device_writes.h): rewritten now, on the loop (a
-  // write is rare; the render re-solves each calibration, tens of ms).
-  std::vector<std::string> models = options_.station.models;
-  if (const auto it = options_.station.per_device.find(name);
-      it != options_.station.per_device.end() && it->second.models) {
-    models = *it->second.models;
-  }
-  std::string report_error;
-  if (!WriteDeviceReport(options_.state_dir, name, models, drivers::UtcNowIso8601(),
-                         &report_error)) {
-    spdlog::warn("{}: {}", name, report_error);
-  }
-  const bool ok = entry.value("ok", false);
-  const nlohmann::json verification = entry.value("verification", nlohmann::json());
-  spdlog::log(ok ? spdlog::level::info : spdlog::level::err, "{}: {} {}: {}{}", name,
-              entry.value("operation", ""), entry.value("state", ""),
-              ok ? std::string("done") : entry.value("error", std::string("failed")),
-              verification.is_object() ? "; " + verification.value("summary", std::string())
-                                       : std::string());
-  nlohmann::json message = entry;
-  message["class"] = "DEVICE_WRITTEN";
-  message.erase("identity_after");
-  OnEvent(message);
-  if (auto client = job->client.lock()) {
-    if (!job->id.is_null()) message["id"] = job->id;
-    client->Reply(message);
-  }
-}
-
-void Service::TickDeviceWrites(std::int64_t now_ns) {
-  for (auto& [name, writes] : writes_) {
-    if (!writes.job || writes.job->phase == DeviceWriteJob::Phase::kWriting) continue;
-    if (now_ns - writes.job->phase_started_ns < kWindowTimeoutNs) continue;
-    DeviceWriteJob& job = *writes.job;
-    if (job.phase == DeviceWriteJob::Phase::kBefore) {
-      job.entry["state"] = "unchanged";
-      job.entry["ok"] = false;
-      job.entry["error"] = fmt::format(
-          "nothing was written: {} sent {} of the {} samples averaged before a write in {} s", name,
-          job.before.count(), job.window, kWindowTimeoutNs / 1'000'000'000);
-    } else {
-      job.entry["verification"] = {
-          {"pass", false},
-          {"summary",
-           fmt::format("not verified: {} sent {} of {} samples after the write in {} s", name,
-                       job.after.count(), job.window, kWindowTimeoutNs / 1'000'000'000)}};
-    }
-    const std::string device = name;
-    FinishDeviceWrite(device, nullptr);
-    return;  // the map may not be touched while iterating after a finish
   }
 }
 

@@ -141,6 +141,7 @@ TEST(DeviceWritePlan, TheAccelerometerAndGyroWriteTheirBiasAndKeepTheRestInTheSt
     }
     ASSERT_FALSE(plan.kept_in_stream.empty());
     EXPECT_NE(plan.kept_in_stream.front().find("no command"), std::string::npos);
+    EXPECT_EQ(plan.kept_in_stream.size(), name == "gyro21" ? 2u : 1u) << name;
   }
 }
 
@@ -212,6 +213,60 @@ TEST(DeviceWritePlan, ATransformStoredOrWrittenComposesWithEveryQuantity) {
   ASSERT_FALSE(plan.ok());
   EXPECT_NE(plan.refusals.front().find("no sensor-to-vehicle transform command"),
             std::string::npos);
+}
+
+// Calibrations without a turntable (issue 22) write the same way: accel9's bias, gyro9's and
+// gyro9g's bias (the g-sensitivity stays in the stream), magellipsoid's and magsphere's hard and
+// soft iron.
+TEST(DeviceWritePlan, FreeModelsComposeAsThePoseModelsDo) {
+  std::mt19937 rng(17);
+  std::normal_distribution<double> n(0.0, 1.0);
+  FreeContext context;
+  context.field_magnitude = 0.5;
+  for (const std::string name : {"accel9", "gyro9", "gyro9g", "magellipsoid", "magsphere"}) {
+    std::string error;
+    const auto model = MakeFreeModel(name, context, &error);
+    ASSERT_TRUE(model) << error;
+    FreeData data;
+    data.context = context;
+    Eigen::VectorXd theta = model->Identity(data);  // the raw triad as it is, then perturbed
+    for (Eigen::Index i = 0; i < theta.size(); ++i) theta[i] += 0.01 * n(rng);
+    const SensorKind kind = model->sensor();
+    const double scale = kind == SensorKind::kAccelerometer  ? context.gravity_mps2
+                         : kind == SensorKind::kMagnetometer ? context.field_magnitude
+                                                             : 1.0;
+    DeviceWriteRequest q = Request(nullptr, theta);
+    q.correction = CorrectionOf(*model, scale);
+    const DeviceWritePlan plan = PlanDeviceWrite(q);
+    ASSERT_TRUE(plan.ok()) << name << ": " << plan.refusals.front();
+    EXPECT_EQ(plan.model, name);
+    StoredCalibration now = Gx5WithMagnetometer();
+    for (const StoredWrite& w : plan.writes) {
+      if (w.descriptor == 0x37) now.accel_bias = V(w.to_write);
+      if (w.descriptor == 0x38) now.gyro_bias = V(w.to_write);
+      if (w.descriptor == 0x3A) now.hard_iron = V(w.to_write);
+      if (w.descriptor == 0x3B) {
+        Eigen::Matrix3d m;
+        for (int i = 0; i < 9; ++i) m(i / 3, i % 3) = w.to_write[static_cast<std::size_t>(i)];
+        now.soft_iron = m;
+      }
+    }
+    for (int k = 0; k < 10; ++k) {
+      const Eigen::Vector3d m_old = scale * Eigen::Vector3d(std::cos(k), std::sin(0.7 * k), 0.3);
+      Sample s;
+      (kind == SensorKind::kAccelerometer ? s.acc_mps2
+       : kind == SensorKind::kGyroscope   ? s.gyr_radps
+                                          : s.mag) = m_old;
+      drivers::mip::ReexpressMipOutput(Gx5WithMagnetometer(), now, &s);
+      const Eigen::Vector3d m_new = kind == SensorKind::kAccelerometer ? *s.acc_mps2
+                                    : kind == SensorKind::kGyroscope   ? *s.gyr_radps
+                                                                       : *s.mag;
+      const Eigen::Vector3d want = model->Correct(theta, m_old);
+      EXPECT_LT((plan.stream.A * m_new + plan.stream.c - want).norm(), 2e-6 * (1 + want.norm()))
+          << name << " sample " << k;
+    }
+    EXPECT_EQ(plan.kept_in_stream.size(), name == "gyro9g" ? 2u : 1u) << name;
+  }
 }
 
 TEST(DeviceWritePlan, TheSigmaOfABiasIsTheCalibrationsCarriedThrough) {

@@ -112,6 +112,15 @@ configure = false
                           capture_output=True, text=True, timeout=30)
     check(pose.returncode != 0 and "free mode" in pose.stderr,
           f"turncal pose refused: exit {pose.returncode}, {pose.stderr.strip()[-140:]}")
+    # A free calibration's plan for the device (issue 23), refused here because turncald only
+    # listens (configure = false): it has not read what the device stores.
+    plan = subprocess.run([TURNCAL, "device-write", "imu", "--model", "magellipsoid", "--dry-run",
+                           "--socket", f"{d}/t.sock"], capture_output=True, text=True, timeout=30)
+    check(plan.returncode == 1 and "write magellipsoid v" in plan.stdout and
+          "REFUSED: imu has not told turncald what it stores" in plan.stdout and
+          "configure = false" in plan.stdout,
+          f"device-write --dry-run of magellipsoid plans and refuses: exit {plan.returncode}, "
+          f"{plan.stdout.strip()} {plan.stderr.strip()}")
 
     watch.terminate()
     watch.wait()
