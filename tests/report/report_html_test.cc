@@ -165,8 +165,8 @@ TEST_F(CalibrationReport, IsOneWellFormedScriptFreeDocumentWithEveryPlotAndParam
   for (const Session& s : *sessions_) {
     std::string html, error;
     const auto start = std::chrono::steady_clock::now();
-    ASSERT_TRUE(
-        report::RenderReportHtml(s.calibrations, {s.dir, "2030-01-01T00:00:00Z", {}}, &html, &error))
+    ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "2030-01-01T00:00:00Z", {}}, &html,
+                                         &error))
         << error;
     const double render_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
