@@ -89,6 +89,7 @@ LiveDevice::LiveDevice(boost::asio::io_context& io, drivers::DeviceSpec spec,
 LiveDevice::~LiveDevice() {
   Stop();
   JoinWorker();
+  *alive_ = false;  // a dialogue's result still queued on the loop must not touch this device
 }
 
 void LiveDevice::JoinWorker() {
@@ -201,7 +202,7 @@ void LiveDevice::BeginConfigure() {
   const drivers::Protocol protocol = spec_.protocol;
   const double rate_hz = settings_.rate_hz;
   std::shared_ptr<TransportLink> link = link_;
-  worker_ = std::thread([this, link, generation, protocol, rate_hz] {
+  worker_ = std::thread([this, alive = alive_, link, generation, protocol, rate_hz] {
     std::string error;
     nlohmann::json identity;
     std::optional<drivers::XbusLegacyLayout> layout;
@@ -236,8 +237,9 @@ void LiveDevice::BeginConfigure() {
         }
       }
     }
-    boost::asio::post(io_, [this, generation, ok, error, identity, layout] {
-      if (generation != generation_) return;  // the device went away meanwhile
+    boost::asio::post(io_, [this, alive, generation, ok, error, identity, layout] {
+      // The device was destroyed (a reload) or went away meanwhile.
+      if (!*alive || generation != generation_) return;
       EndConfigure(ok, error, identity, layout);
     });
   });
@@ -276,24 +278,25 @@ bool LiveDevice::RunStoredWrite(std::vector<drivers::mip::StoredWriteStep> steps
   const std::uint64_t generation = ++generation_;
   const double rate_hz = settings_.rate_hz;
   std::shared_ptr<TransportLink> link = link_;
-  worker_ = std::thread(
-      [this, link, generation, rate_hz, steps = std::move(steps), save, done = std::move(done)] {
-        drivers::mip::Dialogue dialogue(link.get());
-        drivers::mip::StoredWriteOutcome outcome =
-            drivers::mip::WriteStoredCalibration(&dialogue, steps, save);
-        std::string configure_error;
-        nlohmann::json identity;
-        if (auto c = dialogue.Configure(rate_hz, &configure_error)) {
-          identity = MipIdentity(*c, c->base_rate_hz / static_cast<double>(c->decimation));
-        }
-        boost::asio::post(
-            io_, [this, generation, outcome = std::move(outcome), identity, configure_error, done] {
-              if (done)
-                done(outcome, identity, identity.is_null() ? configure_error : std::string());
-              if (generation != generation_) return;  // the device went away meanwhile
-              EndConfigure(!identity.is_null(), configure_error, identity, std::nullopt);
-            });
-      });
+  worker_ = std::thread([this, alive = alive_, link, generation, rate_hz, steps = std::move(steps),
+                         save, done = std::move(done)] {
+    drivers::mip::Dialogue dialogue(link.get());
+    drivers::mip::StoredWriteOutcome outcome =
+        drivers::mip::WriteStoredCalibration(&dialogue, steps, save);
+    std::string configure_error;
+    nlohmann::json identity;
+    if (auto c = dialogue.Configure(rate_hz, &configure_error)) {
+      identity = MipIdentity(*c, c->base_rate_hz / static_cast<double>(c->decimation));
+    }
+    boost::asio::post(io_, [this, alive, generation, outcome = std::move(outcome), identity,
+                            configure_error, done] {
+      // The write's outcome is reported whatever became of the device since.
+      if (done) done(outcome, identity, identity.is_null() ? configure_error : std::string());
+      // The device was destroyed (a reload) or went away meanwhile.
+      if (!*alive || generation != generation_) return;
+      EndConfigure(!identity.is_null(), configure_error, identity, std::nullopt);
+    });
+  });
   return true;
 }
 

@@ -134,6 +134,9 @@ class LiveDevice {
   double rate_hz_ = 0.0;
   bool stopping_ = false;
   bool attempted_ = false;
+  // False once destroyed: a dialogue's result posted to the loop checks it before it touches the
+  // device (the service destroys its devices on a reload while the loop runs on).
+  std::shared_ptr<bool> alive_ = std::make_shared<bool>(true);
 };
 
 }  // namespace turncal::daemon
