@@ -83,7 +83,7 @@ class Service {
   void OnDeviceIdentity(std::size_t device, const nlohmann::json& identity);
   // A device's sample on its way through a write (the windows before and after it).
   void OnWriteSample(std::size_t device, const Sample& sample);
-  void StartStoredWrite(std::size_t device);
+  void StartStoredWrite(const std::string& device);
   void FinishDeviceWrite(const std::string& device, nlohmann::json reply);
   void TickDeviceWrites(std::int64_t now_ns);
   // A write whose verification waits for the next captured pose (daemon/service_device_verify.cc).

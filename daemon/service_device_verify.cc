@@ -71,7 +71,10 @@ void Service::FinishDeviceWrite(const std::string& name, nlohmann::json reply) {
 
 void Service::TickDeviceWrites(std::int64_t now_ns) {
   for (auto& [name, writes] : writes_) {
-    if (!writes.job || writes.job->phase == DeviceWriteJob::Phase::kWriting) continue;
+    if (!writes.job || writes.job->phase == DeviceWriteJob::Phase::kWriting ||
+        writes.job->phase == DeviceWriteJob::Phase::kStarting) {
+      continue;
+    }
     if (now_ns - writes.job->phase_started_ns < kWindowTimeoutNs) continue;
     DeviceWriteJob& job = *writes.job;
     if (job.phase == DeviceWriteJob::Phase::kBefore) {
@@ -163,63 +166,73 @@ void Service::OnDeviceIdentity(std::size_t index, const nlohmann::json& identity
   nlohmann::json station_identity = identity;
   const std::optional<StoredCalibration> actual = StoredCalibrationFromIdentity(identity);
   if (!options_.state_dir.empty() && actual) {
+    DeviceWrites& writes = writes_[name];
+    // The record in memory is the latest (its file may have failed to be written); else the file.
     DeviceWriteRecord record;
-    bool exists = false;
+    bool exists = writes.record.has_value();
     std::string error;
-    if (!ReadDeviceWriteRecord(options_.state_dir, name, &record, &exists, &error)) {
+    if (exists) {
+      record = *writes.record;
+    } else if (!ReadDeviceWriteRecord(options_.state_dir, name, &record, &exists, &error)) {
       spdlog::error("{}: {}; the device's output is taken as it is", name, error);
-    } else if (exists) {
-      DeviceWrites& writes = writes_[name];
-      writes.record = record;
+      exists = false;
+    }
+    const std::string serial = identity.value("serial", "");
+    if (exists && serial != record.serial) {
+      spdlog::warn("{}: device_writes/{}.json is of serial {}, the device is {}: not used", name,
+                   name, record.serial, serial);
+      writes.record.reset();
       writes.reexpress = false;
-      const std::string serial = identity.value("serial", "");
-      if (serial != record.serial) {
-        spdlog::warn("{}: device_writes/{}.json is of serial {}, the device is {}: not used", name,
-                     name, record.serial, serial);
-        writes.record.reset();
-      } else if (record.pending && !writes.job && SameStoredCalibration(*actual, *record.pending)) {
-        spdlog::warn(
-            "{}: a write was under way when turncald stopped; the device holds what it "
-            "was writing (device_writes/{}.json)",
-            name, name);
+    } else if (exists && writes.job) {
+      // A write under way: its own end updates the record.
+      writes.record = record;
+      writes.reexpress = record.reexpress();
+    } else if (exists) {
+      // The device says what it holds, and re-expressing its output from any stored values into
+      // `as_if` is exact: whatever happened since (a write cut off, a restart without a save,
+      // another tool), the station's calibrations keep describing it.
+      bool changed = record.pending.has_value();
+      if (!SameStoredCalibration(*actual, record.in_device)) {
+        changed = true;
+        if (record.pending && SameStoredCalibration(*actual, *record.pending)) {
+          spdlog::warn(
+              "{}: a write was under way when turncald stopped; the device holds what "
+              "it was writing (device_writes/{}.json)",
+              name, name);
+        } else if (SameStoredCalibration(*actual, record.as_if)) {
+          spdlog::warn(
+              "{}: holds the values its calibrations were made with, not those the last "
+              "{} left (not saved, and the device restarted?)",
+              name, record.operation);
+          record.nonvolatile_changed = false;  // it started with them
+        } else {
+          spdlog::warn(
+              "{}: holds stored values turncal did not leave there (a write cut off, or "
+              "another tool); its output is re-expressed from them: {}",
+              name, identity["stored_calibration"].dump());
+        }
         record.replaced = record.in_device;
         record.in_device = *actual;
-        record.pending.reset();
-        writes.record = record;
-        writes.reexpress = record.reexpress();
-        if (!WriteDeviceWriteRecord(options_.state_dir, record, &error)) {
-          spdlog::error("{}: {}", name, error);
-        }
-      } else if (SameStoredCalibration(*actual, record.in_device)) {
-        writes.reexpress = record.reexpress();
-      } else if (SameStoredCalibration(*actual, record.as_if)) {
-        spdlog::warn(
-            "{}: holds the values its calibrations were made with, not those the last {} "
-            "left (not saved, and the device restarted?)",
-            name, record.operation);
-        record.in_device = *actual;
-        record.nonvolatile_changed = false;  // it started with them
-        writes.record = record;
-        if (!WriteDeviceWriteRecord(options_.state_dir, record, &error)) {
-          spdlog::error("{}: {}", name, error);
-        }
-      } else {
-        spdlog::error(
-            "{}: holds other stored values than turncal wrote or its calibrations were "
-            "made with: its calibrations do not describe its output (recalibrate)",
-            name);
+        record.time = drivers::UtcNowIso8601();
       }
-      if (writes.reexpress) {
-        station_identity["stored_calibration"] = drivers::mip::StoredCalibrationJson(record.as_if);
-        station_identity["stored_calibration_in_device"] = identity["stored_calibration"];
-        station_identity["output_reexpressed"] =
-            "turncald re-expresses the output in stored_calibration (device_writes/" + name +
-            ".json)";
-        spdlog::info(
-            "{}: its output is re-expressed in the stored values its calibrations were "
-            "made with (the {} of {})",
-            name, record.operation, record.time);
+      record.pending.reset();
+      if (changed && !WriteDeviceWriteRecord(options_.state_dir, record, &error)) {
+        spdlog::error("{}: {}", name, error);
       }
+      writes.record = record;
+      writes.reexpress = record.reexpress();
+    }
+    if (writes.reexpress && writes.record) {
+      station_identity["stored_calibration"] =
+          drivers::mip::StoredCalibrationJson(writes.record->as_if);
+      station_identity["stored_calibration_in_device"] = identity["stored_calibration"];
+      station_identity["output_reexpressed"] =
+          "turncald re-expresses the output in stored_calibration (device_writes/" + name +
+          ".json)";
+      spdlog::info(
+          "{}: its output is re-expressed in the stored values its calibrations were made "
+          "with (the {} of {})",
+          name, writes.record->operation, writes.record->time);
     }
   }
   if (station_) station_->SetDeviceIdentity(static_cast<int>(index), station_identity);

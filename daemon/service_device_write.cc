@@ -7,7 +7,9 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <Eigen/LU>
 #include <algorithm>
+#include <boost/asio/post.hpp>
 #include <cmath>
 
 #include "core/estimation/sensor_class.h"
@@ -214,6 +216,15 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
                          "nothing to compose the values with");
     } else {
       plan = PlanDeviceWrite(q);
+      // The plan composes with what the station's calibrations see (as_if); a device that holds
+      // another transform (an earlier --transform) outputs the triad turned by M_dev M_as_if^-1,
+      // so the stream corrects its output with A M_as_if M_dev^-1.
+      const Eigen::Matrix3d unit = Eigen::Matrix3d::Identity();
+      const Eigen::Matrix3d m_dev = actual->transform.value_or(unit);
+      const Eigen::Matrix3d m_as_if = as_if_now.transform.value_or(unit);
+      if (!args.transform && m_dev != m_as_if) {
+        plan.stream.A = plan.stream.A * m_as_if * m_dev.inverse();
+      }
       job->plan = ToJson(plan);
       refusals = plan.refusals;
     }
@@ -336,7 +347,18 @@ void Service::OnWriteSample(std::size_t device, const Sample& sample) {
   DeviceWriteJob& job = *writes.job;
   if (job.phase == DeviceWriteJob::Phase::kBefore) {
     job.before.Add(sample);
-    if (job.before.count() >= job.window) StartStoredWrite(device);
+    if (job.before.count() >= job.window) {
+      // Not here: this runs inside the decoder's Push, and the write ends that decoder.
+      job.phase = DeviceWriteJob::Phase::kStarting;
+      boost::asio::post(io_, [this, job = writes.job] {
+        auto it = writes_.find(job->args.device);
+        if (it == writes_.end() || it->second.job != job ||
+            job->phase != DeviceWriteJob::Phase::kStarting) {
+          return;
+        }
+        StartStoredWrite(job->args.device);
+      });
+    }
   } else if (job.phase == DeviceWriteJob::Phase::kAfter) {
     job.after.Add(sample);
     if (job.after.count() < job.window) return;
@@ -386,22 +408,20 @@ void Service::OnWriteSample(std::size_t device, const Sample& sample) {
   }
 }
 
-void Service::StartStoredWrite(std::size_t index) {
-  LiveDevice& device = *devices_[index];
-  const std::string name = device.spec().name;
+void Service::StartStoredWrite(const std::string& name) {
   std::shared_ptr<DeviceWriteJob> job = writes_[name].job;
-  // The corrected output's sigma from the calibration, at the window's mean, as the station sees
-  // it (the prediction the device's new output is checked against carries it).
-  if (station_) {
-    Sample mean = job->before.Mean();
-    drivers::mip::ReexpressMipOutput(job->device_before, job->as_if, &mean);
-    Station::Corrected c;
-    if (station_->Correct(static_cast<int>(index), mean, &c, true)) {
-      job->allowance.calibration_sigma[kTriadAcc] = c.acc_sigma;
-      job->allowance.calibration_sigma[kTriadGyr] = c.gyr_sigma;
-      job->allowance.calibration_sigma[kTriadMag] = c.mag_sigma;
-    }
+  std::size_t index = devices_.size();
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    if (devices_[i]->spec().name == name) index = i;
   }
+  if (index == devices_.size()) {
+    job->entry["state"] = "unchanged";
+    job->entry["ok"] = false;
+    job->entry["error"] = "nothing was written: " + name + " is no longer configured";
+    FinishDeviceWrite(name, nullptr);
+    return;
+  }
+  LiveDevice& device = *devices_[index];
   job->phase = DeviceWriteJob::Phase::kWriting;
   job->phase_started_ns = drivers::MonotonicNowNs();
   std::string error;
@@ -420,6 +440,10 @@ void Service::StartStoredWrite(std::size_t index) {
       pending.operation = "none yet";
     }
     pending.pending = job->device_after;
+    // What a write cut off may have done: the next dialogue finds out what the device holds.
+    pending.nonvolatile_changed = pending.nonvolatile_changed || job->save;
+    pending.model = job->args.restore ? pending.model : job->args.model;
+    pending.version = job->version;
     if (!WriteDeviceWriteRecord(options_.state_dir, pending, &error)) {
       job->entry["state"] = "unchanged";
       job->entry["ok"] = false;
@@ -448,10 +472,13 @@ void Service::StartStoredWrite(std::size_t index) {
           // What the device holds now (the dialogue after the write read it back) is in effect:
           // the old values after a rollback, or whatever a failed rollback left.
           DeviceWrites& writes = writes_[name];
-          if (writes.record) {
+          const auto now = StoredCalibrationFromIdentity(identity);
+          // Without what the device holds now (the dialogue after the write failed too), the
+          // record keeps `pending`: the next dialogue compares.
+          if (writes.record && now) {
             DeviceWriteRecord record = *writes.record;
             record.pending.reset();
-            if (const auto now = StoredCalibrationFromIdentity(identity)) record.in_device = *now;
+            record.in_device = *now;
             std::string record_error;
             if (!WriteDeviceWriteRecord(options_.state_dir, record, &record_error)) {
               job->entry["record_error"] = record_error;

@@ -28,7 +28,9 @@ struct Service::DeviceWriteJob {
   StoredCalibration device_before;  // what the device holds now
   StoredCalibration device_after;   // what it holds once written
   StoredCalibration as_if;          // the stored values the station's calibrations see
-  enum class Phase { kBefore, kWriting, kAfter } phase = Phase::kBefore;
+  // kStarting: the window before is full and the write is posted to the loop (it cannot start
+  // inside the decoder's sample callback: the write ends that decoder).
+  enum class Phase { kBefore, kStarting, kWriting, kAfter } phase = Phase::kBefore;
   OutputWindow before, after;
   int window = 20;
   std::int64_t phase_started_ns = 0;

@@ -120,7 +120,7 @@ const std::map<std::string, Manual>& Manuals() {
         "device outputs in the frame the calibration corrects into (every output turns). "
         "Then asks (or --yes), writes, reads back bit for bit, saves only with --save, and "
         "verifies by measurement: the device's uncorrected output after the write must be the "
-        "output predicted from before it, within 3 sigma (a device that moved: at the next "
+        "output predicted from before it (0.1 % false alarms; a device that moved: at the next "
         "captured pose). A failure rolls back. The replaced "
         "values are kept in the state directory (device_writes/); --restore puts back what the "
         "device held before turncal wrote into it. "

@@ -6,7 +6,9 @@
 #include "sim/mip_storage.h"
 
 #include <gtest/gtest.h>
+
 #include <unistd.h>
+#include <Eigen/Geometry>
 
 #include <filesystem>
 #include <fstream>
@@ -73,6 +75,12 @@ TEST_F(MipStorage, WrittenValuesReadBackBitForBitAndCorrectTheOutput) {
   ASSERT_EQ(Send(device.get(), mip::WriteStored(0x3A, kHardIron)).code, 0);
   ASSERT_EQ(Send(device.get(), mip::WriteStored(0x3B, kSoftIron)).code, 0);
   ASSERT_EQ(Send(device.get(), mip::WriteStored(0x37, kAccelBias)).code, 0);
+  // A sensor-to-vehicle transform: 0.1 rad about (1, 2, 2)/3, as floats.
+  const Eigen::Matrix3d rotation =
+      Eigen::AngleAxisd(0.1, Eigen::Vector3d(1, 2, 2) / 3.0).toRotationMatrix();
+  std::vector<double> dcm;
+  for (int i = 0; i < 9; ++i) dcm.push_back(static_cast<float>(rotation(i / 3, i % 3)));
+  ASSERT_EQ(Send(device.get(), mip::WriteStored(0x33, dcm)).code, 0);
   const Answer h = Send(device.get(), mip::ReadStored(0x3A));
   ASSERT_EQ(h.code, 0);
   const std::vector<float> hard = Floats(h.data);
@@ -82,7 +90,14 @@ TEST_F(MipStorage, WrittenValuesReadBackBitForBitAndCorrectTheOutput) {
   ASSERT_EQ(soft.size(), 9u);
   for (int i = 0; i < 9; ++i) EXPECT_EQ(soft[i], static_cast<float>(kSoftIron[i]));
 
-  // The output: mag S (raw - h), accel raw - bias, from samples that carried nothing.
+  const Answer t = Send(device.get(), mip::ReadStored(0x33));
+  ASSERT_EQ(t.code, 0);
+  ASSERT_EQ(Floats(t.data).size(), 9u);
+  for (int i = 0; i < 9; ++i) EXPECT_EQ(Floats(t.data)[i], static_cast<float>(dcm[i]));
+
+  // The output, by the device's convention written out here (not through the re-expression both
+  // the emulator and turncald use): mag M S (raw - h), accel M (raw - bias), gyro M raw, from
+  // samples that carried nothing.
   Sample s;
   s.mag = Eigen::Vector3d(0.25, -0.02, 0.41);
   s.acc_mps2 = Eigen::Vector3d(0.1, -0.2, 9.8);
@@ -96,9 +111,11 @@ TEST_F(MipStorage, WrittenValuesReadBackBitForBitAndCorrectTheOutput) {
     hi[i] = static_cast<float>(kHardIron[i]);
     ab[i] = static_cast<float>(kAccelBias[i]);
   }
-  EXPECT_LT((*s.mag - S * (*raw.mag - hi)).norm(), 1e-15);
-  EXPECT_LT((*s.acc_mps2 - (*raw.acc_mps2 - ab * kStandardGravity_mps2)).norm(), 1e-14);
-  EXPECT_EQ(*s.gyr_radps, *raw.gyr_radps);  // the gyro bias in use is still zero
+  Eigen::Matrix3d M;
+  for (int i = 0; i < 9; ++i) M(i / 3, i % 3) = dcm[static_cast<std::size_t>(i)];
+  EXPECT_LT((*s.mag - M * S * (*raw.mag - hi)).norm(), 1e-14);
+  EXPECT_LT((*s.acc_mps2 - M * (*raw.acc_mps2 - ab * kStandardGravity_mps2)).norm(), 1e-13);
+  EXPECT_LT((*s.gyr_radps - M * *raw.gyr_radps).norm(), 1e-15);  // the gyro bias is still zero
 }
 
 TEST_F(MipStorage, SavedValuesSurviveARestartAndLoadAndDefaultWork) {
