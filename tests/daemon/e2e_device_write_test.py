@@ -12,9 +12,9 @@ last pose:
      back: exit 2, state rolled_back, the device's stored values bit for bit as before;
   3. mag13, then accel13, written with --save: exit 0, read back bit for bit, verified by
      measurement (the uncorrected output after the write is the output predicted from before it,
-     within the limit of 0.1 % false alarms); the corrected stream still matches the pose's true specific force and field
-     within 4 sigma (the device's output is re-expressed in the values the calibrations were made
-     with);
+     within the limit of 0.1 % false alarms); the corrected stream still matches the pose's true
+     specific force and field within 4 sigma (the device's output is re-expressed in the values
+     the calibrations were made with);
   4. the device restarts (the simulator ends; `turncal reset`; a new run with the same truth and
      the same non-volatile folder): it powers up with the written values, and at every captured
      pose its raw output is the truth as the written calibration predicts it (the true output
