@@ -88,16 +88,16 @@ void PrintOutcome(const nlohmann::json& r) {
   if (r.contains("history")) fmt::print("  recorded in {}\n", r.value("history", ""));
 }
 
-int Fail(const std::string& message) {
+int WriteFail(const std::string& message) {
   fmt::print(stderr, "turncal device-write: {}\n", message);
   return 2;
 }
 
 int Run(const DeviceWriteArgs& a) {
-  if (a.restore == !a.model.empty()) return Fail("give --model M (write) or --restore");
+  if (a.restore == !a.model.empty()) return WriteFail("give --model M (write) or --restore");
   ClientConnection conn;
   std::string error;
-  if (!conn.Connect(a.socket, &error)) return Fail(error);
+  if (!conn.Connect(a.socket, &error)) return WriteFail(error);
   nlohmann::json request = {{"cmd", "device_write"}, {"device", a.device}, {"save", a.save}};
   if (a.restore) {
     request["restore"] = true;
@@ -108,10 +108,10 @@ int Run(const DeviceWriteArgs& a) {
   nlohmann::json ask = request;
   ask["dry_run"] = true;
   auto plan_reply = conn.Request(ask, &error);
-  if (!plan_reply) return Fail(error);
+  if (!plan_reply) return WriteFail(error);
   if (a.json) fmt::print("{}\n", plan_reply->dump());
   if (plan_reply->value("class", "") == "ERROR") {
-    return Fail(plan_reply->value("message", "error"));
+    return WriteFail(plan_reply->value("message", "error"));
   }
   const nlohmann::json plan = (*plan_reply)["plan"];
   if (!a.json) PrintPlan(plan);
@@ -119,7 +119,7 @@ int Run(const DeviceWriteArgs& a) {
   if (a.dry_run) return 0;
   if (!a.yes) {
     if (!::isatty(STDIN_FILENO)) {
-      return Fail("not written: no terminal to ask on; add --yes to write without asking");
+      return WriteFail("not written: no terminal to ask on; add --yes to write without asking");
     }
     fmt::print("Write these values into {}? [y/N] ", a.device);
     std::fflush(stdout);
@@ -133,9 +133,9 @@ int Run(const DeviceWriteArgs& a) {
   if (!a.restore) request["version"] = plan.value("version", 0);
   auto reply = conn.Request(request, &error,
                             std::chrono::milliseconds(static_cast<long>(a.timeout_s * 1000)));
-  if (!reply) return Fail(error + " (the write may still be under way: turncal status)");
+  if (!reply) return WriteFail(error + " (the write may still be under way: turncal status)");
   if (a.json) fmt::print("{}\n", reply->dump());
-  if (reply->value("class", "") == "ERROR") return Fail(reply->value("message", "error"));
+  if (reply->value("class", "") == "ERROR") return WriteFail(reply->value("message", "error"));
   if (!a.json) PrintOutcome(*reply);
   if (!reply->value("ok", false)) return 2;
   const bool verified =

@@ -37,7 +37,7 @@ import sys
 import tempfile
 import time
 
-from live_session import check, cube_poses, failures, finish_dir, wait_for
+from live_session import check, cube_poses, failures, finish_dir, sending_times, wait_for
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
 SPEED = 10
@@ -115,6 +115,9 @@ def solve3(A, y):
 
 
 def windows_and_lines(path):
+    """Captured windows (in sending times, as the sequencer keeps them) and the CORRECTED lines
+    with raw, each given its sending time "t_sent" (a loaded daemon reads in bursts: read times
+    would put samples of a move inside a pose's window)."""
     windows, lines = {}, []
     for line in open(path):
         j = json.loads(line)
@@ -122,6 +125,9 @@ def windows_and_lines(path):
             windows[j["index"]] = (j["record"]["t_start"], j["record"]["t_end"])
         elif j.get("class") == "CORRECTED" and "acc_sigma" in j and "raw" in j:
             lines.append(j)
+    if lines:
+        for j, t in zip(lines, sending_times(lines)):
+            j["t_sent"] = t
     return windows, lines
 
 
@@ -256,7 +262,7 @@ def main(d):
     windows, lines = windows_and_lines(f"{d}/watch2.jsonl")
     worst_raw, worst_corrected, compared = (0.0, ""), (0.0, ""), 0
     for index, (t0, t1) in windows.items():
-        inside = [s for s in lines if t0 + 0.05 <= s["t_host_ns"] * 1e-9 <= t1]
+        inside = [s for s in lines if t0 <= s["t_sent"] <= t1]
         if len(inside) < 50:
             continue
         raw_z, corrected_z = compare(inside, truth2["poses"][index]["true_output"], truth2,
@@ -320,7 +326,7 @@ def main(d):
     streams3 = {"acc": ([[1, 0, 0], [0, 1, 0], [0, 0, 1]], [0, 0, 0]),
                 "mag": ([[1, 0, 0], [0, 1, 0], [0, 0, 1]], [0, 0, 0])}
     for index, (t0, t1) in windows.items():
-        inside = [x for x in lines3 if t0 + 0.05 <= x["t_host_ns"] * 1e-9 <= t1]
+        inside = [x for x in lines3 if t0 <= x["t_sent"] <= t1]
         if len(inside) < 50 or index < 2:  # the write ended before pose 1 was captured
             continue
         _, corrected_z = compare(inside, truth3["poses"][index]["true_output"], truth3, streams3,

@@ -68,3 +68,23 @@ def finish_dir(d):
         print(f"(kept {d} for inspection)")
     else:
         shutil.rmtree(d, ignore_errors=True)
+
+
+def sending_times(samples):
+    """When each sample was sent, on the host clock: a record's window is in sending times
+    (docs/SEQUENCER.md), a CORRECTED line carries its read time and its device time. The device
+    clock runs at --live-speed times real time: its rate is the median slope (pairs >= 2 s
+    apart) between the promptest reads of each 0.25 s; the offset is the smallest seen."""
+    pts = [(j["t_host_ns"] * 1e-9, j["t_device"]) for j in samples]
+    rate0 = (pts[-1][0] - pts[0][0]) / (pts[-1][1] - pts[0][1])
+    best = {}
+    for h, dv in pts:
+        k = int(h / 0.25)
+        if k not in best or h - rate0 * dv < best[k][0] - rate0 * best[k][1]:
+            best[k] = (h, dv)
+    b = sorted(best.values())
+    slopes = sorted((q[0] - p[0]) / (q[1] - p[1]) for i, p in enumerate(b) for q in b[i + 1:]
+                    if q[0] - p[0] >= 2.0 and q[1] > p[1])
+    rate = slopes[len(slopes) // 2] if slopes else rate0
+    offset = min(h - rate * dv for h, dv in pts)
+    return [min(h, offset + rate * dv) for h, dv in pts]
