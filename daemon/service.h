@@ -98,6 +98,8 @@ class Service {
     struct PoseCheckT {
       std::string model;
       int version = 0;
+      Eigen::VectorXd theta;  // the calibration written (it may not be the active one by then)
+      Eigen::MatrixXd covariance;
       std::string history;   // its history entry's file, completed then
       nlohmann::json entry;  // that entry
     };

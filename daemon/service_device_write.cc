@@ -235,6 +235,8 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
           *args.version, q.version));
     }
     job->version = q.version;
+    job->theta = q.theta;
+    job->covariance = q.covariance;
     job->device_before = actual.value_or(StoredCalibration{});
     job->device_after = job->device_before;
     for (const StoredWrite& w : plan.writes) {
@@ -399,8 +401,8 @@ void Service::OnWriteSample(std::size_t device, const Sample& sample) {
             "not verified yet: the device moved across the write (its output scattered more than "
             "3 times its noise); it is verified at the next captured pose (" +
             verification.value("summary", std::string()) + ")";
-        writes.at_pose =
-            DeviceWrites::PoseCheckT{job.args.model, job.version, std::string(), job.entry};
+        writes.at_pose = DeviceWrites::PoseCheckT{job.args.model, job.version,   job.theta,
+                                                  job.covariance, std::string(), job.entry};
       }
     }
     job.entry["verification"] = verification;

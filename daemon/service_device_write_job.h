@@ -28,6 +28,8 @@ struct Service::DeviceWriteJob {
   StoredCalibration device_before;  // what the device holds now
   StoredCalibration device_after;   // what it holds once written
   StoredCalibration as_if;          // the stored values the station's calibrations see
+  Eigen::VectorXd theta;            // the calibration written (a verification at a pose uses it)
+  Eigen::MatrixXd covariance;
   // kStarting: the window before is full and the write is posted to the loop (it cannot start
   // inside the decoder's sample callback: the write ends that decoder).
   enum class Phase { kBefore, kStarting, kWriting, kAfter } phase = Phase::kBefore;

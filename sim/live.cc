@@ -412,6 +412,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     ++p;
   };
 
+  std::vector<bool> lose_left(options.lose_replies.size(), true);  // replies still to lose
   bool end_holding = false;  // after the last pose (hold_end_s)
   double end_hold_until_s = 0;
   auto last_turn = Clock::now();
@@ -662,6 +663,25 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
       const ssize_t n = ::read(devices[i].fd, buffer, sizeof(buffer));
       if (n <= 0) continue;
       const auto reply = devices[i].emulator->OnHostBytes({buffer, static_cast<std::size_t>(n)});
+      // A command whose reply is to be lost (a 3DM command in one read: the daemon writes each
+      // command whole): carried out, the reply dropped, once.
+      bool lost = false;
+      for (std::size_t k = 0; k < lose_left.size() && !lost; ++k) {
+        const auto& l = options.lose_replies[k];
+        for (ssize_t at = 0; lose_left[k] && at + 6 < n; ++at) {
+          if (buffer[at] == 0x75 && buffer[at + 1] == 0x65 && buffer[at + 2] == 0x0C &&
+              buffer[at + 5] == l.descriptor && buffer[at + 6] == l.function) {
+            lose_left[k] = false;
+            lost = true;
+            Say({{"event", "reply_lost"},
+                 {"device", devices[i].path},
+                 {"command", fmt::format("0x0C 0x{:02X} function {}", l.descriptor, l.function)},
+                 {"reply_bytes", reply.size()}});
+            break;
+          }
+        }
+      }
+      if (lost) continue;
       const std::size_t from = devices[i].out.size();
       devices[i].out.append(reply.begin(), reply.end());
       errors.Apply(&devices[i], from);

@@ -61,6 +61,14 @@ struct LiveSimOptions {
   // its stationary samples again (and answering dialogues): time for a write into the device
   // and its verification. An event {"event":"holding_end"} says when it begins.
   double hold_end_s = 0;
+  // A reply lost on the line: the first time a device receives the 3DM command (set 0x0C) with
+  // `descriptor` and `function` (1 write, 2 read, 3 save, ...), it carries it out but its reply
+  // never reaches the host ({"event":"reply_lost"} on standard output). MIP devices only.
+  struct LoseReply {
+    std::uint8_t descriptor = 0;
+    std::uint8_t function = 0;
+  };
+  std::vector<LoseReply> lose_replies;
 };
 
 struct LiveSimReport {

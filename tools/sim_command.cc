@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <cstdio>
+
 #include <fcntl.h>
 #include <termios.h>
 #include <unistd.h>
@@ -60,6 +62,7 @@ struct SimCommandArgs {
   std::string live;                // the first of lives
   double live_speed = 1.0;
   double hold_end_s = 0;
+  std::vector<std::string> lose_replies;  // DESC:FUNCTION
   std::string controller;  // turncald's socket: play the controller (sim/live.h)
   double answer_timeout_s = 120;
   int retries = 2;
@@ -287,6 +290,20 @@ int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
                  ec.message());
       return 1;
     }
+  }
+  for (const auto& text : args.lose_replies) {
+    unsigned descriptor = 0, function = 0;
+    char tail = 0;
+    if (std::sscanf(text.c_str(), "%x:%u%c", &descriptor, &function, &tail) != 2 ||
+        descriptor > 0xFF || function < 1 || function > 5) {
+      fmt::print(stderr,
+                 "turncal sim: --lose-reply '{}': DESC:FUNCTION, e.g. 0x3B:3 (the first save of "
+                 "the soft iron)\n",
+                 text);
+      return 2;
+    }
+    live.lose_replies.push_back(
+        {static_cast<std::uint8_t>(descriptor), static_cast<std::uint8_t>(function)});
   }
   for (const auto& text : args.unplugs) {
     sim::LiveSimOptions::Unplug u;
@@ -584,6 +601,10 @@ void AddSimCommand(CLI::App* app) {
                   "with --live: a folder for the MIP devices' non-volatile storage "
                   "(DIR/SIM0001.nvm.json): a calibration the daemon saves into a device survives "
                   "its unplug and the next run");
+  cmd->add_option("--lose-reply", args->lose_replies,
+                  "with --controller: DESC:FUNCTION -- the first 3DM command (set 0x0C) with this "
+                  "descriptor and function (1 write, 2 read, 3 save) is carried out but its reply "
+                  "is lost, e.g. 0x3B:3 (repeatable)");
   cmd->add_option("--hold-end", args->hold_end_s,
                   "with --controller: after the last pose the table stays there this many session "
                   "seconds, the devices streaming (time to write a calibration into a device)")
@@ -605,8 +626,10 @@ void AddSimCommand(CLI::App* app) {
       if (args->protocols.size() != 1 && args->protocols.size() != args->lives.size()) {
         throw CLI::ValidationError("sim", "give one --protocol, or one per --live");
       }
-    } else if (args->bit_error_rate > 0 || !args->unplugs.empty()) {
-      throw CLI::ValidationError("sim", "--bit-error-rate and --unplug need --controller");
+    } else if (args->bit_error_rate > 0 || !args->unplugs.empty() ||
+               !args->lose_replies.empty()) {
+      throw CLI::ValidationError("sim",
+                                 "--bit-error-rate, --unplug and --lose-reply need --controller");
     } else if (args->lives.size() > 1 || args->protocols.size() > 1) {
       throw CLI::ValidationError("sim", "several --live devices need --controller");
     }

@@ -10,7 +10,8 @@ last pose:
      write with 1 sigma, what stays in the stream) and writes nothing;
   2. a save the device cannot do (its non-volatile file cannot be written: NACK 4 "failed") rolls
      back: exit 2, state rolled_back, the device's stored values bit for bit as before;
-  3. mag13, then accel13, written with --save: exit 0, read back bit for bit, verified by
+  3. mag13 (the reply to its save of the soft iron lost on the line: sent again), then accel13,
+     written with --save: exit 0, read back bit for bit, verified by
      measurement (the uncorrected output after the write is the output predicted from before it,
      within the limit of 0.1 % false alarms); the corrected stream still matches the pose's true
      specific force and field within 4 sigma (the device's output is re-expressed in the values
@@ -48,12 +49,12 @@ def run(*args, timeout=180):
     return subprocess.run([TURNCAL, *args], capture_output=True, text=True, timeout=timeout)
 
 
-def start_sim(d, poses, tag):
+def start_sim(d, poses, tag, *extra):
     return subprocess.Popen(
         [TURNCAL, "sim", "--protocol", "mip", "--live", f"{d}/mip", "--controller", f"{d}/t.sock",
          "--live-speed", str(SPEED), "--poses", poses, "--seed", str(SEED), "--truth-out",
          f"{d}/truth{tag}.json", "--answer-timeout", "60", "--retries", "5", "--device-state",
-         f"{d}/nvm", "--hold-end", "3000"],
+         f"{d}/nvm", "--hold-end", "3000", *extra],
         stdout=open(f"{d}/sim{tag}.out", "w"), stderr=open(f"{d}/sim{tag}.err", "w"))
 
 
@@ -165,7 +166,8 @@ def main(d):
         [TURNCALD, "--config", f"{d}/turncald.toml", "--device", f"imu=mip:{d}/mip", "--socket",
          f"{d}/t.sock", "--state-dir", f"{d}/state"],
         stdout=open(f"{d}/daemon.log", "w"), stderr=subprocess.STDOUT)
-    sim = start_sim(d, f"{d}/poses.csv", "")
+    # The reply to the first save of the soft iron is lost on the line (mag13's write, step 3).
+    sim = start_sim(d, f"{d}/poses.csv", "", "--lose-reply", "0x3B:3")
     check(wait_for(f"{d}/t.sock", 30), "turncald's socket is up")
     check(wait_holding(d, ""), "the 20 poses were answered and the table holds at the last one")
     result = json.loads(run("result", "--socket", f"{d}/t.sock", "--json").stdout)
@@ -206,6 +208,10 @@ def main(d):
         check(r.returncode == 0 and reply.get("state") == "saved" and verification.get("pass"),
               f"{model} written and saved: exit {r.returncode}, state {reply.get('state')}, "
               f"{verification.get('summary')} {r.stderr.strip()}")
+    lost = [json.loads(x) for x in open(f"{d}/sim.out") if '"reply_lost"' in x]
+    check(len(lost) == 1 and lost[0]["command"] == "0x0C 0x3B function 3",
+          f"the reply to mag13's save of the soft iron was lost on the line: {lost}; the dialogue "
+          "sent it again, and the write ended saved and verified (above)")
     written, _ = stored(d)
     nvm = json.load(open(f"{d}/nvm/SIM0001.nvm.json")) if os.path.exists(
         f"{d}/nvm/SIM0001.nvm.json") else {}
