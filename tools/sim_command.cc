@@ -63,7 +63,7 @@ struct SimCommandArgs {
   double live_speed = 1.0;
   double hold_end_s = 0;
   std::vector<std::string> lose_replies;  // DESC:FUNCTION
-  std::string controller;  // turncald's socket: play the controller (sim/live.h)
+  std::string controller;                 // turncald's socket: play the controller (sim/live.h)
   double answer_timeout_s = 120;
   int retries = 2;
   double bit_error_rate = 0;
@@ -626,8 +626,7 @@ void AddSimCommand(CLI::App* app) {
       if (args->protocols.size() != 1 && args->protocols.size() != args->lives.size()) {
         throw CLI::ValidationError("sim", "give one --protocol, or one per --live");
       }
-    } else if (args->bit_error_rate > 0 || !args->unplugs.empty() ||
-               !args->lose_replies.empty()) {
+    } else if (args->bit_error_rate > 0 || !args->unplugs.empty() || !args->lose_replies.empty()) {
       throw CLI::ValidationError("sim",
                                  "--bit-error-rate, --unplug and --lose-reply need --controller");
     } else if (args->lives.size() > 1 || args->protocols.size() > 1) {
