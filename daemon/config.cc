@@ -223,6 +223,35 @@ bool ParseGate(const toml::table& t, const std::string& context, const std::stri
   return true;
 }
 
+// [registry]: the connection string is required (a registry without one is a typo), the rest
+// has defaults (daemon/registry_options.h).
+bool ParseRegistry(const toml::table& t, const std::string& source, RegistryOptions* out,
+                   std::string* error) {
+  if (!OnlyKeys(t, {"conninfo", "password_file", "station", "retry_max_s", "connect_timeout_s"},
+                "[registry]", source, error) ||
+      !GetString(t, "conninfo", &out->conninfo, source, error) ||
+      !GetString(t, "password_file", &out->password_file, source, error) ||
+      !GetString(t, "station", &out->station, source, error) ||
+      !GetNumber(t, "retry_max_s", &out->retry_max_s, source, error)) {
+    return false;
+  }
+  double timeout_s = out->connect_timeout_s;
+  if (!GetNumber(t, "connect_timeout_s", &timeout_s, source, error)) return false;
+  if (out->conninfo.empty()) {
+    *error = fmt::format(
+        "{}: [registry] needs conninfo, a libpq connection string (\"host=db dbname=turncal\")",
+        source);
+    return false;
+  }
+  if (!(out->retry_max_s >= 1) || !(timeout_s >= 1 && timeout_s <= 300)) {
+    *error = fmt::format(
+        "{}: [registry] retry_max_s must be >= 1, connect_timeout_s between 1 and 300", source);
+    return false;
+  }
+  out->connect_timeout_s = static_cast<int>(timeout_s);
+  return true;
+}
+
 }  // namespace
 
 bool ParseConfig(const std::string& text, const std::string& source, Config* out,
@@ -237,7 +266,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   Config c;
   if (!OnlyKeys(root,
                 {"socket", "socket_group", "control_users", "state_dir", "station", "sequencer",
-                 "table", "free", "gate", "reference", "device"},
+                 "table", "free", "gate", "reference", "device", "registry"},
                 "the file", source, error)) {
     return false;
   }
@@ -416,6 +445,9 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
       *error = fmt::format("{}: [reference]: {}", source, why);
       return false;
     }
+  }
+  if (const toml::table* t = root["registry"].as_table()) {
+    if (!ParseRegistry(*t, source, &c.registry, error)) return false;
   }
   if (const toml::node* n = root.get("device")) {
     const toml::array* a = n->as_array();

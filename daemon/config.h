@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "daemon/live_device.h"
+#include "daemon/registry_options.h"
 #include "daemon/station.h"
 #include "drivers/device_spec.h"
 
@@ -22,8 +23,9 @@ struct Config {
   std::vector<drivers::DeviceSpec> devices;
   std::map<std::string, DeviceSettings> device_settings;  // by device name: rate_hz, configure
   StationOptions station;
-  bool models_set = false;  // [station] models was given (else the pose source's default)
-  bool dwell_set = false;   // [sequencer] dwell_s was given
+  bool models_set = false;   // [station] models was given (else the pose source's default)
+  bool dwell_set = false;    // [sequencer] dwell_s was given
+  RegistryOptions registry;  // [registry] (daemon/registry_options.h); no conninfo: none
 };
 
 // Parses `text` (named `source` in messages). False with a message on any error.

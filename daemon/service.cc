@@ -153,6 +153,13 @@ bool Service::StartStation(std::string* error) {
   so.state_dir = options_.state_dir;
   if (!so.IsValid(error)) return false;
   DropStation(drop_reason_);  // closes the journal before a new station opens it
+  if (!StartRegistry(error)) return false;
+  if (registry_) {
+    so.on_calibration_saved = [registry = registry_](const nlohmann::json& calibration) {
+      std::string why;
+      if (!registry->AddCalibration(calibration, &why)) spdlog::error("{}", why);
+    };
+  }
   station_ = std::make_unique<Station>(names, so, [this](const nlohmann::json& e) { OnEvent(e); });
   if (!worker_) worker_ = std::make_unique<SolveWorker>(io_);
   station_->SetExecutor([this](std::function<void()> work, std::function<void()> done) {
@@ -167,6 +174,26 @@ bool Service::StartStation(std::string* error) {
     next_pose_index_ =
         std::max(next_pose_index_, station_->Status(static_cast<int>(i))["poses"].get<int>());
   }
+  return true;
+}
+
+bool Service::StartRegistry(std::string* error) {
+  const RegistryOptions& r = options_.registry;
+  if (registry_ && registry_options_ == std::make_tuple(r.conninfo, r.password_file, r.station)) {
+    return true;  // a reload that left [registry] as it was
+  }
+  registry_.reset();  // the old station, which held it too, is gone (DropStation)
+  if (!r.enabled()) return true;
+  if (options_.state_dir.empty()) {
+    *error = "[registry] needs a state directory: the outbox lives there (--state-dir)";
+    return false;
+  }
+  auto registry = std::make_shared<RegistryOutbox>(options_.state_dir, r);
+  if (!registry->Start(error)) return false;
+  registry_ = std::move(registry);
+  registry_options_ = std::make_tuple(r.conninfo, r.password_file, r.station);
+  spdlog::info("registry: station '{}', outbox in {}/outbox", StationName(r.station),
+               options_.state_dir);
   return true;
 }
 

@@ -14,11 +14,13 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "daemon/config.h"
 #include "daemon/device_write.h"
 #include "daemon/live_device.h"
+#include "daemon/registry_outbox.h"
 #include "daemon/socket_server.h"
 #include "daemon/solve_worker.h"
 #include "daemon/station.h"
@@ -32,7 +34,8 @@ struct ServiceOptions {
   StationOptions station;                                 // state_dir set by the service
   std::string state_dir;
   SocketOptions socket;
-  std::string record_path;  // --record: a capture of every device's bytes and the pose commands
+  RegistryOptions registry;  // [registry]: the outbox's connection (none: no registry)
+  std::string record_path;   // --record: a capture of every device's bytes and the pose commands
   // Re-reads the configuration on SIGHUP (nullptr: SIGHUP only logs). False with a message.
   std::function<bool(ServiceOptions*, std::string*)> reload;
 };
@@ -49,6 +52,8 @@ class Service {
 
  private:
   bool StartStation(std::string* error);
+  // The registry's outbox for options_.registry (kept across a reload that did not change it).
+  bool StartRegistry(std::string* error);
   void StartDevices();
   // Drains the solve worker, then destroys the station; clients still waiting for a pose get a
   // POSE_REJECTED saying `why` (nothing when empty).
@@ -88,6 +93,8 @@ class Service {
   void TickDeviceWrites(std::int64_t now_ns);
   // A write whose verification waits for the next captured pose (daemon/service_device_verify.cc).
   void VerifyWriteAtPose(const nlohmann::json& pose_captured);
+  // A device write's history entry (its "history" names the file) into the registry's outbox.
+  void QueueDeviceWrite(const std::string& device, const nlohmann::json& entry);
   struct DeviceWriteJob;
   // Per device name: the writes in effect, and a write under way.
   struct DeviceWrites {
@@ -118,6 +125,10 @@ class Service {
   std::string corrected_text_[4], raw_text_;                     // OnSample's line buffers
   std::unique_ptr<SocketServer> server_;
   std::unique_ptr<drivers::CaptureWriter> recorder_;
+  // The registry's outbox (daemon/registry_outbox.h); null without [registry]. Shared with the
+  // station's persistence, which adds to it from the solve worker.
+  std::shared_ptr<RegistryOutbox> registry_;
+  std::tuple<std::string, std::string, std::string> registry_options_;
   std::int64_t started_ns_ = 0;
   std::int64_t last_flush_ns_ = 0;
   std::int64_t ready_deadline_ns_ = 0;

@@ -35,6 +35,7 @@ void Service::FinishDeviceWrite(const std::string& name, nlohmann::json reply) {
     spdlog::error("{}: {}", name, error);
   } else {
     entry["history"] = path;
+    QueueDeviceWrite(name, entry);
   }
   if (writes.at_pose && writes.at_pose->history.empty()) {
     writes.at_pose->history = path;
@@ -133,6 +134,8 @@ void Service::VerifyWriteAtPose(const nlohmann::json& event) {
   if (!check.history.empty() &&
       !WriteFileAtomically(check.history, check.entry.dump(1) + "\n", &error)) {
     spdlog::error("{}: {}", device, error);
+  } else if (!check.history.empty()) {
+    QueueDeviceWrite(device, check.entry);  // the registry's row of this write, completed
   }
   spdlog::log(verification.value("pass", false) ? spdlog::level::info : spdlog::level::err,
               "{}: {} v{} written into the device: {}", device, check.model, check.version,
@@ -153,6 +156,20 @@ void Service::VerifyWriteAtPose(const nlohmann::json& event) {
            {"version", check.version},
            {"verification", verification},
            {"history", check.history}});
+}
+
+void Service::QueueDeviceWrite(const std::string& device, const nlohmann::json& entry) {
+  if (!registry_) return;
+  nlohmann::json identity = {{"serial", entry.value("serial", "")}};
+  for (const auto& d : devices_) {
+    if (d->spec().name != device) continue;
+    const nlohmann::json live = d->Status()["identity"];
+    if (live.is_object()) identity = live;
+  }
+  std::string error;
+  if (!registry_->AddDeviceWrite(entry, identity, entry.value("history", ""), &error)) {
+    spdlog::error("{}: {}", device, error);
+  }
 }
 
 void Service::OnDeviceIdentity(std::size_t index, const nlohmann::json& identity) {

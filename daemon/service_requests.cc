@@ -41,6 +41,8 @@ nlohmann::json Service::StatusJson() const {
            {{"last", worker_ ? worker_->last_ms() : 0.0},
             {"max", worker_ ? worker_->longest_ms() : 0.0},
             {"queued", worker_ ? worker_->queued() : 0}}},
+          // The registry's outbox: entries waiting, sent, the last error (null: no registry).
+          {"registry", registry_ ? registry_->Status() : nlohmann::json()},
           {"summary", status_line_},
           {"devices", devices}};
 }

@@ -560,9 +560,11 @@ void Station::PersistCalibration(DeviceState& d, const std::string& model,
   auto write_error = std::make_shared<std::string>();
   Defer(
       [dir = options_.state_dir, device = d.name, model, calibration = std::move(calibration),
-       write_error] {
-        if (!dir.empty())
-          WriteActiveCalibration(dir, device, model, calibration, write_error.get());
+       write_error, saved = options_.on_calibration_saved] {
+        if (dir.empty()) return;
+        if (WriteActiveCalibration(dir, device, model, calibration, write_error.get()) && saved) {
+          saved(calibration);
+        }
       },
       [this, &d, event = std::move(event), write_error, apply = std::move(apply)] {
         if (!options_.state_dir.empty()) NoteWrite(d.name, *write_error);

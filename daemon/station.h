@@ -108,6 +108,9 @@ struct StationOptions {
   // Where the pose journal and the active calibrations live (daemon/persistence.h); empty:
   // nothing is persisted. A journal found there is replayed first: the session resumes.
   std::string state_dir;
+  // Called with every activated calibration once its file in state_dir is durable, on the
+  // thread that wrote it (the solve worker): the registry's outbox (daemon/registry_outbox.h).
+  std::function<void(const nlohmann::json& calibration)> on_calibration_saved;
   bool IsValid(std::string* error) const;
 };
 

@@ -141,6 +141,7 @@ SEE ALSO
     out->socket.control_uids = {c.control_uids.begin(), c.control_uids.end()};
     out->device_settings = c.device_settings;
     out->record_path = flags.record_path;
+    out->registry = c.registry;
     out->devices = flags.devices;
     for (const auto& d : c.devices) {
       bool overridden = false;

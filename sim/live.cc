@@ -153,7 +153,8 @@ bool OpenDevice(Device* d, std::string* error) {
 
 // The device's dialogue state as at power-up: the i-th simulated device's identity.
 std::unique_ptr<DeviceEmulator> PowerUp(const Device& d, std::size_t i,
-                                        const std::string& state_dir) {
+                                        const LiveSimOptions& options) {
+  const std::string& state_dir = options.device_state_dir;
   EmulatedIdentity id;
   id.serial = fmt::format("SIM{:04}", i + 1);
   if (!state_dir.empty() && d.protocol == drivers::Protocol::kMip) {
@@ -161,6 +162,13 @@ std::unique_ptr<DeviceEmulator> PowerUp(const Device& d, std::size_t i,
         (std::filesystem::path(state_dir) / (id.serial + ".nvm.json")).string();
   }
   id.xbus_device_id = 0x03700001u + static_cast<std::uint32_t>(i);
+  if (i < options.serials.size()) {
+    id.serial = options.serials[i];
+    // Checked by `turncal sim` (8 hex digits for an Xbus device).
+    if (d.protocol == drivers::Protocol::kXbus) {
+      id.xbus_device_id = static_cast<std::uint32_t>(std::stoul(id.serial, nullptr, 16));
+    }
+  }
   return DeviceEmulator::Make(d.protocol, id, d.capture->session_options.rate_hz);
 }
 
@@ -306,7 +314,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     d.protocol = d.capture->header.devices.at(0).protocol;
     d.period_s = 1.0 / d.capture->session_options.rate_hz;
     d.speed = options.speed;
-    d.emulator = PowerUp(d, i, options.device_state_dir);
+    d.emulator = PowerUp(d, i, options);
     if (!d.emulator->storage_error().empty()) {
       Say({{"event", "device_storage"},
            {"device", d.path},
@@ -557,7 +565,7 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
       Device& d = devices[i];
       if (!d.unplugged || vt < d.replug_vt) continue;
       if (!OpenDevice(&d, error)) return false;
-      d.emulator = PowerUp(d, i, options.device_state_dir);
+      d.emulator = PowerUp(d, i, options);
       d.unplugged = false;
       Say({{"event", "replugged"}, {"device", d.path}});
     }

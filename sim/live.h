@@ -69,6 +69,9 @@ struct LiveSimOptions {
     std::uint8_t function = 0;
   };
   std::vector<LoseReply> lose_replies;
+  // The devices' serial numbers, one per --live device in order (MIP: the device info's serial;
+  // Xbus: the device id, 8 hex digits). Missing: SIM0001, SIM0002, ... and 037000NN.
+  std::vector<std::string> serials;
 };
 
 struct LiveSimReport {

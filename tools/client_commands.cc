@@ -70,6 +70,21 @@ int Simple(const std::string& command, const Common& c, const nlohmann::json& re
 void PrintStatus(const nlohmann::json& s) {
   fmt::print("turncald {}  up {:.0f} s  {} client(s)  {}\n", s.value("release", "?"),
              s.value("uptime_s", 0.0), s.value("clients", 0), s.value("summary", ""));
+  if (const nlohmann::json& r = s.value("registry", nlohmann::json()); r.is_object()) {
+    // The registry's outbox (daemon/registry_outbox.h): what waits, and why.
+    auto text = [&r](const char* key) {
+      return r[key].is_string() ? r[key].get<std::string>() : std::string("-");
+    };
+    fmt::print(
+        "registry (station {}): {}  outbox {} waiting  sent {}  already there {}  "
+        "rejected {}  last sent {}\n",
+        text("station"), r.value("connected", false) ? "connected" : "not connected",
+        r.value("depth", 0), r.value("sent", 0), r.value("already_there", 0),
+        r.value("rejected", 0), text("last_sent_time"));
+    if (r["last_error"].is_string()) {
+      fmt::print("  last error ({}): {}\n", text("last_error_time"), text("last_error"));
+    }
+  }
   for (const auto& [name, d] : s["devices"].items()) {
     const auto& k = d["counters"];
     fmt::print("\n{} ({} on {}): {}  {:.1f} Hz\n", name, d.value("protocol", "?"),

@@ -133,6 +133,45 @@ const std::map<std::string, Manual>& Manuals() {
         "as it was, or the reply says its state), the daemon cannot be reached, or a "
         "command-line mistake",
         "docs/protocol.md (Writing a calibration into the device)"}},
+      {"registry",
+       {"The calibration registry that every station's outbox fills (PostgreSQL; [registry] in "
+        "turncald.toml). history SERIAL lists every calibration of a device at every station "
+        "(a device that moved between stations shows both); latest SERIAL shows its latest "
+        "passing calibration of each model with the parameters and their sigma; export writes "
+        "CSV (one row per calibration and parameter) or JSON (whole documents with the writes "
+        "into the device); stations shows each station's last contact; certificate SERIAL "
+        "--model M writes the calibration certificate of its latest passing (or --version N) "
+        "calibration (docs/CERTIFICATES.md); migrate brings the schema to this turncal's "
+        "version. The connection: --db, else TURNCAL_REGISTRY, else "
+        "--config's [registry] (the password from its password_file).",
+        "turncal registry history 6251.12345 --db 'host=db.lab dbname=turncal'\n"
+        "turncal registry latest 6251.12345 --model accel13 --json\n"
+        "turncal registry export --format csv --passing -o calibrations.csv\n"
+        "turncal registry stations --config /etc/turncal/turncald.toml\n"
+        "turncal registry certificate 6251.12345 --model mag13 -o cert.html --pdf cert.pdf",
+        "0 done; 1 nothing found (history, latest); 2 the registry cannot be reached, refused "
+        "the query, or a command-line mistake",
+        "docs/REGISTRY.md, README (A registry for several stations)"}},
+      {"certificate",
+       {"The calibration certificate of a device's calibration, one printable HTML file per "
+        "model (and with --pdf a PDF printed by headless Chromium): identity (serial, model, "
+        "firmware), station, date, environment (reference gravity and field), procedure (poses, "
+        "dwell, rates, noise model), every parameter with its standard uncertainty u = 1 sigma, "
+        "its expanded uncertainty U = 2u (k = 2, about 95 %, GUM) and the gate's tolerance on u, "
+        "the verdict, the software and a SHA-256 content hash. It reads the active calibration "
+        "(STATE_DIR/calibrations/DEVICE.MODEL.json) or, with --version, an earlier one "
+        "(history/). --verify recomputes the hash: any edit of the file fails. The same "
+        "calibration gives the same file (no date is added unless --issued).",
+        "turncal certificate --state-dir /var/lib/turncal --device imu1 --station lab-2 -o "
+        "cert.html   # cert.accel13.html, cert.mag13.html, ...\n"
+        "turncal certificate --state-dir /var/lib/turncal --device imu1 --model accel13 "
+        "--version 4 -o imu1-v4.html --pdf imu1-v4.pdf\n"
+        "turncal certificate --verify cert.accel13.html",
+        "0 written (or --verify: the hash matches); 1 --verify: the file was changed after "
+        "turncal wrote it; 2 no such calibration, a malformed calibration, a file that cannot "
+        "be written, Chromium missing or failing (--pdf), an unreadable file or not a "
+        "certificate (--verify), or a command-line mistake",
+        "docs/CERTIFICATES.md, docs/models.md (the parameters)"}},
       {"capture",
        {"Records a live port into a .tcap capture (bytes with their host times) until Ctrl-C or "
         "SIGTERM. A capture replays through the whole pipeline: turncald --replay FILE --once.",

@@ -63,6 +63,7 @@ struct SimCommandArgs {
   double live_speed = 1.0;
   double hold_end_s = 0;
   std::vector<std::string> lose_replies;  // DESC:FUNCTION
+  std::vector<std::string> serials;       // --serial, one per --live device
   std::string controller;                 // turncald's socket: play the controller (sim/live.h)
   double answer_timeout_s = 120;
   int retries = 2;
@@ -282,6 +283,7 @@ int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
   live.unplug_s = args.unplug_s;
   live.device_state_dir = args.device_state;
   live.hold_end_s = args.hold_end_s;
+  live.serials = args.serials;
   if (!live.device_state_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(live.device_state_dir, ec);
@@ -605,6 +607,10 @@ void AddSimCommand(CLI::App* app) {
                   "with --controller: DESC:FUNCTION -- the first 3DM command (set 0x0C) with this "
                   "descriptor and function (1 write, 2 read, 3 save) is carried out but its reply "
                   "is lost, e.g. 0x3B:3 (repeatable)");
+  cmd->add_option("--serial", args->serials,
+                  "with --live: the devices' serial numbers, one per --live in order (an Xbus "
+                  "device's is its device id, 8 hex digits); default SIM0001, ... and 03700001, "
+                  "...");
   cmd->add_option("--hold-end", args->hold_end_s,
                   "with --controller: after the last pose the table stays there this many session "
                   "seconds, the devices streaming (time to write a calibration into a device)")
@@ -618,6 +624,20 @@ void AddSimCommand(CLI::App* app) {
     }
     args->protocol = args->protocols.front();
     args->live = args->lives.empty() ? std::string() : args->lives.front();
+    if (args->serials.size() > args->lives.size()) {
+      throw CLI::ValidationError("sim", "--serial: at most one per --live device");
+    }
+    for (std::size_t i = 0; i < args->serials.size(); ++i) {
+      const auto& p = args->protocols.size() == 1 ? args->protocols.front() : args->protocols[i];
+      const std::string& serial = args->serials[i];
+      const bool hex8 = serial.size() == 8 &&
+                        serial.find_first_not_of("0123456789abcdefABCDEF") == std::string::npos;
+      if (serial.empty() || serial.size() > 16 || (p == "xbus" && !hex8)) {
+        throw CLI::ValidationError(
+            "sim", "--serial '" + serial +
+                       "': 1 to 16 characters (an Xbus device's: its device id, 8 hex digits)");
+      }
+    }
     if (!args->controller.empty()) {
       if (args->lives.empty()) throw CLI::ValidationError("sim", "--controller needs --live PTY");
       if (!args->output.empty() || args->faults) {

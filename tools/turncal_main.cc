@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include "tools/capture_command.h"
+#include "tools/certificate_command.h"
 #include "tools/client_commands.h"
 #include "tools/decode_command.h"
 #include "tools/device_write_command.h"
@@ -13,6 +14,7 @@
 #include "tools/noise_command.h"
 #include "tools/observability_command.h"
 #include "tools/plan_compare_command.h"
+#include "tools/registry_command.h"
 #include "tools/sequence_command.h"
 #include "tools/sim_command.h"
 #include "tools/sim_fit_command.h"
@@ -36,6 +38,8 @@ int main(int argc, char** argv) {
   turncal::tools::AddSequenceCommand(&app);
   turncal::tools::AddClientCommands(&app);
   turncal::tools::AddDeviceWriteCommand(&app);
+  turncal::tools::AddCertificateCommand(&app);
+  turncal::tools::AddRegistryCommand(&app);
   // Description, examples, exit status and where to read more under every command's --help
   // (tests/tools/help_test.sh checks that no command lacks them).
   turncal::tools::AddManualFooters(&app);

@@ -20,6 +20,7 @@
 #      seconds, machine load. Last line of output: {"class":"LOAD_RESULT",...}.
 #
 # Environment (defaults): DEVICES=8 RATE=1000 CLIENTS=4 PROTOCOL=mip BAUD=921600 INTERVAL=10
+#   REGISTRY=CONNINFO adds [registry] (the outbox sends every activated calibration there);
 #   SEED=1 SETTLE=5 (seconds between the first corrected sample of every device and the window:
 #   the daemon first drains what the ptys buffered while it started); KEEP=1 keeps the work directory (logs, result.json); WORK=DIR uses DIR (created);
 #   NICE=N runs simulator, turncald and subscribers under `nice -n N` (e.g. -10 as root: on a
@@ -96,6 +97,11 @@ fi
     printf '[[device]]\nname = "imu%d"\nprotocol = "%s"\nport = "%s/imu%d"\nbaud = %d\nrate_hz = %s\n\n' \
       "$i" "$PROTOCOL" "$WORK" "$i" "$BAUD" "$RATE"
   done
+  # REGISTRY=CONNINFO: the station also sends every activated calibration to that registry
+  # (docs/REGISTRY.md), to measure the sample path with and without it.
+  if [[ -n ${REGISTRY:-} ]]; then
+    printf '[registry]\nconninfo = "%s"\nstation = "daemon-load"\n' "$REGISTRY"
+  fi
 } > "$WORK/turncald.toml"
 
 LIVES=()
@@ -150,6 +156,10 @@ set +e
 STATUS=${PIPESTATUS[0]}
 set -e
 
+if [[ -n ${REGISTRY:-} ]]; then
+  echo "daemon_load.sh: registry: $("$TURNCAL" status --socket "$WORK/t.sock" --json |
+    python3 -c 'import json, sys; print(json.load(sys.stdin)["registry"])')"
+fi
 echo "daemon_load.sh: after: $(uptime)"
 echo "daemon_load.sh: top processes at the end:"
 top -b -n 1 -w 160 | sed -n '7,14p'

@@ -35,6 +35,10 @@ stage() {
     mkdir -p "$1/turncald.service.d"
     cp "$units/tcp-serial.conf" "$1/turncald.service.d/"
   fi
+  if [[ ${2:-} == registry ]]; then
+    mkdir -p "$1/turncald.service.d"
+    cp "$units/registry.conf" "$1/turncald.service.d/"
+  fi
 }
 
 verify() {  # DIR LABEL
@@ -42,7 +46,7 @@ verify() {  # DIR LABEL
   out=$(cd "$1" && systemd-analyze verify --man=no ./turncald.socket ./turncald.service 2>&1) \
     || rc=$?
   # Lines about other units (the system's own) are not ours to fix.
-  out=$(grep -E "turncald|turncal\.|tcp-serial|$1" <<< "$out" || true)
+  out=$(grep -E "turncald|turncal\.|tcp-serial|registry\.conf|$1" <<< "$out" || true)
   if [[ $rc != 0 || -n $out ]]; then
     echo "FAIL: systemd-analyze verify ($2), exit $rc:"
     echo "$out"
@@ -74,6 +78,8 @@ stage "$dir/plain"
 stage "$dir/tcp" tcp
 verify "$dir/plain" "units"
 verify "$dir/tcp" "units + tcp-serial.conf"
+stage "$dir/registry" registry
+verify "$dir/registry" "units + registry.conf"
 
 if command -v systemd-sysusers > /dev/null; then
   mkdir -p "$dir/root/etc"
@@ -91,6 +97,7 @@ limit=$(awk -v m="$measured" 'BEGIN { print m + 0.5 }')
 limit_tcp=$(awk -v m="$measured_tcp" 'BEGIN { print m + 0.5 }')
 exposure "$dir/plain" "turncald.service" "$limit"
 exposure "$dir/tcp" "turncald.service + tcp-serial.conf" "$limit_tcp"
+exposure "$dir/registry" "turncald.service + registry.conf" "$limit_tcp"
 
 [[ $failed == 0 ]] && echo "systemd units: verified"
 exit $failed

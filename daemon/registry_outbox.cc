@@ -1,0 +1,391 @@
+#include "daemon/registry_outbox.h"
+
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "daemon/atomic_file.h"
+#include "daemon/registry_db.h"
+#include "drivers/transport/transport.h"
+#include "turncal/version.h"
+
+namespace turncal::daemon {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Between two heartbeats (the station's last contact) while nothing waits.
+constexpr auto kHeartbeat = std::chrono::seconds(60);
+constexpr double kFirstRetryS = 0.5;
+
+std::string HostName() {
+  char name[256] = {};
+  if (::gethostname(name, sizeof(name) - 1) != 0) return "";
+  return name;
+}
+
+std::string SerialOrName(const nlohmann::json& identity, const std::string& device) {
+  for (const char* key : {"serial", "device_id"}) {
+    if (identity.is_object() && identity.contains(key) && identity[key].is_string() &&
+        !identity[key].get<std::string>().empty()) {
+      return identity[key].get<std::string>();
+    }
+  }
+  return device;
+}
+
+nlohmann::json IdentityOf(const nlohmann::json& calibration) {
+  const nlohmann::json provenance = calibration.value("provenance", nlohmann::json::object());
+  return provenance.is_object() ? provenance.value("device_identity", nlohmann::json())
+                                : nlohmann::json();
+}
+
+// A calibration's id in this state directory (sent.log): device, model, version and time.
+std::string CalibrationLocalId(const nlohmann::json& calibration) {
+  return fmt::format("{}.{}.v{}@{}", calibration.value("device", ""),
+                     calibration.value("model", ""), calibration.value("version", 0),
+                     calibration.value("time", ""));
+}
+
+// Letters, digits and -._ only: a file name from a device or model name.
+std::string Sanitized(const std::string& text) {
+  std::string s = text;
+  for (char& c : s) {
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '.' && c != '_') c = '_';
+  }
+  return s.substr(0, 120);
+}
+
+bool ReadJsonFile(const fs::path& path, nlohmann::json* out, std::string* error) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    *error = fmt::format("cannot read '{}'", path.string());
+    return false;
+  }
+  std::stringstream text;
+  text << in.rdbuf();
+  *out = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
+  if (out->is_discarded()) {
+    *error = fmt::format("'{}' is not JSON", path.string());
+    return false;
+  }
+  return true;
+}
+
+// The entries waiting, oldest first.
+std::vector<fs::path> WaitingEntries(const std::string& dir) {
+  std::vector<fs::path> entries;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    if (e.is_regular_file(ec) && name.size() > 5 && name.ends_with(".json")) {
+      entries.push_back(e.path());
+    }
+  }
+  std::sort(entries.begin(), entries.end());
+  return entries;
+}
+
+// Test hook (tests/daemon/e2e_registry_test.py): hold after the first commit, before the entry
+// leaves the outbox, so that a kill -9 lands exactly there.
+bool HoldAfterCommit() {
+  const char* v = std::getenv("TURNCAL_TEST_REGISTRY_HOLD_AFTER_COMMIT");
+  return v && *v && std::string(v) != "0";
+}
+
+}  // namespace
+
+RegistryOutbox::RegistryOutbox(std::string state_dir, RegistryOptions options)
+    : state_dir_(std::move(state_dir)),
+      options_(std::move(options)),
+      station_(StationName(options_.station)),
+      host_(HostName()) {}
+
+RegistryOutbox::~RegistryOutbox() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+std::string RegistryOutbox::Dir() const { return (fs::path(state_dir_) / "outbox").string(); }
+
+std::string RegistryOutbox::CalibrationKey(const std::string& station,
+                                           const nlohmann::json& calibration) {
+  return fmt::format("{}/{}/{}/v{}/{}", station,
+                     SerialOrName(IdentityOf(calibration), calibration.value("device", "")),
+                     calibration.value("model", ""), calibration.value("version", 0),
+                     calibration.value("time", ""));
+}
+
+bool RegistryOutbox::Start(std::string* error) {
+  std::error_code ec;
+  fs::create_directories(fs::path(Dir()) / "rejected", ec);
+  if (ec) {
+    *error = fmt::format("registry: cannot create '{}': {}", Dir(), ec.message());
+    return false;
+  }
+  // The entries an earlier run left: counted now, sent by the thread.
+  for (const auto& path : WaitingEntries(Dir())) {
+    nlohmann::json entry;
+    std::string why;
+    if (ReadJsonFile(path, &entry, &why)) queued_ids_.insert(entry.value("local_id", ""));
+    ++depth_;
+  }
+  thread_ = std::thread([this] { Run(); });
+  return true;
+}
+
+bool RegistryOutbox::WriteEntry(const std::string& kind, const std::string& local_id,
+                                nlohmann::json entry, std::string* error) {
+  std::uint64_t sequence = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    sequence = ++sequence_;
+  }
+  const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count();
+  const std::string name =
+      fmt::format("{:020}{:06}-{}-{}.json", now_ns, sequence % 1000000, kind, Sanitized(local_id));
+  entry["schema"] = 1;
+  entry["kind"] = kind;
+  entry["local_id"] = local_id;
+  entry["station"] = station_;
+  entry["host"] = host_;
+  entry["software"] = kVersion;
+  entry["queued"] = drivers::UtcNowIso8601();
+  if (!WriteFileAtomically((fs::path(Dir()) / name).string(), entry.dump() + "\n", error)) {
+    *error = "registry outbox: " + *error;
+    return false;
+  }
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    queued_ids_.insert(local_id);
+    ++depth_;
+    added_ = true;
+  }
+  wake_.notify_all();
+  return true;
+}
+
+bool RegistryOutbox::AddCalibration(const nlohmann::json& calibration, std::string* error) {
+  nlohmann::json entry = {{"key", CalibrationKey(station_, calibration)},
+                          {"device", calibration.value("device", "")},
+                          {"identity", IdentityOf(calibration)},
+                          {"document", calibration}};
+  return WriteEntry("calibration", CalibrationLocalId(calibration), std::move(entry), error);
+}
+
+bool RegistryOutbox::AddDeviceWrite(const nlohmann::json& write_entry,
+                                    const nlohmann::json& identity, const std::string& history_path,
+                                    std::string* error) {
+  const std::string device = write_entry.value("device", "");
+  const std::string file = fs::path(history_path).filename().string();
+  nlohmann::json entry = {
+      {"key", fmt::format("{}/{}/write/{}", station_, SerialOrName(identity, device), file)},
+      {"device", device},
+      {"identity", identity},
+      {"document", write_entry}};
+  return WriteEntry("device_write", "write:" + file, std::move(entry), error);
+}
+
+nlohmann::json RegistryOutbox::Status() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto or_null = [](const std::string& s) {
+    return s.empty() ? nlohmann::json() : nlohmann::json(s);
+  };
+  return {{"station", station_},
+          {"connected", connected_},
+          {"schema", schema_},
+          {"depth", depth_},
+          {"sent", sent_},
+          {"already_there", already_there_},
+          {"rejected", rejected_},
+          {"last_error", or_null(last_error_)},
+          {"last_error_time", or_null(last_error_time_)},
+          {"last_sent_time", or_null(last_sent_time_)}};
+}
+
+void RegistryOutbox::NoteError(const std::string& error) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (error != last_error_) spdlog::warn("registry: {}", error);
+  last_error_ = error;
+  last_error_time_ = drivers::UtcNowIso8601();
+  connected_ = false;
+}
+
+void RegistryOutbox::Reconcile() {
+  std::set<std::string> sent;
+  {
+    std::ifstream log(fs::path(Dir()) / "sent.log");
+    for (std::string line; std::getline(log, line);) sent.insert(line);
+  }
+  int added = 0;
+  for (const char* folder : {"history", "calibrations"}) {
+    std::vector<fs::path> files;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(fs::path(state_dir_) / folder, ec)) {
+      if (e.path().extension() == ".json") files.push_back(e.path());
+    }
+    std::sort(files.begin(), files.end());
+    for (const auto& path : files) {
+      nlohmann::json calibration;
+      std::string why;
+      if (!ReadJsonFile(path, &calibration, &why) || !calibration.is_object() ||
+          calibration.value("class", "") != "CALIBRATION") {
+        continue;
+      }
+      const std::string id = CalibrationLocalId(calibration);
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (sent.count(id) || queued_ids_.count(id) || stop_) continue;
+      }
+      if (AddCalibration(calibration, &why)) {
+        ++added;
+      } else {
+        NoteError(why);
+      }
+    }
+  }
+  if (added > 0) {
+    spdlog::info("registry: {} calibration(s) of this state directory were not yet sent; queued",
+                 added);
+  }
+}
+
+void RegistryOutbox::Run() {
+  RegistryDb db;
+  Reconcile();
+  double retry_s = kFirstRetryS;
+  auto last_contact = std::chrono::steady_clock::now() - kHeartbeat;
+  const bool hold_after_commit = HoldAfterCommit();
+  while (true) {
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      if (stop_) return;
+      added_ = false;
+    }
+    const std::vector<fs::path> waiting = WaitingEntries(Dir());
+    const bool heartbeat_due = std::chrono::steady_clock::now() - last_contact >= kHeartbeat;
+    bool failed = false;
+    if ((!waiting.empty() || heartbeat_due) && !db.connected()) {
+      std::string error;
+      if (db.Connect(options_, &error)) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        connected_ = true;
+        schema_ = db.schema_version();
+        spdlog::info("registry: connected (schema {}), {} entr{} waiting", schema_, waiting.size(),
+                     waiting.size() == 1 ? "y" : "ies");
+      } else {
+        NoteError(error);
+        failed = true;
+      }
+    }
+    for (const auto& path : failed ? std::vector<fs::path>{} : waiting) {
+      nlohmann::json entry;
+      std::string error;
+      if (!ReadJsonFile(path, &entry, &error) || !entry.is_object() ||
+          !entry.contains("document")) {
+        // Not an entry (edited by hand, a disk fault): kept aside and counted, never retried.
+        std::error_code ec;
+        fs::rename(path, fs::path(Dir()) / "rejected" / path.filename(), ec);
+        spdlog::error("registry: {} is not an outbox entry; moved to outbox/rejected/",
+                      path.string());
+        std::lock_guard<std::mutex> lock(mutex_);
+        ++rejected_;
+        --depth_;
+        continue;
+      }
+      bool inserted = false;
+      if (!db.Put(entry, &inserted, &error)) {
+        if (db.connected()) {
+          // The server refused this entry itself (a constraint, bad data): kept aside so that
+          // the others still go; the station's own files keep it.
+          std::error_code ec;
+          fs::rename(path, fs::path(Dir()) / "rejected" / path.filename(), ec);
+          NoteError(fmt::format("{} refused: {}", path.filename().string(), error));
+          std::lock_guard<std::mutex> lock(mutex_);
+          connected_ = true;
+          ++rejected_;
+          --depth_;
+          continue;
+        }
+        db.Close();
+        NoteError(error);
+        failed = true;
+        break;
+      }
+      if (hold_after_commit) {
+        spdlog::warn("registry: {} committed; holding before it leaves the outbox (test hook)",
+                     entry.value("key", ""));
+        std::unique_lock<std::mutex> lock(mutex_);
+        wake_.wait(lock, [this] { return stop_; });
+        return;
+      }
+      const std::string local_id = entry.value("local_id", "");
+      {
+        std::ofstream log(fs::path(Dir()) / "sent.log", std::ios::app);
+        log << local_id << "\n";
+      }
+      std::error_code ec;
+      fs::remove(path, ec);
+      last_contact = std::chrono::steady_clock::now();
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!last_error_.empty()) {
+        spdlog::info("registry: sending again (the last error, {}: {})", last_error_time_,
+                     last_error_);
+        last_error_.clear();
+        last_error_time_.clear();
+      }
+      ++(inserted ? sent_ : already_there_);
+      --depth_;
+      queued_ids_.erase(local_id);
+      last_sent_time_ = drivers::UtcNowIso8601();
+      if (!inserted) {
+        spdlog::info("registry: {} was there already (sent again after a crash)",
+                     entry.value("key", ""));
+      }
+    }
+    if (!failed && waiting.empty() && heartbeat_due && db.connected()) {
+      std::string error;
+      if (db.TouchStation(station_, host_, &error)) {
+        last_contact = std::chrono::steady_clock::now();
+        std::lock_guard<std::mutex> lock(mutex_);
+        last_error_.clear();
+        last_error_time_.clear();
+      } else {
+        db.Close();
+        NoteError(error);
+        failed = true;
+      }
+    }
+    if (!failed) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      retry_s = kFirstRetryS;
+      connected_ = db.connected();
+    }
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (failed) {
+      // Backing off; a new entry does not shorten the wait (the database is away).
+      wake_.wait_for(lock, std::chrono::duration<double>(retry_s), [this] { return stop_; });
+      retry_s = std::min(retry_s * 2.0, options_.retry_max_s);
+    } else {
+      wake_.wait_for(lock, kHeartbeat, [this] { return stop_ || added_; });
+    }
+  }
+}
+
+}  // namespace turncal::daemon

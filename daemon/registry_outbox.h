@@ -1,0 +1,84 @@
+#pragma once
+// The registry's outbox (issue 24, docs/REGISTRY.md): every activated calibration, and every
+// write into a device, goes to the registry through files in the state directory, so the
+// station keeps working while the database is down and loses nothing:
+//
+//   outbox/NNNN-KIND-DEVICE.MODEL.vN.json   an entry waiting (written atomically and fsynced
+//                                           after the calibration's own file)
+//   outbox/sent.log                         the entries the registry has committed, one local id
+//                                           a line (appended after the commit)
+//   outbox/rejected/                        entries the registry refused as malformed (counted;
+//                                           never retried, never deleted)
+//
+// Its own thread sends the entries oldest first, each in one transaction keyed by an
+// idempotency key (station, device serial, model, version and the calibration's time): a crash
+// between the commit and the entry's removal sends it again, and the registry keeps one row. At
+// its start it also sends the active and earlier calibrations (calibrations/, history/) that
+// sent.log does not list: a crash between the calibration's file and its outbox entry, or a
+// registry configured after the station had calibrated, loses nothing either. The event loop
+// only writes files and reads counters; the database is never waited for on it.
+
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+#include <thread>
+
+#include "daemon/registry_options.h"
+
+namespace turncal::daemon {
+
+class RegistryOutbox {
+ public:
+  RegistryOutbox(std::string state_dir, RegistryOptions options);
+  ~RegistryOutbox();  // stops the thread (an attempt under way ends first: connect_timeout)
+  RegistryOutbox(const RegistryOutbox&) = delete;
+  RegistryOutbox& operator=(const RegistryOutbox&) = delete;
+
+  // Creates outbox/ and starts the thread. False with a message (the directory cannot be made).
+  bool Start(std::string* error);
+
+  // An activated calibration (its document as calibrations/DEVICE.MODEL.json holds it; the
+  // device's identity is its provenance's). Any thread. False with a message when the entry
+  // cannot be written (then the start's reconciliation sends it).
+  bool AddCalibration(const nlohmann::json& calibration, std::string* error);
+  // A write into a device (daemon/device_write.h's history entry; `history_path` names it: a
+  // later verification at a pose updates the same registry row). Any thread.
+  bool AddDeviceWrite(const nlohmann::json& entry, const nlohmann::json& identity,
+                      const std::string& history_path, std::string* error);
+
+  // For `status`: station, connected, schema, depth (entries waiting), sent, already_there
+  // (resends the registry held already), rejected, last_error and its time, last_sent time.
+  nlohmann::json Status() const;
+
+  // The idempotency key of a calibration document at `station`.
+  static std::string CalibrationKey(const std::string& station, const nlohmann::json& calibration);
+
+ private:
+  void Run();
+  bool WriteEntry(const std::string& kind, const std::string& local_id, nlohmann::json entry,
+                  std::string* error);
+  void Reconcile();
+  void NoteError(const std::string& error);
+  std::string Dir() const;
+
+  const std::string state_dir_;
+  const RegistryOptions options_;
+  const std::string station_, host_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  bool stop_ = false;
+  bool added_ = false;                // an entry was added since the thread last looked
+  std::uint64_t sequence_ = 0;        // orders the entries written in one nanosecond
+  std::set<std::string> queued_ids_;  // local ids with an entry in outbox/
+  std::int64_t depth_ = 0, sent_ = 0, already_there_ = 0, rejected_ = 0;
+  bool connected_ = false;
+  int schema_ = 0;
+  std::string last_error_, last_error_time_, last_sent_time_;
+  std::thread thread_;
+};
+
+}  // namespace turncal::daemon

@@ -1,0 +1,251 @@
+// The calibration certificate (report/certificate.h) on a calibration the station wrote for a
+// simulated session (tests/report/certificate_accel13.json: `turncal sim --protocol mip --seed 4`
+// replayed by `turncald --replay --once --state-dir`, its records and covariance rounded to six
+// digits to keep the file small): the hash verifies and any edit fails it, the rendering is
+// deterministic, U is 2 sigma, the gate's check is u <= tolerance, and a parameter without a
+// sigma says "not determined".
+
+#include "report/certificate.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <regex>
+#include <sstream>
+
+namespace turncal::report {
+namespace {
+
+nlohmann::json Fixture() {
+  std::ifstream in(std::string(TURNCAL_SOURCE_DIR) + "/tests/report/certificate_accel13.json");
+  std::stringstream text;
+  text << in.rdbuf();
+  return nlohmann::json::parse(text.str());
+}
+
+std::string Render(const CertificateSource& source, std::string* hash = nullptr) {
+  std::string html, h, error;
+  EXPECT_TRUE(RenderCertificateHtml(source, &html, &h, &error)) << error;
+  if (hash) *hash = h;
+  return html;
+}
+
+CertificateSource Source() {
+  CertificateSource s;
+  s.calibration = Fixture();
+  s.station = "lab-2";
+  s.source = "state directory /var/lib/turncal";
+  return s;
+}
+
+// The embedded data block.
+nlohmann::json DataBlock(const std::string& html) {
+  const std::string open = "<script type=\"application/json\" id=\"turncal-certificate-data\">";
+  const std::size_t from = html.find(open);
+  const std::size_t to = html.find("</script>", from);
+  EXPECT_NE(from, std::string::npos);
+  return nlohmann::json::parse(html.substr(from + open.size(), to - from - open.size()));
+}
+
+const nlohmann::json& Parameter(const nlohmann::json& data, const std::string& name) {
+  for (const auto& p : data["parameters"]) {
+    if (p["name"] == name) return p;
+  }
+  ADD_FAILURE() << "no parameter " << name;
+  return data;
+}
+
+// The <tr id="param-NAME"> row of the parameter table.
+std::string Row(const std::string& html, const std::string& name) {
+  const std::size_t from = html.find("<tr id=\"param-" + name + "\"");
+  EXPECT_NE(from, std::string::npos) << name;
+  return html.substr(from, html.find("</tr>", from) - from);
+}
+
+TEST(Certificate, HashVerifiesAndIsShownInTheMetaAndTheFooter) {
+  std::string hash;
+  const std::string html = Render(Source(), &hash);
+  const CertificateCheck check = VerifyCertificateHtml(html);
+  EXPECT_TRUE(check.ok) << check.reason;
+  EXPECT_EQ(check.hash_claimed, hash);
+  EXPECT_EQ(check.hash_computed, hash);
+  EXPECT_NE(html.find("<meta name=\"turncal-certificate-sha256\" content=\"" + hash + "\">"),
+            std::string::npos);
+  EXPECT_NE(html.find("Content hash (SHA-256): <span class=\"hash\" id=\"content-hash\">" + hash),
+            std::string::npos);
+  EXPECT_NE(html.find("<h1>Calibration certificate</h1>"), std::string::npos);
+  EXPECT_NE(html.find("lab-2-imu-accel13-v3"), std::string::npos);
+  // Nothing fetched, nothing run: no external resource and no script but the data block.
+  EXPECT_EQ(html.find("http"), std::string::npos);
+  EXPECT_EQ(html.find("<script>"), std::string::npos);
+  EXPECT_FALSE(std::regex_search(html, std::regex("\\b(nan|inf)\\b", std::regex::icase)));
+}
+
+TEST(Certificate, TheSameCalibrationGivesTheSameBytes) {
+  std::string a_hash, b_hash;
+  const std::string a = Render(Source(), &a_hash);
+  const std::string b = Render(Source(), &b_hash);
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(a_hash, b_hash);
+  CertificateSource other = Source();
+  other.station = "lab-3";
+  EXPECT_NE(Render(other), a);
+}
+
+TEST(Certificate, FlippingOneDigitOfAParameterValueFailsVerification) {
+  std::string html = Render(Source());
+  const std::string row = Row(html, "bx");
+  // The value cell is the third <td>: change its first digit.
+  std::size_t at = html.find(row);
+  for (int cells = 0; cells < 3; ++cells) at = html.find("<td", at + 1);
+  at = html.find_first_of("0123456789", at + 4);
+  html[at] = html[at] == '9' ? '8' : static_cast<char>(html[at] + 1);
+  const CertificateCheck check = VerifyCertificateHtml(html);
+  EXPECT_FALSE(check.ok);
+  EXPECT_FALSE(check.not_a_certificate);
+  EXPECT_NE(check.hash_claimed, check.hash_computed);
+  EXPECT_NE(check.reason.find("changed"), std::string::npos) << check.reason;
+}
+
+TEST(Certificate, AnyByteChangedFailsWhitespaceToo) {
+  const std::string html = Render(Source());
+  EXPECT_FALSE(VerifyCertificateHtml(html + "\n").ok);
+  std::string crlf;
+  for (char ch : html) crlf += ch == '\n' ? std::string("\r\n") : std::string(1, ch);
+  EXPECT_FALSE(VerifyCertificateHtml(crlf).ok);
+  std::string data = html;
+  const std::size_t at = data.find("\"station\": \"lab-2\"");
+  ASSERT_NE(at, std::string::npos);
+  data.replace(at, 18, "\"station\": \"lab-9\"");  // the data block only
+  EXPECT_FALSE(VerifyCertificateHtml(data).ok);
+}
+
+TEST(Certificate, EditingTheHashItselfFailsVerification) {
+  std::string hash;
+  const std::string html = Render(Source(), &hash);
+  const std::string forged(64, hash[0] == 'a' ? 'b' : 'a');
+  // The <meta> only: the visible hash no longer agrees.
+  std::string meta_only = html;
+  meta_only.replace(meta_only.find(hash), 64, forged);
+  CertificateCheck check = VerifyCertificateHtml(meta_only);
+  EXPECT_FALSE(check.ok);
+  EXPECT_NE(check.reason.find("visible"), std::string::npos) << check.reason;
+  // Both: they agree with each other, not with the content.
+  std::string both = std::regex_replace(html, std::regex(hash), forged);
+  check = VerifyCertificateHtml(both);
+  EXPECT_FALSE(check.ok);
+  EXPECT_EQ(check.hash_claimed, forged);
+  EXPECT_EQ(check.hash_computed, hash);  // the file is otherwise unchanged
+  // A hash that is not one.
+  std::string short_hash = html;
+  short_hash.replace(short_hash.find(hash), 64, "123");
+  EXPECT_FALSE(VerifyCertificateHtml(short_hash).ok);
+}
+
+TEST(Certificate, SomethingElseIsNotACertificate) {
+  const CertificateCheck check = VerifyCertificateHtml("<!DOCTYPE html><html></html>");
+  EXPECT_FALSE(check.ok);
+  EXPECT_TRUE(check.not_a_certificate);
+}
+
+TEST(Certificate, ExpandedUncertaintyIsTwiceTheStandardUncertainty) {
+  const CertificateSource source = Source();
+  const nlohmann::json data = DataBlock(Render(source));
+  EXPECT_EQ(data["coverage_factor"], 2.0);
+  ASSERT_EQ(data["parameters"].size(), 13u);
+  for (const auto& p : data["parameters"]) {
+    const std::string name = p["name"];
+    const double sigma = source.calibration["params"][name]["sigma"];
+    EXPECT_EQ(p["u"].get<double>(), sigma) << name;
+    EXPECT_EQ(p["U"].get<double>(), 2 * sigma) << name;
+    EXPECT_EQ(p["value"].get<double>(), source.calibration["params"][name]["value"].get<double>());
+  }
+  // bz's U on the page: mg, two significant digits (sigma 1.69e-4 m/s^2 = 0.01726 mg).
+  EXPECT_NE(Row(Render(source), "bz").find("<td>0.035&#8201;mg</td>"), std::string::npos)
+      << Row(Render(source), "bz");
+}
+
+TEST(Certificate, TheGateCheckIsTheStandardUncertaintyAgainstTheTolerance) {
+  CertificateSource source = Source();
+  const double sigma = source.calibration["params"]["Sx"]["sigma"];
+  // u <= T < U: within (the gate judges u, not U).
+  source.calibration["tolerances"]["Sx"] = 1.5 * sigma;
+  nlohmann::json data = DataBlock(Render(source));
+  EXPECT_EQ(Parameter(data, "Sx")["check"], "within");
+  EXPECT_EQ(Parameter(data, "Sx")["tolerance_u"], 1.5 * sigma);
+  source.calibration["tolerances"]["Sx"] = 0.5 * sigma;
+  const std::string html = Render(source);
+  data = DataBlock(html);
+  EXPECT_EQ(Parameter(data, "Sx")["check"], "exceeds");
+  EXPECT_NE(Row(html, "Sx").find("class=\"exceeds\""), std::string::npos);
+  // Installation parameters are not gated.
+  EXPECT_EQ(Parameter(data, "beta")["check"], "not gated");
+  EXPECT_TRUE(Parameter(data, "beta")["tolerance_u"].is_null());
+}
+
+TEST(Certificate, ParameterWithoutSigmaSaysNotDetermined) {
+  CertificateSource source = Source();
+  source.calibration["params"]["beta"]["sigma"] = nullptr;
+  source.calibration["params"]["bz"]["sigma"] = nullptr;
+  const std::string html = Render(source);
+  EXPECT_TRUE(VerifyCertificateHtml(html).ok);
+  EXPECT_NE(Row(html, "beta").find("not determined"), std::string::npos);
+  EXPECT_NE(Row(html, "bz").find("not determined"), std::string::npos);
+  EXPECT_FALSE(std::regex_search(html, std::regex("\\b(nan|inf)\\b", std::regex::icase)));
+  const nlohmann::json data = DataBlock(html);
+  EXPECT_TRUE(Parameter(data, "beta")["u"].is_null());
+  EXPECT_TRUE(Parameter(data, "beta")["U"].is_null());
+  EXPECT_EQ(Parameter(data, "bz")["check"], "not determined");
+}
+
+TEST(Certificate, IdentityFromTheDeviceAndFromTheCaller) {
+  CertificateSource source = Source();
+  std::string html = Render(source);
+  EXPECT_NE(html.find("not reported by the device"), std::string::npos);  // a replay has none
+  source.calibration["provenance"]["device_identity"] = {
+      {"protocol", "mip"},      {"model_name", "3DM-GX5-25"}, {"model_number", "6251-4220"},
+      {"serial", "6251.81234"}, {"firmware", "1.1.71"},       {"rate_hz", 500}};
+  source.identity = {{"firmware", "1.1.72"}};
+  html = Render(source);
+  EXPECT_EQ(html.find("not reported by the device"), std::string::npos);
+  EXPECT_NE(html.find("6251.81234"), std::string::npos);
+  EXPECT_NE(html.find("3DM-GX5-25 (6251-4220)"), std::string::npos);
+  EXPECT_NE(html.find("1.1.72"), std::string::npos);  // the caller's wins
+  const nlohmann::json data = DataBlock(html);
+  EXPECT_EQ(data["device"]["serial"], "6251.81234");
+  EXPECT_TRUE(data["device"]["reported_by_device"].get<bool>());
+}
+
+TEST(Certificate, ContentHoldsTheEnvironmentProcedureAndVerdict) {
+  const nlohmann::json data = DataBlock(Render(Source()));
+  EXPECT_NEAR(data["environment"]["gravity_mps2"].get<double>(), 9.77821, 1e-5);
+  EXPECT_EQ(data["procedure"]["poses"]["static_poses"], 36);
+  EXPECT_EQ(data["procedure"]["records"], 36);
+  EXPECT_NEAR(data["procedure"]["dwell_s_median"].get<double>(), 3.0, 0.1);
+  EXPECT_EQ(data["verdict"]["text"], "PASS");
+  EXPECT_EQ(data["calibration"]["version"], 3);
+  EXPECT_EQ(data["calibration"]["time_utc"], "2026-03-14T09:26:53Z");
+}
+
+TEST(Certificate, MalformedCalibrationIsRefusedWithAMessage) {
+  CertificateSource source = Source();
+  source.calibration.erase("params");
+  std::string html = "untouched", hash, error;
+  EXPECT_FALSE(RenderCertificateHtml(source, &html, &hash, &error));
+  EXPECT_EQ(html, "untouched");
+  EXPECT_FALSE(error.empty());
+  source.calibration = nlohmann::json::array();
+  EXPECT_FALSE(RenderCertificateHtml(source, &html, &hash, &error));
+}
+
+TEST(Certificate, NumberNamesStationDeviceModelAndVersion) {
+  EXPECT_EQ(CertificateNumber("lab 2", "imu1", "mag13", 4), "lab_2-imu1-mag13-v4");
+  EXPECT_EQ(CertificateNumber("", "imu", "accel13", 1), "unknown-imu-accel13-v1");
+}
+
+TEST(Certificate, Sha256OfKnownInput) {
+  EXPECT_EQ(Sha256Hex("abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+}
+
+}  // namespace
+}  // namespace turncal::report

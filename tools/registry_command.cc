@@ -1,0 +1,436 @@
+#include "tools/registry_command.h"
+
+#include <fmt/format.h>
+
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "daemon/atomic_file.h"
+#include "daemon/config.h"
+#include "daemon/registry_db.h"
+#include "tools/certificate_command.h"
+
+namespace turncal::tools {
+
+namespace {
+
+using daemon::RegistryDb;
+using daemon::RegistryRows;
+
+struct RegistryArgs {
+  std::string conninfo;       // --db
+  std::string config_path;    // --config: turncald.toml's [registry]
+  std::string password_file;  // --password-file
+  std::string serial, model, station, format = "text", output, pdf, issued;
+  int version = 0;
+  bool json = false;
+  bool passing_only = false;
+};
+
+// The connection: --db, else TURNCAL_REGISTRY, else --config's (or /etc/turncal/turncald.toml's)
+// [registry]. Exit 2 with a message when none works.
+int Open(const RegistryArgs& a, RegistryDb* db) {
+  daemon::RegistryOptions options;
+  std::string error;
+  std::string config = a.config_path;
+  if (a.conninfo.empty() && config.empty() && !std::getenv("TURNCAL_REGISTRY") &&
+      std::filesystem::exists("/etc/turncal/turncald.toml")) {
+    config = "/etc/turncal/turncald.toml";
+  }
+  if (!a.conninfo.empty()) {
+    options.conninfo = a.conninfo;
+  } else if (const char* env = std::getenv("TURNCAL_REGISTRY"); env && *env) {
+    options.conninfo = env;
+  } else if (!config.empty()) {
+    daemon::Config c;
+    if (!daemon::LoadConfig(config, &c, &error)) {
+      fmt::print(stderr, "turncal registry: {}\n", error);
+      return 2;
+    }
+    if (!c.registry.enabled()) {
+      fmt::print(stderr, "turncal registry: {} has no [registry]\n", config);
+      return 2;
+    }
+    options = c.registry;
+  } else {
+    fmt::print(stderr,
+               "turncal registry: no registry: give --db CONNINFO, TURNCAL_REGISTRY, or --config "
+               "with a [registry] section\n");
+    return 2;
+  }
+  if (!a.password_file.empty()) options.password_file = a.password_file;
+  if (!db->Connect(options, &error)) {
+    fmt::print(stderr, "turncal registry: {}\n", error);
+    return 2;
+  }
+  return 0;
+}
+
+std::string Cell(const std::optional<std::string>& v) { return v.value_or(""); }
+
+// A table of rows for people: columns padded to their widest cell.
+void PrintTable(const RegistryRows& r) {
+  std::vector<std::size_t> width(r.columns.size());
+  for (std::size_t c = 0; c < r.columns.size(); ++c) width[c] = r.columns[c].size();
+  for (const auto& row : r.rows) {
+    for (std::size_t c = 0; c < row.size(); ++c) width[c] = std::max(width[c], Cell(row[c]).size());
+  }
+  auto line = [&](const std::vector<std::string>& cells) {
+    std::string s;
+    for (std::size_t c = 0; c < cells.size(); ++c) {
+      s += fmt::format("{:<{}}", cells[c], c + 1 < cells.size() ? width[c] + 2 : 0);
+    }
+    fmt::print("{}\n", s);
+  };
+  line(r.columns);
+  for (const auto& row : r.rows) {
+    std::vector<std::string> cells;
+    for (const auto& v : row) cells.push_back(Cell(v));
+    line(cells);
+  }
+}
+
+nlohmann::json RowsJson(const RegistryRows& r) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& row : r.rows) {
+    nlohmann::json o = nlohmann::json::object();
+    for (std::size_t c = 0; c < row.size(); ++c) {
+      if (!row[c]) {
+        o[r.columns[c]] = nullptr;
+        continue;
+      }
+      // By the column's type: jsonb and numbers as JSON, booleans ("t"/"f"), text as strings.
+      const auto kind = r.kinds[c];
+      nlohmann::json parsed =
+          kind == RegistryRows::Kind::kJson || kind == RegistryRows::Kind::kNumber
+              ? nlohmann::json::parse(*row[c], nullptr, false)
+              : nlohmann::json();
+      if (kind == RegistryRows::Kind::kBoolean) {
+        o[r.columns[c]] = *row[c] == "t";
+      } else if (!parsed.is_null() && !parsed.is_discarded()) {
+        o[r.columns[c]] = parsed;
+      } else {
+        o[r.columns[c]] = *row[c];
+      }
+    }
+    list.push_back(o);
+  }
+  return list;
+}
+
+constexpr const char* kHistorySql = R"sql(
+SELECT c.calibrated_at, s.name AS station, c.device_name AS device, c.model, c.version,
+       CASE WHEN c.passed THEN 'pass' ELSE 'FAIL' END AS gate,
+       (SELECT count(*) FROM calibration_poses p WHERE p.calibration_id = c.id) AS poses,
+       round(c.chi2::numeric, 2) AS chi2, c.dof, c.software, c.idempotency_key AS key
+FROM calibrations c JOIN devices d ON d.id = c.device_id JOIN stations s ON s.id = c.station_id
+WHERE d.serial = $1 AND ($2::text IS NULL OR c.model = $2)
+ORDER BY c.calibrated_at, c.id)sql";
+
+constexpr const char* kLatestSql = R"sql(
+SELECT DISTINCT ON (c.model) c.model, c.version, c.calibrated_at, s.name AS station,
+       c.device_name AS device, d.model_name, d.firmware, c.software, c.passed, c.parameters,
+       c.idempotency_key AS key, c.document
+FROM calibrations c JOIN devices d ON d.id = c.device_id JOIN stations s ON s.id = c.station_id
+WHERE d.serial = $1 AND c.passed AND ($2::text IS NULL OR c.model = $2)
+ORDER BY c.model, c.calibrated_at DESC, c.id DESC)sql";
+
+constexpr const char* kStationsSql = R"sql(
+SELECT s.name AS station, s.host, s.software, s.first_contact, s.last_contact,
+       round(extract(epoch FROM now() - s.last_contact))::bigint AS seconds_ago,
+       (SELECT count(*) FROM calibrations c WHERE c.station_id = s.id) AS calibrations,
+       (SELECT max(c.calibrated_at) FROM calibrations c WHERE c.station_id = s.id)
+         AS last_calibration
+FROM stations s ORDER BY s.name)sql";
+
+// One row per calibration and parameter (long format: every model fits one table).
+constexpr const char* kExportCsvSql = R"sql(
+SELECT s.name AS station, d.serial, d.model_name AS device_model, d.firmware,
+       c.device_name AS device, c.model, c.version, c.calibrated_at, c.passed, c.software,
+       c.chi2, c.dof, c.p_value, p.key AS parameter, p.value->>'value' AS value,
+       p.value->>'sigma' AS sigma, p.value->>'unit' AS unit, c.idempotency_key AS key
+FROM calibrations c JOIN devices d ON d.id = c.device_id JOIN stations s ON s.id = c.station_id
+CROSS JOIN LATERAL jsonb_each(c.parameters) AS p
+WHERE ($1::text IS NULL OR d.serial = $1) AND ($2::text IS NULL OR s.name = $2)
+  AND ($3::text IS NULL OR c.model = $3) AND (NOT $4::boolean OR c.passed)
+ORDER BY c.calibrated_at, c.id, p.key)sql";
+
+constexpr const char* kExportJsonSql = R"sql(
+SELECT s.name AS station, d.serial, d.model_name AS device_model, d.firmware, c.model,
+       c.version, c.calibrated_at, c.received_at, c.passed, c.idempotency_key AS key,
+       (SELECT coalesce(jsonb_agg(w.document ORDER BY w.written_at), '[]'::jsonb)
+        FROM device_writes w WHERE w.device_id = d.id AND w.model = c.model
+          AND w.version = c.version AND w.station_id = s.id) AS device_writes,
+       c.document AS calibration
+FROM calibrations c JOIN devices d ON d.id = c.device_id JOIN stations s ON s.id = c.station_id
+WHERE ($1::text IS NULL OR d.serial = $1) AND ($2::text IS NULL OR s.name = $2)
+  AND ($3::text IS NULL OR c.model = $3) AND (NOT $4::boolean OR c.passed)
+ORDER BY c.calibrated_at, c.id)sql";
+
+std::optional<std::string> Maybe(const std::string& s) {
+  return s.empty() ? std::nullopt : std::optional<std::string>(s);
+}
+
+// RFC 4180: quoted when a cell holds a comma, a quote or a line break.
+std::string CsvCell(const std::string& s) {
+  if (s.find_first_of(",\"\r\n") == std::string::npos) return s;
+  std::string q = "\"";
+  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
+int Emit(const RegistryArgs& a, const std::string& text) {
+  if (a.output.empty() || a.output == "-") {
+    fmt::print("{}", text);
+    return 0;
+  }
+  std::string error;
+  if (!daemon::WriteFileAtomically(a.output, text, &error)) {
+    fmt::print(stderr, "turncal registry: {}\n", error);
+    return 2;
+  }
+  fmt::print(stderr, "turncal registry: wrote {}\n", a.output);
+  return 0;
+}
+
+int RunHistory(const RegistryArgs& a) {
+  RegistryDb db;
+  if (int rc = Open(a, &db)) return rc;
+  RegistryRows rows;
+  std::string error;
+  if (!db.Query(kHistorySql, {a.serial, Maybe(a.model)}, &rows, &error)) {
+    fmt::print(stderr, "turncal registry: {}\n", error);
+    return 2;
+  }
+  if (a.json) {
+    fmt::print("{}\n", RowsJson(rows).dump(1));
+  } else if (rows.rows.empty()) {
+    fmt::print("serial {}: no calibration in the registry\n", a.serial);
+  } else {
+    fmt::print("serial {}: {} calibration(s)\n", a.serial, rows.rows.size());
+    PrintTable(rows);
+  }
+  return rows.rows.empty() ? 1 : 0;
+}
+
+int RunLatest(const RegistryArgs& a) {
+  RegistryDb db;
+  if (int rc = Open(a, &db)) return rc;
+  RegistryRows rows;
+  std::string error;
+  if (!db.Query(kLatestSql, {a.serial, Maybe(a.model)}, &rows, &error)) {
+    fmt::print(stderr, "turncal registry: {}\n", error);
+    return 2;
+  }
+  const nlohmann::json list = RowsJson(rows);
+  if (a.json) {
+    fmt::print("{}\n", list.dump(1));
+    return list.empty() ? 1 : 0;
+  }
+  if (list.empty()) {
+    fmt::print("serial {}: no passing calibration{} in the registry\n", a.serial,
+               a.model.empty() ? "" : " of " + a.model);
+    return 1;
+  }
+  for (const auto& c : list) {
+    fmt::print(
+        "serial {} {} v{}: passed, {} at station {} (device {}, {} firmware {}), turncal {}\n",
+        a.serial, c.value("model", ""), c.value("version", 0), c.value("calibrated_at", ""),
+        c.value("station", ""), c.value("device", ""),
+        c["model_name"].is_string() ? c["model_name"].get<std::string>() : "?",
+        c["firmware"].is_string()
+            ? c["firmware"].get<std::string>()
+            : (c["firmware"].is_null() ? std::string("?") : c["firmware"].dump()),
+        c.value("software", ""));
+    for (const auto& [name, p] : c["parameters"].items()) {
+      const nlohmann::json sigma = p.value("sigma", nlohmann::json());
+      fmt::print("  {:<10} {:>14.7g}  sigma {}\n", name, p.value("value", 0.0),
+                 sigma.is_number() ? fmt::format("{:.3g}", sigma.get<double>())
+                                   : std::string("(not determined)"));
+    }
+  }
+  return 0;
+}
+
+int RunStations(const RegistryArgs& a) {
+  RegistryDb db;
+  if (int rc = Open(a, &db)) return rc;
+  RegistryRows rows;
+  std::string error;
+  if (!db.Query(kStationsSql, {}, &rows, &error)) {
+    fmt::print(stderr, "turncal registry: {}\n", error);
+    return 2;
+  }
+  if (a.json) {
+    fmt::print("{}\n", RowsJson(rows).dump(1));
+  } else {
+    PrintTable(rows);
+  }
+  return 0;
+}
+
+int RunExport(const RegistryArgs& a) {
+  RegistryDb db;
+  if (int rc = Open(a, &db)) return rc;
+  RegistryRows rows;
+  std::string error;
+  const bool csv = a.format == "csv";
+  if (!db.Query(
+          csv ? kExportCsvSql : kExportJsonSql,
+          {Maybe(a.serial), Maybe(a.station), Maybe(a.model), a.passing_only ? "true" : "false"},
+          &rows, &error)) {
+    fmt::print(stderr, "turncal registry: {}\n", error);
+    return 2;
+  }
+  if (!csv) return Emit(a, RowsJson(rows).dump(1) + "\n");
+  std::string text;
+  for (std::size_t c = 0; c < rows.columns.size(); ++c) {
+    text += (c ? "," : "") + CsvCell(rows.columns[c]);
+  }
+  text += "\r\n";
+  for (const auto& row : rows.rows) {
+    for (std::size_t c = 0; c < row.size(); ++c) text += (c ? "," : "") + CsvCell(Cell(row[c]));
+    text += "\r\n";
+  }
+  return Emit(a, text);
+}
+
+// The calibration of a serial and model a certificate is made of: --version N, else the latest
+// passing one. With --station, only that station's.
+constexpr const char* kCertificateSql = R"sql(
+SELECT c.document, s.name AS station, d.serial, d.model_name, d.firmware, d.protocol,
+       c.idempotency_key AS key
+FROM calibrations c JOIN devices d ON d.id = c.device_id JOIN stations s ON s.id = c.station_id
+WHERE d.serial = $1 AND c.model = $2 AND ($3::integer IS NULL OR c.version = $3::integer)
+  AND ($4::text IS NULL OR s.name = $4) AND ($3::integer IS NOT NULL OR c.passed)
+ORDER BY c.calibrated_at DESC, c.id DESC LIMIT 2)sql";
+
+int RunCertificate(const RegistryArgs& a) {
+  RegistryDb db;
+  if (int rc = Open(a, &db)) return rc;
+  RegistryRows rows;
+  std::string error;
+  const std::optional<std::string> version =
+      a.version > 0 ? std::optional<std::string>(std::to_string(a.version)) : std::nullopt;
+  if (!db.Query(kCertificateSql, {a.serial, a.model, version, Maybe(a.station)}, &rows, &error)) {
+    fmt::print(stderr, "turncal registry: {}\n", error);
+    return 2;
+  }
+  if (rows.rows.empty()) {
+    fmt::print(stderr,
+               "turncal registry: serial {} has no {} calibration of {}{} in the registry\n",
+               a.serial, version ? "version " + *version : std::string("passing"), a.model,
+               a.station.empty() ? "" : " at station " + a.station);
+    return 1;
+  }
+  // A version alone may name calibrations of two stations (each counts its own).
+  if (version && rows.rows.size() > 1 && a.station.empty()) {
+    fmt::print(stderr,
+               "turncal registry: serial {} {} v{} was calibrated at more than one station; "
+               "give --station\n",
+               a.serial, a.model, *version);
+    return 2;
+  }
+  const auto& row = rows.rows.front();
+  report::CertificateSource source;
+  source.calibration = nlohmann::json::parse(row[0].value_or("null"), nullptr, false);
+  source.station = row[1].value_or("");
+  source.source = "registry (key " + row[6].value_or("") + ")";
+  source.identity = {{"serial", row[2].value_or("")}};
+  if (row[3]) source.identity["model_name"] = *row[3];
+  if (row[4]) source.identity["firmware"] = *row[4];
+  if (row[5]) source.identity["protocol"] = *row[5];
+  source.issued_utc = a.issued;
+  return WriteCertificate(source, a.output, a.pdf);
+}
+
+int RunMigrate(const RegistryArgs& a) {
+  RegistryDb db;
+  if (int rc = Open(a, &db)) return rc;
+  fmt::print("registry schema: version {} (this turncal knows {})\n", db.schema_version(),
+             daemon::kRegistrySchemaVersion);
+  return 0;
+}
+
+void AddConnectionOptions(CLI::App* sub, const std::shared_ptr<RegistryArgs>& a) {
+  sub->add_option("--db", a->conninfo,
+                  "the registry: a libpq connection string or postgresql:// URI (else "
+                  "TURNCAL_REGISTRY, else --config's [registry])");
+  sub->add_option("--config", a->config_path,
+                  "turncald.toml whose [registry] to use (default /etc/turncal/turncald.toml "
+                  "when it exists)");
+  sub->add_option("--password-file", a->password_file,
+                  "the password's file (mode 600; relative: in $CREDENTIALS_DIRECTORY)");
+}
+
+}  // namespace
+
+void AddRegistryCommand(CLI::App* app) {
+  CLI::App* cmd =
+      app->add_subcommand("registry",
+                          "the calibration registry across stations (PostgreSQL): history, latest, "
+                          "export, stations, migrate");
+  cmd->require_subcommand(1);
+  auto run = [](int rc) { throw CLI::RuntimeError(rc); };
+
+  auto history = std::make_shared<RegistryArgs>();
+  CLI::App* h = cmd->add_subcommand("history", "every calibration of a serial, at every station");
+  h->add_option("SERIAL", history->serial, "the device's serial")->required();
+  h->add_option("--model", history->model, "only this model");
+  h->add_flag("--json", history->json, "as JSON");
+  AddConnectionOptions(h, history);
+  h->callback([history, run] { run(RunHistory(*history)); });
+
+  auto latest = std::make_shared<RegistryArgs>();
+  CLI::App* l = cmd->add_subcommand("latest", "the latest passing calibration of a serial");
+  l->add_option("SERIAL", latest->serial, "the device's serial")->required();
+  l->add_option("--model", latest->model, "only this model (default: the latest of each)");
+  l->add_flag("--json", latest->json, "as JSON, with the whole calibration document");
+  AddConnectionOptions(l, latest);
+  l->callback([latest, run] { run(RunLatest(*latest)); });
+
+  auto exporting = std::make_shared<RegistryArgs>();
+  exporting->format = "csv";
+  CLI::App* e = cmd->add_subcommand("export",
+                                    "calibrations to CSV (one row per parameter) or "
+                                    "JSON (whole documents)");
+  e->add_option("--format", exporting->format, "csv or json")
+      ->check(CLI::IsMember({"csv", "json"}))
+      ->capture_default_str();
+  e->add_option("--serial", exporting->serial, "only this serial");
+  e->add_option("--station", exporting->station, "only this station");
+  e->add_option("--model", exporting->model, "only this model");
+  e->add_flag("--passing", exporting->passing_only, "only calibrations that passed the gate");
+  e->add_option("-o,--output", exporting->output, "write here (atomically) instead of stdout");
+  AddConnectionOptions(e, exporting);
+  e->callback([exporting, run] { run(RunExport(*exporting)); });
+
+  auto stations = std::make_shared<RegistryArgs>();
+  CLI::App* s = cmd->add_subcommand("stations", "every station and its last contact");
+  s->add_flag("--json", stations->json, "as JSON");
+  AddConnectionOptions(s, stations);
+  s->callback([stations, run] { run(RunStations(*stations)); });
+
+  auto cert = std::make_shared<RegistryArgs>();
+  CLI::App* c = cmd->add_subcommand(
+      "certificate", "the calibration certificate of a serial's calibration, from the registry");
+  c->add_option("SERIAL", cert->serial, "the device's serial")->required();
+  c->add_option("--model", cert->model, "the model")->required();
+  c->add_option("--version", cert->version, "this version (default: the latest passing one)");
+  c->add_option("--station", cert->station, "only this station's calibrations");
+  c->add_option("--issued", cert->issued, "the issue date shown on the certificate");
+  c->add_option("-o,--output", cert->output, "the certificate (HTML)")->required();
+  c->add_option("--pdf", cert->pdf, "also print it to this PDF with headless Chromium");
+  AddConnectionOptions(c, cert);
+  c->callback([cert, run] { run(RunCertificate(*cert)); });
+
+  auto migrate = std::make_shared<RegistryArgs>();
+  CLI::App* m = cmd->add_subcommand(
+      "migrate", "bring the registry's schema to this turncal's version (stations do it too)");
+  AddConnectionOptions(m, migrate);
+  m->callback([migrate, run] { run(RunMigrate(*migrate)); });
+}
+
+}  // namespace turncal::tools
