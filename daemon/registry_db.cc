@@ -85,7 +85,8 @@ SELECT $1, $2::bigint, $3::bigint, d->>'device', d->>'model', (d->>'version')::i
                                        'observability', d->'observability')),
   (d->>'chi2')::double precision, round((d->>'dof')::double precision)::integer,
   (d->>'p_value')::double precision, d->'tolerances', d->'context', d->'calibrator',
-  (d->'provenance') - 'records', d->>'software', (d->>'time')::timestamptz, d
+  CASE WHEN jsonb_typeof(d->'provenance') = 'object' THEN (d->'provenance') - 'records' END,
+  d->>'software', (d->>'time')::timestamptz, d
 FROM (SELECT $4::jsonb AS d) AS s
 ON CONFLICT (idempotency_key) DO NOTHING
 RETURNING id)sql";
@@ -94,8 +95,10 @@ RETURNING id)sql";
 constexpr const char* kInsertPoses = R"sql(
 INSERT INTO calibration_poses (calibration_id, index, pose, record)
 SELECT $1::bigint, (t.n - 1)::integer, t.pose, t.record
-FROM ROWS FROM (jsonb_array_elements(COALESCE($2::jsonb -> 'poses', '[]'::jsonb)),
-                jsonb_array_elements(COALESCE($2::jsonb -> 'records', '[]'::jsonb)))
+FROM ROWS FROM (jsonb_array_elements(CASE WHEN jsonb_typeof($2::jsonb -> 'poses') = 'array'
+                                           THEN $2::jsonb -> 'poses' ELSE '[]'::jsonb END),
+                jsonb_array_elements(CASE WHEN jsonb_typeof($2::jsonb -> 'records') = 'array'
+                                           THEN $2::jsonb -> 'records' ELSE '[]'::jsonb END))
      WITH ORDINALITY AS t(pose, record, n))sql";
 
 // A device write's entry is written again when its verification at the next pose completes it:
@@ -108,31 +111,64 @@ SELECT $1, $2::bigint, $3::bigint, d->>'device', d->>'model', (d->>'version')::i
 FROM (SELECT $4::jsonb AS d) AS s
 ON CONFLICT (idempotency_key) DO UPDATE SET outcome = EXCLUDED.outcome,
   document = EXCLUDED.document
-RETURNING (xmax = 0) AS inserted)sql";
+  WHERE NOT (device_writes.document ? 'verification_at_pose')
+    OR EXCLUDED.document ? 'verification_at_pose'
+RETURNING id)sql";
 
 }  // namespace
 
 RegistryDb::~RegistryDb() { Close(); }
 
 void RegistryDb::Close() {
+  {
+    std::lock_guard<std::mutex> lock(cancel_mutex_);
+    if (cancel_) PQfreeCancel(cancel_);
+    cancel_ = nullptr;
+  }
   if (conn_) PQfinish(conn_);
   conn_ = nullptr;
   schema_version_ = 0;
 }
 
+void RegistryDb::Cancel() {
+  std::lock_guard<std::mutex> lock(cancel_mutex_);
+  char message[256];
+  if (cancel_) PQcancel(cancel_, message, sizeof(message));
+}
+
 bool RegistryDb::connected() const { return conn_ && PQstatus(conn_) == CONNECTION_OK; }
 
-bool RegistryDb::Connect(const RegistryOptions& options, std::string* error) {
+bool RegistryDb::Connect(const RegistryOptions& options, bool migrate, std::string* error) {
   Close();
   std::string password;
   if (!options.password_file.empty() &&
       !ReadPasswordFile(options.password_file, &password, error)) {
     return false;
   }
-  // The connection string first (expand_dbname), then what it does not set.
+  // Defaults first, then the connection string (expand_dbname: what it sets wins), then the
+  // password from its file. Every wait is bounded: a connection attempt by connect_timeout, a
+  // dead peer by keepalives and tcp_user_timeout, a statement and a lock wait (the migration's
+  // advisory lock among them) by the server's timeouts.
   const std::string timeout = std::to_string(options.connect_timeout_s);
-  std::vector<const char*> keys = {"dbname", "connect_timeout", "application_name"};
-  std::vector<const char*> values = {options.conninfo.c_str(), timeout.c_str(), "turncald"};
+  std::vector<const char*> keys = {"connect_timeout",
+                                   "application_name",
+                                   "keepalives",
+                                   "keepalives_idle",
+                                   "keepalives_interval",
+                                   "keepalives_count",
+                                   "tcp_user_timeout",
+                                   "options",
+                                   "dbname"};
+  std::vector<const char*> values = {
+      timeout.c_str(),
+      "turncald",
+      "1",
+      "10",
+      "5",
+      "3",
+      "30000",
+      "-c statement_timeout=60000 -c lock_timeout=30000 -c TimeZone=UTC -c DateStyle=ISO",
+      options.conninfo.c_str()};
   if (!password.empty()) {
     keys.push_back("password");
     values.push_back(password.c_str());
@@ -149,7 +185,29 @@ bool RegistryDb::Connect(const RegistryOptions& options, std::string* error) {
   // The server's notices ("relation already exists, skipping") are not the user's business.
   PQsetNoticeProcessor(
       conn_, [](void*, const char*) {}, nullptr);
-  if (!Migrate(error)) {
+  {
+    std::lock_guard<std::mutex> lock(cancel_mutex_);
+    cancel_ = PQgetCancel(conn_);
+  }
+  if (migrate) {
+    if (!Migrate(error)) {
+      Close();
+      return false;
+    }
+    return true;
+  }
+  RegistryRows rows;
+  std::string why;
+  if (!Exec("SELECT CASE WHEN to_regclass('schema_migrations') IS NULL THEN 0 ELSE "
+            "(SELECT COALESCE(max(version), 0) FROM schema_migrations) END",
+            {}, &rows, &why)) {
+    *error = "registry schema: " + why;
+    Close();
+    return false;
+  }
+  schema_version_ = std::stoi(rows.rows.at(0).at(0).value_or("0"));
+  if (schema_version_ == 0) {
+    *error = "the registry has no schema yet: `turncal registry migrate`, or start a station";
     Close();
     return false;
   }
@@ -170,7 +228,10 @@ bool RegistryDb::Exec(const std::string& sql, const std::vector<std::optional<st
                           : PQexecParams(conn_, sql.c_str(), static_cast<int>(values.size()),
                                          nullptr, values.data(), nullptr, nullptr, 0));
   const ExecStatusType status = r ? PQresultStatus(r.get()) : PGRES_FATAL_ERROR;
+  last_sqlstate_.clear();
   if (status != PGRES_COMMAND_OK && status != PGRES_TUPLES_OK) {
+    const char* state = r ? PQresultErrorField(r.get(), PG_DIAG_SQLSTATE) : nullptr;
+    last_sqlstate_ = state ? state : "";
     *error = PgMessage(r ? PQresultErrorMessage(r.get()) : PQerrorMessage(conn_));
     if (error->empty()) *error = PgMessage(PQerrorMessage(conn_));
     return false;
@@ -243,13 +304,6 @@ bool RegistryDb::Migrate(std::string* error) {
     return false;
   }
   int version = std::stoi(rows.rows.at(0).at(0).value_or("0"));
-  if (version > static_cast<int>(migrations.size())) {
-    Exec("ROLLBACK", {}, nullptr, &why);
-    *error = fmt::format(
-        "the registry's schema is version {}, newer than this turncal knows ({}): update turncal",
-        version, migrations.size());
-    return false;
-  }
   for (; version < static_cast<int>(migrations.size()); ++version) {
     const RegistryMigration& m = migrations[static_cast<std::size_t>(version)];
     if (!Exec(m.sql, {}, nullptr, &why) ||
@@ -266,7 +320,7 @@ bool RegistryDb::Migrate(std::string* error) {
     *error = "registry schema: " + why;
     return false;
   }
-  schema_version_ = version;
+  schema_version_ = std::max(version, static_cast<int>(migrations.size()));
   return true;
 }
 
@@ -275,43 +329,54 @@ bool RegistryDb::TouchStation(const std::string& station, const std::string& hos
   return Exec(kUpsertStation, {station, host, std::string(kVersion)}, nullptr, error);
 }
 
-bool RegistryDb::Put(const nlohmann::json& entry, bool* inserted, std::string* error) {
-  *inserted = false;
+bool RegistryDb::Put(const nlohmann::json& entry, PutResult* result, std::string* error) {
+  *result = PutResult();
   const std::string kind = entry.value("kind", "");
   if (kind != "calibration" && kind != "device_write") {
     *error = fmt::format("outbox entry of unknown kind '{}'", kind);
+    result->permanent = true;
     return false;
   }
-  const RegistryDevice device = DeviceOf(entry);
-  const nlohmann::json& document = entry.at("document");
+  RegistryDevice device;
+  std::string document, provenance;
+  try {
+    device = DeviceOf(entry);
+    document = entry.at("document").dump();
+    const nlohmann::json& d = entry.at("document");
+    provenance = d.is_object() && d.contains("provenance") ? d["provenance"].dump() : "null";
+  } catch (const std::exception& e) {  // nlohmann's type errors: not an entry
+    *error = std::string("malformed outbox entry: ") + e.what();
+    result->permanent = true;
+    return false;
+  }
   RegistryRows station_row, device_row, row;
   std::string why;
-  const bool ok =
-      Exec("BEGIN", {}, nullptr, &why) &&
-      Exec(kUpsertStation,
-           {entry.value("station", ""), entry.value("host", ""), entry.value("software", "")},
-           &station_row, &why) &&
-      Exec(kUpsertDevice,
-           {device.serial, device.reported ? "true" : "false", device.model_name, device.firmware,
-            device.protocol},
-           &device_row, &why) &&
-      Exec(kind == "calibration" ? kInsertCalibration : kUpsertDeviceWrite,
-           {entry.value("key", ""), station_row.rows.at(0).at(0), device_row.rows.at(0).at(0),
-            document.dump()},
-           &row, &why);
-  if (ok && kind == "calibration" && !row.rows.empty()) {
-    *inserted = true;
-    if (!Exec(kInsertPoses, {row.rows[0][0], document.value("provenance", nlohmann::json()).dump()},
-              nullptr, &why)) {
-      std::string ignored;
-      Exec("ROLLBACK", {}, nullptr, &ignored);
-      *error = why;
-      return false;
-    }
+  bool ok = Exec("BEGIN", {}, nullptr, &why) &&
+            Exec(kUpsertStation,
+                 {entry.value("station", ""), entry.value("host", ""), entry.value("software", "")},
+                 &station_row, &why) &&
+            Exec(kUpsertDevice,
+                 {device.serial, device.reported ? "true" : "false", device.model_name,
+                  device.firmware, device.protocol},
+                 &device_row, &why) &&
+            Exec(kind == "calibration" ? kInsertCalibration : kUpsertDeviceWrite,
+                 {entry.value("key", ""), station_row.rows.at(0).at(0), device_row.rows.at(0).at(0),
+                  document},
+                 &row, &why);
+  if (ok && kind == "calibration") {
+    result->already_there = row.rows.empty();
+    if (!row.rows.empty()) ok = Exec(kInsertPoses, {row.rows[0][0], provenance}, nullptr, &why);
   } else if (ok && kind == "device_write") {
-    *inserted = !row.rows.empty() && row.rows[0][0] == std::optional<std::string>("t");
+    // Inserted, or updated by its completed entry: sent either way. Nothing returned: the
+    // registry's row already held the verification this entry lacks.
+    result->already_there = row.rows.empty();
   }
-  if (!ok || !Exec("COMMIT", {}, nullptr, &why)) {
+  if (ok) ok = Exec("COMMIT", {}, nullptr, &why);
+  if (!ok) {
+    // Class 22 (data exception) and 23 (integrity constraint): this entry will never fit.
+    // Anything else (a read-only standby, a full disk, a cancel, a timeout, a lost connection,
+    // a missing privilege) may pass later.
+    result->permanent = last_sqlstate_.rfind("22", 0) == 0 || last_sqlstate_.rfind("23", 0) == 0;
     std::string ignored;
     if (conn_ && PQtransactionStatus(conn_) != PQTRANS_IDLE)
       Exec("ROLLBACK", {}, nullptr, &ignored);

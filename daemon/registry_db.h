@@ -15,7 +15,10 @@
 //   calibration_poses  calibration, index, pose (the table's angles), record (the statistics)
 //   device_writes      idempotency_key (unique), station, device, model, version, operation,
 //                      outcome, written_at, document (daemon/device_write.h's history entry)
+//   certificates       sha256 (the content hash), calibration, number, issued_at, issued_by,
+//                      html (the certificate as issued: `turncal registry certificate`)
 
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -24,10 +27,11 @@
 #include "daemon/registry_options.h"
 
 struct pg_conn;
+struct pg_cancel;
 
 namespace turncal::daemon {
 
-inline constexpr int kRegistrySchemaVersion = 1;
+inline constexpr int kRegistrySchemaVersion = 2;
 
 // A query's answer: column names and rows of text (null: SQL NULL).
 struct RegistryRows {
@@ -47,18 +51,29 @@ class RegistryDb {
 
   // Connects (the password from options.password_file) and brings the schema to
   // kRegistrySchemaVersion (migrations under an advisory lock: several stations may start at
-  // once). A database whose schema is newer than this software knows is refused. False with a
-  // message.
-  bool Connect(const RegistryOptions& options, std::string* error);
+  // once). A newer schema than this software knows is used as it is: migrations only add
+  // tables and columns with defaults, so an older station's inserts still fit. Every operation
+  // is bounded: TCP keepalives, tcp_user_timeout, statement_timeout and lock_timeout, unless the
+  // connection string sets them. False with a message.
+  // `migrate` false (the queries of `turncal registry`): the schema is only read, never changed,
+  // and a database without one is an error.
+  bool Connect(const RegistryOptions& options, bool migrate, std::string* error);
   bool connected() const;
   void Close();
+  // Any thread: asks the server to cancel the statement under way (the outbox stops).
+  void Cancel();
   // The schema version the database holds after Connect.
   int schema_version() const { return schema_version_; }
 
   // One outbox entry (daemon/registry_outbox.h) in one transaction: the station's last contact,
   // the device, then the calibration and its poses, or the device write. *inserted is false when
   // the registry already held the entry's key (a resend after a crash): nothing is written twice.
-  bool Put(const nlohmann::json& entry, bool* inserted, std::string* error);
+  struct PutResult {
+    bool already_there = false;  // the key was there: nothing written
+    bool permanent = false;      // on failure: the entry itself is refused (SQLSTATE class 22,
+                                 // 23, or a malformed entry); else it may pass later
+  };
+  bool Put(const nlohmann::json& entry, PutResult* result, std::string* error);
   // The station's last contact (a heartbeat while there is nothing to send).
   bool TouchStation(const std::string& station, const std::string& host, std::string* error);
 
@@ -72,7 +87,10 @@ class RegistryDb {
             RegistryRows* out, std::string* error);
 
   pg_conn* conn_ = nullptr;
+  std::mutex cancel_mutex_;
+  pg_cancel* cancel_ = nullptr;  // PQgetCancel's, for Cancel from another thread
   int schema_version_ = 0;
+  std::string last_sqlstate_;  // of the last failed Exec ("" when there was none)
 };
 
 // The migrations, oldest first: migration i brings the schema from version i to i + 1.

@@ -29,8 +29,15 @@ bool ReadPasswordFile(const std::string& password_file, std::string* password, s
     *error = fmt::format("registry password file '{}': {}", path, std::strerror(errno));
     return false;
   }
-  // As libpq treats ~/.pgpass: a password others may read is refused, not used.
-  if ((st.st_mode & (S_IRWXG | S_IRWXO)) != 0) {
+  // As libpq treats ~/.pgpass: a password others may read is refused, not used. A systemd
+  // credential is private to the service whatever its mode bits show (systemd grants the
+  // service's user read access with an ACL, whose mask then shows as group bits): there only
+  // the "other" bits count.
+  const char* credentials = std::getenv("CREDENTIALS_DIRECTORY");
+  const bool credential =
+      credentials && *credentials &&
+      std::filesystem::path(path).parent_path() == std::filesystem::path(credentials);
+  if ((st.st_mode & (credential ? S_IRWXO : (S_IRWXG | S_IRWXO))) != 0) {
     *error = fmt::format(
         "registry password file '{}' may be read by group or others (mode {:04o}): chmod 600 it "
         "or give it with systemd's LoadCredential=",
@@ -43,8 +50,10 @@ bool ReadPasswordFile(const std::string& password_file, std::string* password, s
     return false;
   }
   std::getline(in, *password);
-  while (!password->empty() && (password->back() == '\r' || password->back() == ' ')) {
-    password->pop_back();
+  if (!password->empty() && password->back() == '\r') password->pop_back();  // CRLF
+  if (password->empty()) {
+    *error = fmt::format("the registry password file '{}' is empty", path);
+    return false;
   }
   return true;
 }

@@ -117,6 +117,8 @@ RegistryOutbox::~RegistryOutbox() {
     stop_ = true;
   }
   wake_.notify_all();
+  // A statement under way ends at once; a connection attempt within connect_timeout.
+  if (db_) db_->Cancel();
   if (thread_.joinable()) thread_.join();
 }
 
@@ -130,6 +132,21 @@ std::string RegistryOutbox::CalibrationKey(const std::string& station,
                      calibration.value("time", ""));
 }
 
+namespace {
+
+// The sequence number at the start of an outbox file's name (0 when there is none).
+std::uint64_t OutboxSequenceOf(const fs::path& path) {
+  const std::string name = path.filename().string();
+  std::uint64_t n = 0;
+  for (char c : name) {
+    if (c < '0' || c > '9') break;
+    n = n * 10 + static_cast<std::uint64_t>(c - '0');
+  }
+  return n;
+}
+
+}  // namespace
+
 bool RegistryOutbox::Start(std::string* error) {
   std::error_code ec;
   fs::create_directories(fs::path(Dir()) / "rejected", ec);
@@ -137,29 +154,39 @@ bool RegistryOutbox::Start(std::string* error) {
     *error = fmt::format("registry: cannot create '{}': {}", Dir(), ec.message());
     return false;
   }
-  // The entries an earlier run left: counted now, sent by the thread.
+  // The entries an earlier run left: counted now, sent by the thread; the new ones sort after
+  // them (a sequence, not the clock, which may step back).
   for (const auto& path : WaitingEntries(Dir())) {
     nlohmann::json entry;
     std::string why;
-    if (ReadJsonFile(path, &entry, &why)) queued_ids_.insert(entry.value("local_id", ""));
+    if (ReadJsonFile(path, &entry, &why) && entry.is_object() && entry["local_id"].is_string()) {
+      queued_ids_.insert(entry["local_id"].get<std::string>());
+    }
+    sequence_ = std::max(sequence_, OutboxSequenceOf(path));
     ++depth_;
   }
+  for (const auto& path : WaitingEntries((fs::path(Dir()) / "rejected").string())) {
+    nlohmann::json entry;
+    std::string why;
+    if (ReadJsonFile(path, &entry, &why) && entry.is_object() && entry["local_id"].is_string()) {
+      rejected_ids_.insert(entry["local_id"].get<std::string>());
+    }
+  }
+  db_ = std::make_unique<RegistryDb>();
   thread_ = std::thread([this] { Run(); });
   return true;
 }
 
-bool RegistryOutbox::WriteEntry(const std::string& kind, const std::string& local_id,
+bool RegistryOutbox::WriteEntry(const std::string& kind, const std::string& local_id, bool unique,
                                 nlohmann::json entry, std::string* error) {
   std::uint64_t sequence = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    // Reserved before the file is written: a reconciliation and the worker never both write it.
+    if (!queued_ids_.insert(local_id).second && unique) return true;
     sequence = ++sequence_;
   }
-  const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                          std::chrono::system_clock::now().time_since_epoch())
-                          .count();
-  const std::string name =
-      fmt::format("{:020}{:06}-{}-{}.json", now_ns, sequence % 1000000, kind, Sanitized(local_id));
+  const std::string name = fmt::format("{:012}-{}-{}.json", sequence, kind, Sanitized(local_id));
   entry["schema"] = 1;
   entry["kind"] = kind;
   entry["local_id"] = local_id;
@@ -169,11 +196,17 @@ bool RegistryOutbox::WriteEntry(const std::string& kind, const std::string& loca
   entry["queued"] = drivers::UtcNowIso8601();
   if (!WriteFileAtomically((fs::path(Dir()) / name).string(), entry.dump() + "\n", error)) {
     *error = "registry outbox: " + *error;
+    {
+      // The thread looks for what is not yet sent again after its next wait (the calibration's
+      // own file holds it): a full disk loses no registry entry once space is back.
+      std::lock_guard<std::mutex> lock(mutex_);
+      queued_ids_.erase(local_id);
+      reconcile_due_ = true;
+    }
     return false;
   }
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    queued_ids_.insert(local_id);
     ++depth_;
     added_ = true;
   }
@@ -186,7 +219,8 @@ bool RegistryOutbox::AddCalibration(const nlohmann::json& calibration, std::stri
                           {"device", calibration.value("device", "")},
                           {"identity", IdentityOf(calibration)},
                           {"document", calibration}};
-  return WriteEntry("calibration", CalibrationLocalId(calibration), std::move(entry), error);
+  return WriteEntry("calibration", CalibrationLocalId(calibration), /*unique=*/true,
+                    std::move(entry), error);
 }
 
 bool RegistryOutbox::AddDeviceWrite(const nlohmann::json& write_entry,
@@ -199,7 +233,7 @@ bool RegistryOutbox::AddDeviceWrite(const nlohmann::json& write_entry,
       {"device", device},
       {"identity", identity},
       {"document", write_entry}};
-  return WriteEntry("device_write", "write:" + file, std::move(entry), error);
+  return WriteEntry("device_write", "write:" + file, /*unique=*/false, std::move(entry), error);
 }
 
 nlohmann::json RegistryOutbox::Status() const {
@@ -219,12 +253,12 @@ nlohmann::json RegistryOutbox::Status() const {
           {"last_sent_time", or_null(last_sent_time_)}};
 }
 
-void RegistryOutbox::NoteError(const std::string& error) {
+void RegistryOutbox::NoteError(const std::string& error, bool connection) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (error != last_error_) spdlog::warn("registry: {}", error);
   last_error_ = error;
   last_error_time_ = drivers::UtcNowIso8601();
-  connected_ = false;
+  if (connection) connected_ = false;
 }
 
 void RegistryOutbox::Reconcile() {
@@ -233,31 +267,35 @@ void RegistryOutbox::Reconcile() {
     std::ifstream log(fs::path(Dir()) / "sent.log");
     for (std::string line; std::getline(log, line);) sent.insert(line);
   }
-  int added = 0;
+  // Oldest first by the calibration's own time (v10 sorts before v2 by name), so that the
+  // registry's device row ends with the newest identity.
+  std::vector<std::pair<std::string, nlohmann::json>> missing;
   for (const char* folder : {"history", "calibrations"}) {
-    std::vector<fs::path> files;
     std::error_code ec;
     for (const auto& e : fs::directory_iterator(fs::path(state_dir_) / folder, ec)) {
-      if (e.path().extension() == ".json") files.push_back(e.path());
-    }
-    std::sort(files.begin(), files.end());
-    for (const auto& path : files) {
+      if (e.path().extension() != ".json") continue;
       nlohmann::json calibration;
       std::string why;
-      if (!ReadJsonFile(path, &calibration, &why) || !calibration.is_object() ||
+      if (!ReadJsonFile(e.path(), &calibration, &why) || !calibration.is_object() ||
           calibration.value("class", "") != "CALIBRATION") {
         continue;
       }
       const std::string id = CalibrationLocalId(calibration);
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        if (sent.count(id) || queued_ids_.count(id) || stop_) continue;
-      }
-      if (AddCalibration(calibration, &why)) {
-        ++added;
-      } else {
-        NoteError(why);
-      }
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (stop_) return;
+      if (sent.count(id) || queued_ids_.count(id) || rejected_ids_.count(id)) continue;
+      missing.emplace_back(calibration.value("time", "") + "#" + id, std::move(calibration));
+    }
+  }
+  std::sort(missing.begin(), missing.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  int added = 0;
+  for (const auto& [order, calibration] : missing) {
+    std::string why;
+    if (AddCalibration(calibration, &why)) {
+      ++added;
+    } else {
+      NoteError(why, /*connection=*/false);
     }
   }
   if (added > 0) {
@@ -266,24 +304,109 @@ void RegistryOutbox::Reconcile() {
   }
 }
 
+void RegistryOutbox::Reject(const std::string& path, const std::string& local_id,
+                            const std::string& why) {
+  std::error_code ec;
+  fs::rename(path, fs::path(Dir()) / "rejected" / fs::path(path).filename(), ec);
+  spdlog::error("registry: {} moved to outbox/rejected/: {}", fs::path(path).filename().string(),
+                why);
+  NoteError(fmt::format("{} rejected: {}", fs::path(path).filename().string(), why),
+            /*connection=*/false);
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++rejected_;
+  --depth_;
+  queued_ids_.erase(local_id);
+  rejected_ids_.insert(local_id);
+}
+
+bool RegistryOutbox::SendEntry(const std::string& path, bool hold_after_commit) {
+  RegistryDb* db = db_.get();
+  nlohmann::json entry;
+  std::string error;
+  if (!ReadJsonFile(path, &entry, &error)) {
+    std::error_code ec;
+    if (fs::exists(path, ec) && !fs::is_regular_file(path, ec)) {
+      Reject(path, "", error);
+      return true;
+    }
+    // A file that cannot be read now (EMFILE, EIO) is tried again later; one that is not JSON
+    // (edited by hand, a disk fault) is kept aside.
+    if (error.find("is not JSON") == std::string::npos) {
+      NoteError(error, /*connection=*/false);
+      return false;
+    }
+    Reject(path, "", error);
+    return true;
+  }
+  if (!entry.is_object() || !entry.contains("document") || !entry["local_id"].is_string()) {
+    Reject(path, "", "not an outbox entry");
+    return true;
+  }
+  const std::string local_id = entry["local_id"].get<std::string>();
+  RegistryDb::PutResult result;
+  if (!db->Put(entry, &result, &error)) {
+    if (result.permanent) {
+      // The server refused this entry itself (SQLSTATE class 22 data or 23 constraint): kept
+      // aside so that the others still go; the station's own files keep it.
+      Reject(path, local_id, error);
+      return true;
+    }
+    db->Close();  // anything else may pass: the connection is made afresh after a wait
+    NoteError(error);
+    return false;
+  }
+  if (hold_after_commit) {
+    spdlog::warn("registry: {} committed; holding before it leaves the outbox (test hook)",
+                 entry.value("key", ""));
+    std::unique_lock<std::mutex> lock(mutex_);
+    wake_.wait(lock, [this] { return stop_; });
+    return false;
+  }
+  {
+    std::ofstream log(fs::path(Dir()) / "sent.log", std::ios::app);
+    log << local_id << "\n";
+  }
+  std::error_code ec;
+  fs::remove(path, ec);
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!last_error_.empty()) {
+    spdlog::info("registry: sending again (the last error, {}: {})", last_error_time_, last_error_);
+    last_error_.clear();
+    last_error_time_.clear();
+  }
+  ++(result.already_there ? already_there_ : sent_);
+  --depth_;
+  queued_ids_.erase(local_id);
+  last_sent_time_ = drivers::UtcNowIso8601();
+  if (result.already_there) {
+    spdlog::info("registry: {} was there already (sent again after a crash)",
+                 entry.value("key", ""));
+  }
+  return true;
+}
+
 void RegistryOutbox::Run() {
-  RegistryDb db;
+  RegistryDb& db = *db_;
   Reconcile();
   double retry_s = kFirstRetryS;
   auto last_contact = std::chrono::steady_clock::now() - kHeartbeat;
   const bool hold_after_commit = HoldAfterCommit();
   while (true) {
+    bool reconcile = false;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       if (stop_) return;
       added_ = false;
+      reconcile = reconcile_due_;
+      reconcile_due_ = false;
     }
+    if (reconcile) Reconcile();
     const std::vector<fs::path> waiting = WaitingEntries(Dir());
     const bool heartbeat_due = std::chrono::steady_clock::now() - last_contact >= kHeartbeat;
     bool failed = false;
     if ((!waiting.empty() || heartbeat_due) && !db.connected()) {
       std::string error;
-      if (db.Connect(options_, &error)) {
+      if (db.Connect(options_, /*migrate=*/true, &error)) {
         std::lock_guard<std::mutex> lock(mutex_);
         connected_ = true;
         schema_ = db.schema_version();
@@ -295,69 +418,19 @@ void RegistryOutbox::Run() {
       }
     }
     for (const auto& path : failed ? std::vector<fs::path>{} : waiting) {
-      nlohmann::json entry;
-      std::string error;
-      if (!ReadJsonFile(path, &entry, &error) || !entry.is_object() ||
-          !entry.contains("document")) {
-        // Not an entry (edited by hand, a disk fault): kept aside and counted, never retried.
-        std::error_code ec;
-        fs::rename(path, fs::path(Dir()) / "rejected" / path.filename(), ec);
-        spdlog::error("registry: {} is not an outbox entry; moved to outbox/rejected/",
-                      path.string());
-        std::lock_guard<std::mutex> lock(mutex_);
-        ++rejected_;
-        --depth_;
-        continue;
-      }
-      bool inserted = false;
-      if (!db.Put(entry, &inserted, &error)) {
-        if (db.connected()) {
-          // The server refused this entry itself (a constraint, bad data): kept aside so that
-          // the others still go; the station's own files keep it.
-          std::error_code ec;
-          fs::rename(path, fs::path(Dir()) / "rejected" / path.filename(), ec);
-          NoteError(fmt::format("{} refused: {}", path.filename().string(), error));
-          std::lock_guard<std::mutex> lock(mutex_);
-          connected_ = true;
-          ++rejected_;
-          --depth_;
-          continue;
-        }
-        db.Close();
-        NoteError(error);
-        failed = true;
-        break;
-      }
-      if (hold_after_commit) {
-        spdlog::warn("registry: {} committed; holding before it leaves the outbox (test hook)",
-                     entry.value("key", ""));
-        std::unique_lock<std::mutex> lock(mutex_);
-        wake_.wait(lock, [this] { return stop_; });
-        return;
-      }
-      const std::string local_id = entry.value("local_id", "");
       {
-        std::ofstream log(fs::path(Dir()) / "sent.log", std::ios::app);
-        log << local_id << "\n";
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (stop_) return;
       }
-      std::error_code ec;
-      fs::remove(path, ec);
+      try {
+        if (!SendEntry(path.string(), hold_after_commit)) {
+          failed = true;
+          break;
+        }
+      } catch (const std::exception& e) {  // a malformed entry's JSON (nlohmann's type errors)
+        Reject(path.string(), "", e.what());
+      }
       last_contact = std::chrono::steady_clock::now();
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (!last_error_.empty()) {
-        spdlog::info("registry: sending again (the last error, {}: {})", last_error_time_,
-                     last_error_);
-        last_error_.clear();
-        last_error_time_.clear();
-      }
-      ++(inserted ? sent_ : already_there_);
-      --depth_;
-      queued_ids_.erase(local_id);
-      last_sent_time_ = drivers::UtcNowIso8601();
-      if (!inserted) {
-        spdlog::info("registry: {} was there already (sent again after a crash)",
-                     entry.value("key", ""));
-      }
     }
     if (!failed && waiting.empty() && heartbeat_due && db.connected()) {
       std::string error;
@@ -383,7 +456,7 @@ void RegistryOutbox::Run() {
       wake_.wait_for(lock, std::chrono::duration<double>(retry_s), [this] { return stop_; });
       retry_s = std::min(retry_s * 2.0, options_.retry_max_s);
     } else {
-      wake_.wait_for(lock, kHeartbeat, [this] { return stop_ || added_; });
+      wake_.wait_for(lock, kHeartbeat, [this] { return stop_ || added_ || reconcile_due_; });
     }
   }
 }

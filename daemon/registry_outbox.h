@@ -3,12 +3,14 @@
 // write into a device, goes to the registry through files in the state directory, so the
 // station keeps working while the database is down and loses nothing:
 //
-//   outbox/NNNN-KIND-DEVICE.MODEL.vN.json   an entry waiting (written atomically and fsynced
+//   outbox/SEQUENCE-KIND-LOCALID.json       an entry waiting (written atomically and fsynced
 //                                           after the calibration's own file)
 //   outbox/sent.log                         the entries the registry has committed, one local id
 //                                           a line (appended after the commit)
-//   outbox/rejected/                        entries the registry refused as malformed (counted;
-//                                           never retried, never deleted)
+//   outbox/rejected/                        entries the registry refused as malformed (SQLSTATE
+//                                           class 22 or 23) or that are not entries: counted,
+//                                           never retried (not even by the reconciliation),
+//                                           never deleted
 //
 // Its own thread sends the entries oldest first, each in one transaction keyed by an
 // idempotency key (station, device serial, model, version and the calibration's time): a crash
@@ -20,12 +22,14 @@
 
 #include <condition_variable>
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
 #include <thread>
 
+#include "daemon/registry_db.h"
 #include "daemon/registry_options.h"
 
 namespace turncal::daemon {
@@ -58,10 +62,16 @@ class RegistryOutbox {
 
  private:
   void Run();
-  bool WriteEntry(const std::string& kind, const std::string& local_id, nlohmann::json entry,
-                  std::string* error);
+  // `unique`: an entry with the same local id already queued makes this one unnecessary (a
+  // calibration reconciled while the worker adds it); a device write's later entry is not.
+  bool WriteEntry(const std::string& kind, const std::string& local_id, bool unique,
+                  nlohmann::json entry, std::string* error);
   void Reconcile();
-  void NoteError(const std::string& error);
+  // One waiting entry to the registry. False when the database went away (the caller backs off).
+  bool SendEntry(const std::string& path, bool hold_after_commit);
+  void Reject(const std::string& path, const std::string& local_id, const std::string& why);
+  // The last error for `status`; `connection`: the database went away with it.
+  void NoteError(const std::string& error, bool connection = true);
   std::string Dir() const;
 
   const std::string state_dir_;
@@ -72,12 +82,15 @@ class RegistryOutbox {
   std::condition_variable wake_;
   bool stop_ = false;
   bool added_ = false;                // an entry was added since the thread last looked
-  std::uint64_t sequence_ = 0;        // orders the entries written in one nanosecond
+  bool reconcile_due_ = false;        // an entry could not be written: look at the state dir again
+  std::uint64_t sequence_ = 0;        // orders the entries (continues after the highest left)
   std::set<std::string> queued_ids_;  // local ids with an entry in outbox/
+  std::set<std::string> rejected_ids_;  // local ids in outbox/rejected/: never queued again
   std::int64_t depth_ = 0, sent_ = 0, already_there_ = 0, rejected_ = 0;
   bool connected_ = false;
   int schema_ = 0;
   std::string last_error_, last_error_time_, last_sent_time_;
+  std::unique_ptr<RegistryDb> db_;  // the thread's connection (Cancel from the destructor)
   std::thread thread_;
 };
 

@@ -77,6 +77,17 @@ CREATE TABLE device_writes (
 );
 CREATE INDEX device_writes_by_device ON device_writes (device_id, written_at);
 )sql"},
+      {"certificates issued from the registry, by their content hash", R"sql(
+CREATE TABLE certificates (
+  sha256         text PRIMARY KEY,
+  calibration_id bigint NOT NULL REFERENCES calibrations(id),
+  number         text NOT NULL,
+  issued_at      timestamptz NOT NULL DEFAULT now(),
+  issued_by      text NOT NULL DEFAULT current_user,
+  html           text NOT NULL
+);
+CREATE INDEX certificates_by_calibration ON certificates (calibration_id);
+)sql"},
   };
   return migrations;
 }

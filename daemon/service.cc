@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <thread>
 
 #include "daemon/notify.h"
 #include "daemon/persistence.h"
@@ -152,8 +153,12 @@ bool Service::StartStation(std::string* error) {
   StationOptions so = options_.station;
   so.state_dir = options_.state_dir;
   if (!so.IsValid(error)) return false;
+  if (options_.registry.enabled() && options_.state_dir.empty()) {
+    *error = "[registry] needs a state directory: the outbox lives there (--state-dir)";
+    return false;
+  }
   DropStation(drop_reason_);  // closes the journal before a new station opens it
-  if (!StartRegistry(error)) return false;
+  StartRegistry();
   if (registry_) {
     so.on_calibration_saved = [registry = registry_](const nlohmann::json& calibration) {
       std::string why;
@@ -177,24 +182,30 @@ bool Service::StartStation(std::string* error) {
   return true;
 }
 
-bool Service::StartRegistry(std::string* error) {
+void Service::StartRegistry() {
   const RegistryOptions& r = options_.registry;
-  if (registry_ && registry_options_ == std::make_tuple(r.conninfo, r.password_file, r.station)) {
-    return true;  // a reload that left [registry] as it was
+  const auto wanted = std::make_tuple(r.conninfo, r.password_file, r.station, r.retry_max_s,
+                                      r.connect_timeout_s, options_.state_dir);
+  if (registry_ && registry_options_ == wanted) return;  // a reload that left it as it was
+  if (registry_) {
+    // Stopped off the loop: a connection attempt under way may take connect_timeout, longer
+    // than the watchdog allows the loop. (The old station, which held it too, is gone.)
+    std::thread([old = std::move(registry_)]() mutable { old.reset(); }).detach();
   }
-  registry_.reset();  // the old station, which held it too, is gone (DropStation)
-  if (!r.enabled()) return true;
-  if (options_.state_dir.empty()) {
-    *error = "[registry] needs a state directory: the outbox lives there (--state-dir)";
-    return false;
-  }
+  registry_.reset();
+  if (!r.enabled()) return;
   auto registry = std::make_shared<RegistryOutbox>(options_.state_dir, r);
-  if (!registry->Start(error)) return false;
+  std::string error;
+  if (!registry->Start(&error)) {
+    // The station works without it; the calibrations wait in their files (the next start's
+    // reconciliation sends them).
+    spdlog::error("{}", error);
+    return;
+  }
   registry_ = std::move(registry);
-  registry_options_ = std::make_tuple(r.conninfo, r.password_file, r.station);
+  registry_options_ = wanted;
   spdlog::info("registry: station '{}', outbox in {}/outbox", StationName(r.station),
                options_.state_dir);
-  return true;
 }
 
 void Service::DropStation(const std::string& why) {

@@ -53,7 +53,8 @@ class Service {
  private:
   bool StartStation(std::string* error);
   // The registry's outbox for options_.registry (kept across a reload that did not change it).
-  bool StartRegistry(std::string* error);
+  // A failure is logged; the station works without it.
+  void StartRegistry();
   void StartDevices();
   // Drains the solve worker, then destroys the station; clients still waiting for a pose get a
   // POSE_REJECTED saying `why` (nothing when empty).
@@ -128,7 +129,7 @@ class Service {
   // The registry's outbox (daemon/registry_outbox.h); null without [registry]. Shared with the
   // station's persistence, which adds to it from the solve worker.
   std::shared_ptr<RegistryOutbox> registry_;
-  std::tuple<std::string, std::string, std::string> registry_options_;
+  std::tuple<std::string, std::string, std::string, double, int, std::string> registry_options_;
   std::int64_t started_ns_ = 0;
   std::int64_t last_flush_ns_ = 0;
   std::int64_t ready_deadline_ns_ = 0;

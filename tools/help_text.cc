@@ -141,16 +141,19 @@ const std::map<std::string, Manual>& Manuals() {
         "CSV (one row per calibration and parameter) or JSON (whole documents with the writes "
         "into the device); stations shows each station's last contact; certificate SERIAL "
         "--model M writes the calibration certificate of its latest passing (or --version N) "
-        "calibration (docs/CERTIFICATES.md); migrate brings the schema to this turncal's "
+        "calibration (docs/CERTIFICATES.md) and records it with its hash; verify FILE checks that a "
+        "certificate is unchanged and that the registry issued it; migrate brings the schema to this turncal's "
         "version. The connection: --db, else TURNCAL_REGISTRY, else "
         "--config's [registry] (the password from its password_file).",
         "turncal registry history 6251.12345 --db 'host=db.lab dbname=turncal'\n"
         "turncal registry latest 6251.12345 --model accel13 --json\n"
         "turncal registry export --format csv --passing -o calibrations.csv\n"
         "turncal registry stations --config /etc/turncal/turncald.toml\n"
-        "turncal registry certificate 6251.12345 --model mag13 -o cert.html --pdf cert.pdf",
-        "0 done; 1 nothing found (history, latest); 2 the registry cannot be reached, refused "
-        "the query, or a command-line mistake",
+        "turncal registry certificate 6251.12345 --model mag13 -o cert.html --pdf cert.pdf\n"
+        "turncal registry verify cert.html",
+        "0 done (verify: unchanged and issued by the registry); 1 nothing found (history, "
+        "latest, certificate), or verify: edited or not issued by the registry; 2 the registry "
+        "cannot be reached, refused the query, or a command-line mistake",
         "docs/REGISTRY.md, README (A registry for several stations)"}},
       {"certificate",
        {"The calibration certificate of a device's calibration, one printable HTML file per "

@@ -4,12 +4,14 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <nlohmann/json.hpp>
 
 #include "daemon/atomic_file.h"
 #include "daemon/config.h"
 #include "daemon/registry_db.h"
+#include "report/certificate.h"
 #include "tools/certificate_command.h"
 
 namespace turncal::tools {
@@ -31,7 +33,7 @@ struct RegistryArgs {
 
 // The connection: --db, else TURNCAL_REGISTRY, else --config's (or /etc/turncal/turncald.toml's)
 // [registry]. Exit 2 with a message when none works.
-int Open(const RegistryArgs& a, RegistryDb* db) {
+int Open(const RegistryArgs& a, RegistryDb* db, bool migrate = false) {
   daemon::RegistryOptions options;
   std::string error;
   std::string config = a.config_path;
@@ -61,7 +63,7 @@ int Open(const RegistryArgs& a, RegistryDb* db) {
     return 2;
   }
   if (!a.password_file.empty()) options.password_file = a.password_file;
-  if (!db->Connect(options, &error)) {
+  if (!db->Connect(options, migrate, &error)) {
     fmt::print(stderr, "turncal registry: {}\n", error);
     return 2;
   }
@@ -109,6 +111,8 @@ nlohmann::json RowsJson(const RegistryRows& r) {
               : nlohmann::json();
       if (kind == RegistryRows::Kind::kBoolean) {
         o[r.columns[c]] = *row[c] == "t";
+      } else if (kind == RegistryRows::Kind::kJson && !parsed.is_discarded()) {
+        o[r.columns[c]] = parsed;  // jsonb, null included
       } else if (!parsed.is_null() && !parsed.is_discarded()) {
         o[r.columns[c]] = parsed;
       } else {
@@ -131,7 +135,10 @@ ORDER BY c.calibrated_at, c.id)sql";
 
 constexpr const char* kLatestSql = R"sql(
 SELECT DISTINCT ON (c.model) c.model, c.version, c.calibrated_at, s.name AS station,
-       c.device_name AS device, d.model_name, d.firmware, c.software, c.passed, c.parameters,
+       c.device_name AS device,
+       COALESCE(c.provenance->'device_identity'->>'model_name', d.model_name) AS model_name,
+       COALESCE(c.provenance->'device_identity'->>'firmware', d.firmware) AS firmware,
+       c.software, c.passed, c.parameters,
        c.idempotency_key AS key, c.document
 FROM calibrations c JOIN devices d ON d.id = c.device_id JOIN stations s ON s.id = c.station_id
 WHERE d.serial = $1 AND c.passed AND ($2::text IS NULL OR c.model = $2)
@@ -147,7 +154,9 @@ FROM stations s ORDER BY s.name)sql";
 
 // One row per calibration and parameter (long format: every model fits one table).
 constexpr const char* kExportCsvSql = R"sql(
-SELECT s.name AS station, d.serial, d.model_name AS device_model, d.firmware,
+SELECT s.name AS station, d.serial,
+       COALESCE(c.provenance->'device_identity'->>'model_name', d.model_name) AS device_model,
+       COALESCE(c.provenance->'device_identity'->>'firmware', d.firmware) AS firmware,
        c.device_name AS device, c.model, c.version, c.calibrated_at, c.passed, c.software,
        c.chi2, c.dof, c.p_value, p.key AS parameter, p.value->>'value' AS value,
        p.value->>'sigma' AS sigma, p.value->>'unit' AS unit, c.idempotency_key AS key
@@ -158,7 +167,9 @@ WHERE ($1::text IS NULL OR d.serial = $1) AND ($2::text IS NULL OR s.name = $2)
 ORDER BY c.calibrated_at, c.id, p.key)sql";
 
 constexpr const char* kExportJsonSql = R"sql(
-SELECT s.name AS station, d.serial, d.model_name AS device_model, d.firmware, c.model,
+SELECT s.name AS station, d.serial,
+       COALESCE(c.provenance->'device_identity'->>'model_name', d.model_name) AS device_model,
+       COALESCE(c.provenance->'device_identity'->>'firmware', d.firmware) AS firmware, c.model,
        c.version, c.calibrated_at, c.received_at, c.passed, c.idempotency_key AS key,
        (SELECT coalesce(jsonb_agg(w.document ORDER BY w.written_at), '[]'::jsonb)
         FROM device_writes w WHERE w.device_id = d.id AND w.model = c.model
@@ -246,9 +257,12 @@ int RunLatest(const RegistryArgs& a) {
         c.value("software", ""));
     for (const auto& [name, p] : c["parameters"].items()) {
       const nlohmann::json sigma = p.value("sigma", nlohmann::json());
-      fmt::print("  {:<10} {:>14.7g}  sigma {}\n", name, p.value("value", 0.0),
-                 sigma.is_number() ? fmt::format("{:.3g}", sigma.get<double>())
-                                   : std::string("(not determined)"));
+      const nlohmann::json value = p.value("value", nlohmann::json());
+      fmt::print(
+          "  {:<10} {:>14}  sigma {}\n", name,
+          value.is_number() ? fmt::format("{:.7g}", value.get<double>()) : std::string("(none)"),
+          sigma.is_number() ? fmt::format("{:.3g}", sigma.get<double>())
+                            : std::string("(not determined)"));
     }
   }
   return 0;
@@ -301,11 +315,29 @@ int RunExport(const RegistryArgs& a) {
 // passing one. With --station, only that station's.
 constexpr const char* kCertificateSql = R"sql(
 SELECT c.document, s.name AS station, d.serial, d.model_name, d.firmware, d.protocol,
-       c.idempotency_key AS key
+       c.idempotency_key AS key, c.id
 FROM calibrations c JOIN devices d ON d.id = c.device_id JOIN stations s ON s.id = c.station_id
 WHERE d.serial = $1 AND c.model = $2 AND ($3::integer IS NULL OR c.version = $3::integer)
   AND ($4::text IS NULL OR s.name = $4) AND ($3::integer IS NOT NULL OR c.passed)
 ORDER BY c.calibrated_at DESC, c.id DESC LIMIT 2)sql";
+
+// The certificate number the page shows (report/certificate.h's CertificateNumber), from its
+// embedded data; "" when it cannot be found.
+std::string CertificateNumberOf(const std::string& html) {
+  const std::string tag = "<script type=\"application/json\"";
+  const std::size_t at = html.find(tag);
+  if (at == std::string::npos) return "";
+  const std::size_t begin = html.find('>', at);
+  const std::size_t end = html.find("</script>", begin);
+  if (begin == std::string::npos || end == std::string::npos) return "";
+  const nlohmann::json data =
+      nlohmann::json::parse(html.substr(begin + 1, end - begin - 1), nullptr, false);
+  if (!data.is_object()) return "";
+  for (const char* key : {"number", "certificate_number"}) {
+    if (data.contains(key) && data[key].is_string()) return data[key].get<std::string>();
+  }
+  return "";
+}
 
 int RunCertificate(const RegistryArgs& a) {
   RegistryDb db;
@@ -338,17 +370,80 @@ int RunCertificate(const RegistryArgs& a) {
   source.calibration = nlohmann::json::parse(row[0].value_or("null"), nullptr, false);
   source.station = row[1].value_or("");
   source.source = "registry (key " + row[6].value_or("") + ")";
+  // The identity the calibration was made with (its provenance); the registry adds the serial
+  // (and, for a device that reported none, what the registry knows of it).
   source.identity = {{"serial", row[2].value_or("")}};
-  if (row[3]) source.identity["model_name"] = *row[3];
-  if (row[4]) source.identity["firmware"] = *row[4];
-  if (row[5]) source.identity["protocol"] = *row[5];
+  const nlohmann::json provenance = source.calibration.is_object()
+                                        ? source.calibration.value("provenance", nlohmann::json())
+                                        : nlohmann::json();
+  if (!provenance.is_object() || !provenance["device_identity"].is_object()) {
+    if (row[3]) source.identity["model_name"] = *row[3];
+    if (row[4]) source.identity["firmware"] = *row[4];
+    if (row[5]) source.identity["protocol"] = *row[5];
+  }
   source.issued_utc = a.issued;
-  return WriteCertificate(source, a.output, a.pdf);
+  if (int rc = WriteCertificate(source, a.output, a.pdf)) return rc;
+  // The registry keeps the certificate and its hash: `turncal registry verify` then tells a
+  // certificate it issued from one edited and given a recomputed hash.
+  std::ifstream in(a.output, std::ios::binary);
+  const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const report::CertificateCheck check = report::VerifyCertificateHtml(html);
+  if (!check.ok ||
+      !db.Query("INSERT INTO certificates (sha256, calibration_id, number, html) "
+                "VALUES ($1, $2::bigint, $3, $4) ON CONFLICT (sha256) DO NOTHING",
+                {check.hash_claimed, row[7], CertificateNumberOf(html), html}, nullptr, &error)) {
+    fmt::print(stderr, "turncal registry: the certificate was written but not registered: {}\n",
+               check.ok ? error : check.reason);
+    return 2;
+  }
+  fmt::print("registered: sha256 {} (turncal registry verify {})\n", check.hash_claimed, a.output);
+  return 0;
+}
+
+// `registry verify FILE`: the file is unchanged (its hash) and the registry issued it.
+int RunVerify(const RegistryArgs& a) {
+  std::ifstream in(a.output, std::ios::binary);
+  if (!in) {
+    fmt::print(stderr, "turncal registry: cannot read '{}'\n", a.output);
+    return 2;
+  }
+  const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const report::CertificateCheck check = report::VerifyCertificateHtml(html);
+  if (check.not_a_certificate) {
+    fmt::print(stderr, "turncal registry: '{}' is not a turncal certificate\n", a.output);
+    return 2;
+  }
+  if (!check.ok) {
+    fmt::print("FAILED: {}: {}\n", a.output, check.reason);
+    return 1;
+  }
+  RegistryDb db;
+  if (int rc = Open(a, &db)) return rc;
+  RegistryRows rows;
+  std::string error;
+  if (!db.Query("SELECT t.number, t.issued_at, t.issued_by, c.idempotency_key, t.html = $2 "
+                "FROM certificates t JOIN calibrations c ON c.id = t.calibration_id "
+                "WHERE t.sha256 = $1",
+                {check.hash_claimed, html}, &rows, &error)) {
+    fmt::print(stderr, "turncal registry: {}\n", error);
+    return 2;
+  }
+  if (rows.rows.empty() || rows.rows[0][4] != std::optional<std::string>("t")) {
+    fmt::print(
+        "FAILED: {}: its hash {} is consistent, but the registry did not issue it (edited and "
+        "given a new hash, or made from a state directory and never registered)\n",
+        a.output, check.hash_claimed);
+    return 1;
+  }
+  const auto& r = rows.rows[0];
+  fmt::print("verified: {}: certificate {} issued {} by {} for {}; sha256 {}\n", a.output,
+             Cell(r[0]), Cell(r[1]), Cell(r[2]), Cell(r[3]), check.hash_claimed);
+  return 0;
 }
 
 int RunMigrate(const RegistryArgs& a) {
   RegistryDb db;
-  if (int rc = Open(a, &db)) return rc;
+  if (int rc = Open(a, &db, /*migrate=*/true)) return rc;
   fmt::print("registry schema: version {} (this turncal knows {})\n", db.schema_version(),
              daemon::kRegistrySchemaVersion);
   return 0;
@@ -425,6 +520,13 @@ void AddRegistryCommand(CLI::App* app) {
   c->add_option("--pdf", cert->pdf, "also print it to this PDF with headless Chromium");
   AddConnectionOptions(c, cert);
   c->callback([cert, run] { run(RunCertificate(*cert)); });
+
+  auto verify = std::make_shared<RegistryArgs>();
+  CLI::App* v = cmd->add_subcommand(
+      "verify", "a certificate is unchanged and the registry issued it (its hash is registered)");
+  v->add_option("FILE", verify->output, "the certificate (HTML)")->required();
+  AddConnectionOptions(v, verify);
+  v->callback([verify, run] { run(RunVerify(*verify)); });
 
   auto migrate = std::make_shared<RegistryArgs>();
   CLI::App* m = cmd->add_subcommand(

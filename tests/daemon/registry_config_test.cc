@@ -48,19 +48,30 @@ TEST(RegistryConfig, ThePasswordFileIsOnlyReadWhenNobodyElseMay) {
   const auto dir = std::filesystem::temp_directory_path() / "turncal_registry_config_test";
   std::filesystem::create_directories(dir);
   const std::string path = (dir / "pw").string();
-  std::ofstream(path) << "hunter2  \n";
+  std::ofstream(path) << "hunter2 \r\n";
   ::chmod(path.c_str(), 0600);
   std::string password, error;
   ASSERT_TRUE(ReadPasswordFile(path, &password, &error)) << error;
-  EXPECT_EQ(password, "hunter2");
+  EXPECT_EQ(password, "hunter2 ");  // a password may end in a space; the CRLF's CR goes
   // Relative: in systemd's credentials directory.
   ::setenv("CREDENTIALS_DIRECTORY", dir.c_str(), 1);
   EXPECT_EQ(ResolvePasswordFile("pw"), path);
   ASSERT_TRUE(ReadPasswordFile("pw", &password, &error)) << error;
+  // systemd's credential with an ACL for the service's user: its mask shows as group bits.
+  ::chmod(path.c_str(), 0440);
+  EXPECT_TRUE(ReadPasswordFile("pw", &password, &error)) << error;
   ::unsetenv("CREDENTIALS_DIRECTORY");
   ::chmod(path.c_str(), 0640);
   EXPECT_FALSE(ReadPasswordFile(path, &password, &error));
   EXPECT_NE(error.find("may be read by group or others (mode 0640)"), std::string::npos) << error;
+  ::chmod(path.c_str(), 0604);  // others, even in the credentials directory
+  ::setenv("CREDENTIALS_DIRECTORY", dir.c_str(), 1);
+  EXPECT_FALSE(ReadPasswordFile("pw", &password, &error));
+  ::unsetenv("CREDENTIALS_DIRECTORY");
+  std::ofstream(path, std::ios::trunc) << "\n";
+  ::chmod(path.c_str(), 0600);
+  EXPECT_FALSE(ReadPasswordFile(path, &password, &error));
+  EXPECT_NE(error.find("is empty"), std::string::npos) << error;
   EXPECT_FALSE(ReadPasswordFile((dir / "missing").string(), &password, &error));
   EXPECT_NE(error.find("missing"), std::string::npos) << error;
   std::filesystem::remove_all(dir);
@@ -87,13 +98,15 @@ TEST(RegistryConfig, NoServerIsAClearErrorNotAHang) {
   RegistryOptions o;
   o.conninfo = "host=/nonexistent/turncal port=1 dbname=turncal";
   std::string error;
-  EXPECT_FALSE(db.Connect(o, &error));
+  EXPECT_FALSE(db.Connect(o, /*migrate=*/true, &error));
   EXPECT_FALSE(db.connected());
   EXPECT_NE(error.find("cannot connect to the registry"), std::string::npos) << error;
-  bool inserted = true;
+  RegistryDb::PutResult result;
   EXPECT_FALSE(
-      db.Put({{"kind", "calibration"}, {"document", nlohmann::json::object()}}, &inserted, &error));
-  EXPECT_FALSE(inserted);
+      db.Put({{"kind", "calibration"}, {"document", nlohmann::json::object()}}, &result, &error));
+  EXPECT_FALSE(result.permanent);  // not connected: it may pass later
+  EXPECT_FALSE(db.Put({{"kind", "nonsense"}}, &result, &error));
+  EXPECT_TRUE(result.permanent);
 }
 
 TEST(RegistryConfig, TheMigrationsAreNumberedFromOne) {

@@ -7,7 +7,7 @@ on 127.0.0.1 with a self-signed certificate, scram-sha-256 passwords: the statio
 from a mode-600 file). Then:
 
   1. station line-a (over TLS, verify-full; turncald, `turncal sim --live --controller`, a MIP IMU 6251.00001 and an
-     Xbus IMU 03A00001, 12 poses): every calibration it activated is in the registry once, with
+     Xbus IMU 03A00001, 9 poses): every calibration it activated is in the registry once, with
      its poses, and the registry's document is the station's file; mag13 written into the MIP
      IMU (`turncal device-write`) is in the registry's device_writes once;
   2. a password file that others may read is refused, and so is a server whose certificate
@@ -15,17 +15,20 @@ from a mode-600 file). Then:
   3. station line-b (6251.00003, 03A00004): the server is stopped mid-session (after the first
      calibration arrived); the station keeps calibrating, `status` shows the outbox's depth and
      the last error; with the server still down turncald is killed (-9) with entries in its
-     outbox (between the outbox and the insert);
-  4. the server starts again; turncald starts with a test hook that holds after the first commit,
-     before that entry leaves the outbox, and is killed (-9) there: the entry is in the registry
-     and still in the outbox;
+     outbox (between the outbox and the insert), and the newest entry is removed (as a crash
+     between a calibration's file and its entry leaves it);
+  4. the server starts again; turncald starts (the reconciliation queues the calibration whose
+     entry was removed) with a test hook that holds after the first commit, before that entry
+     leaves the outbox, and is killed (-9) there: the entry is in the registry and still in the
+     outbox;
   5. turncald starts normally: the outbox drains, the held entry is found already there (not
      written twice), and the registry holds every calibration of line-b's state directory once;
   6. IMU 6251.00001 moves to line-b (a second session there, `turncal reset` between):
      `turncal registry history 6251.00001` shows both stations' calibrations, `latest` shows the
      latest passing one (line-b's), export to CSV and JSON hold every calibration,
-     `registry stations` lists both stations, and `registry certificate` writes a certificate
-     whose hash verifies.
+     `registry stations` lists both stations, `registry certificate` writes a certificate
+     whose hash verifies and is registered, and `registry verify` refuses a forgery whose hash
+     was recomputed after an edit.
 
 Usage: e2e_registry_test.py TURNCAL TURNCALD   (exit 77: PostgreSQL is not installed)
 """
@@ -79,6 +82,7 @@ class Station:
 
     def start(self, env_extra=None):
         env = dict(os.environ, **(env_extra or {}))
+        env.pop("PGPASSWORD", None)  # the station's password comes from its file only
         self.runs += 1
         self.daemon = subprocess.Popen(
             [TURNCALD, "--config", f"{self.d}/turncald.toml", "--device", f"mip=mip:{self.d}/mip",
@@ -165,7 +169,7 @@ def main(d):
     pg.init(password=PASSWORD)
     os.environ["PGPASSWORD"] = PASSWORD  # psql's, for the checks
     db = pg.conninfo()
-    cube_poses(TURNCAL, f"{d}/poses.csv", 12)
+    cube_poses(TURNCAL, f"{d}/poses.csv", 9)
 
     # 1. line-a: a MIP and an Xbus IMU, the registry up throughout, reached over TLS (TCP,
     # sslmode=verify-full against the server's certificate).
@@ -177,7 +181,7 @@ def main(d):
     check(tls and tls[0][0] == "t", f"line-a reaches the registry over TLS: {tls}")
     sim = a.simulate(["6251.00001", "03A00001"], 11, f"{d}/poses.csv", "--hold-end", "3000")
     check(wait_until(lambda: '"holding_end"' in open(f"{a.d}/sim11.out").read(), 300, 0.2),
-          "line-a: the 12 poses were answered; the table holds")
+          "line-a: the 9 poses were answered; the table holds")
     # What is written into a device goes to the registry too.
     r = run("device-write", "mip", "--model", "mag13", "--yes", "--socket", f"{a.d}/t.sock")
     check(r.returncode == 0, f"line-a: mag13 written into 6251.00001 (exit {r.returncode})")
@@ -240,12 +244,19 @@ def main(d):
     waiting = len(b.outbox())
     check(waiting == reg["depth"], f"line-b: {waiting} entries in outbox/ as status says")
     b.kill9()  # between the outbox and the insert
+    # A crash between a calibration's file and its outbox entry leaves exactly this: the newest
+    # entry missing. The next start's reconciliation must find it.
+    lost = b.outbox()[-1]
+    lost_key = json.load(open(lost))["key"]
+    os.unlink(lost)
 
     # 4. The server is back; turncald holds after its first commit and is killed there.
     pg.start()
     b.start({"TURNCAL_TEST_REGISTRY_HOLD_AFTER_COMMIT": "1"})
     check(wait_until(lambda: "holding before it leaves the outbox" in b.log(), 60),
           "line-b: the first entry was committed and turncald holds")
+    check("1 calibration(s) of this state directory were not yet sent; queued" in b.log(),
+          "line-b: the calibration without an outbox entry was queued again at the start")
     held = [k for k in registry_keys(pg, "line-b")]
     b.kill9()
     check(len(b.outbox()) == waiting, f"line-b: the committed entry is still in the outbox "
@@ -259,12 +270,13 @@ def main(d):
     check(reg["already_there"] == 1 and reg["sent"] == waiting - 1,
           f"line-b: {reg['sent']} sent, {reg['already_there']} already there (the held one)")
     files_b = check_all_once(pg, b, "line-b after a stopped server and two kill -9")
+    check(lost_key in registry_keys(pg, "line-b"), f"line-b: {lost_key} (its entry lost) arrived")
     check(len(held) < len(files_b), "line-b: calibrations arrived after the restarts")
 
     # 6. 6251.00001 moves from line-a to line-b.
     check(run("reset", "--socket", f"{b.d}/t.sock").returncode == 0, "line-b: reset")
     sim = b.simulate(["6251.00001", "03A00004"], 13, f"{d}/poses.csv")
-    check(sim.wait(timeout=300) == 0, "line-b: the moved IMU's 12 poses were answered")
+    check(sim.wait(timeout=300) == 0, "line-b: the moved IMU's 9 poses were answered")
     check(wait_until(lambda: (b.registry() or {}).get("depth", 1) == 0 and not b.outbox(), 60),
           "line-b: the outbox drained")
     check_all_once(pg, b, "line-b after the second session")
@@ -306,6 +318,22 @@ def main(d):
     html = open(f"{d}/cert.html").read() if r.returncode == 0 else ""
     check(r.returncode == 0 and v.returncode == 0 and "6251.00001" in html and "line-b" in html,
           f"registry certificate: line-b's accel13 of 6251.00001, hash verified ({v.stdout.strip()})")
+    r = run("registry", "verify", f"{d}/cert.html", "--db", db)
+    check(r.returncode == 0 and "verified" in r.stdout,
+          f"registry verify: the certificate is registered ({r.stdout.strip()})")
+    # A forgery: one digit changed and the hash recomputed by the public recipe. The file is
+    # self-consistent (certificate --verify passes) but the registry did not issue it.
+    import hashlib
+    import re
+    h = re.search(r'turncal-certificate-sha256" content="([0-9a-f]{64})', html).group(1)
+    forged = html.replace("line-b", "line-x", 1).replace(h, "0" * 64)
+    new_h = hashlib.sha256(forged.encode()).hexdigest()
+    open(f"{d}/forged.html", "w").write(forged.replace("0" * 64, new_h))
+    check(run("certificate", "--verify", f"{d}/forged.html").returncode == 0,
+          "a forgery with a recomputed hash passes certificate --verify (the hash alone)")
+    r = run("registry", "verify", f"{d}/forged.html", "--db", db)
+    check(r.returncode == 1 and "did not issue it" in r.stdout,
+          f"registry verify refuses the forgery: {r.stdout.strip()}")
     dup = pg.psql("SELECT count(*) - count(DISTINCT document) FROM calibrations")[0][0]
     check(dup == "0", "no calibration document is in the registry twice")
     b.stop()
