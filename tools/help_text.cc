@@ -141,8 +141,10 @@ const std::map<std::string, Manual>& Manuals() {
         "CSV (one row per calibration and parameter) or JSON (whole documents with the writes "
         "into the device); stations shows each station's last contact; certificate SERIAL "
         "--model M writes the calibration certificate of its latest passing (or --version N) "
-        "calibration (docs/CERTIFICATES.md) and records it with its hash; verify FILE checks that a "
-        "certificate is unchanged and that the registry issued it; migrate brings the schema to this turncal's "
+        "calibration (docs/CERTIFICATES.md) and records it with its hash; verify FILE checks that "
+        "a "
+        "certificate is unchanged and that the registry issued it; migrate brings the schema to "
+        "this turncal's "
         "version. The connection: --db, else TURNCAL_REGISTRY, else "
         "--config's [registry] (the password from its password_file).",
         "turncal registry history 6251.12345 --db 'host=db.lab dbname=turncal'\n"
