@@ -339,9 +339,20 @@ std::string CertificateNumberOf(const std::string& html) {
   return "";
 }
 
+// Certificates are kept from schema 2 on.
+bool HasCertificates(const RegistryDb& db) {
+  if (db.schema_version() >= 2) return true;
+  fmt::print(stderr,
+             "turncal registry: the registry's schema is version {}; certificates need 2: run "
+             "`turncal registry migrate` (or start a station of this turncal)\n",
+             db.schema_version());
+  return false;
+}
+
 int RunCertificate(const RegistryArgs& a) {
   RegistryDb db;
   if (int rc = Open(a, &db)) return rc;
+  if (!HasCertificates(db)) return 2;
   RegistryRows rows;
   std::string error;
   const std::optional<std::string> version =
@@ -419,6 +430,7 @@ int RunVerify(const RegistryArgs& a) {
   }
   RegistryDb db;
   if (int rc = Open(a, &db)) return rc;
+  if (!HasCertificates(db)) return 2;
   RegistryRows rows;
   std::string error;
   if (!db.Query("SELECT t.number, t.issued_at, t.issued_by, c.idempotency_key, t.html = $2 "
