@@ -11,12 +11,19 @@
 
 #include "core/frames/reference.h"
 #include "drivers/mip/mip_stored.h"
+#include "drivers/mip/mip_stored_write.h"
 
 namespace turncal::daemon {
 
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// A quantity to write, with what the device holds now (to_write and sigma come later).
+StoredWrite Planned(std::uint8_t descriptor, std::vector<double> stored) {
+  return {drivers::mip::StoredQuantityKey(descriptor), descriptor, std::move(stored), {}, {},
+          drivers::mip::StoredQuantityUnit(descriptor)};
+}
 
 double F32(double v) { return static_cast<double>(static_cast<float>(v)); }
 
@@ -219,12 +226,7 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
     }
     const double unit = acc ? kStandardGravity_mps2 : 1.0;
     const Eigen::Vector3d old_value = *old;
-    writes.push_back({acc ? "accel_bias_g" : "gyro_bias_radps",
-                      acc ? std::uint8_t{0x37} : std::uint8_t{0x38},
-                      Values(old_value),
-                      {},
-                      {},
-                      acc ? "g" : "rad/s"});
+    writes.push_back(Planned(acc ? std::uint8_t{0x37} : std::uint8_t{0x38}, Values(old_value)));
     compose = [old_value, unit, M_old](const AffineCorrection& x) {
       const Eigen::Vector3d b = -x.A.inverse() * x.c;
       return Values(Eigen::Vector3d(old_value + M_old.inverse() * b / unit));
@@ -261,8 +263,8 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
       refuse("the stored soft-iron matrix is singular");
       return plan;
     }
-    writes.push_back({"hard_iron_gauss", 0x3A, Values(h_old), {}, {}, "Gauss"});
-    writes.push_back({"soft_iron", 0x3B, Values(S_old), {}, {}, ""});
+    writes.push_back(Planned(0x3A, Values(h_old)));
+    writes.push_back(Planned(0x3B, Values(S_old)));
     // New output m' = M_new S_new (raw - h_new) = M_new M_old^-1 P (m - b) with
     // h_new = h_old + S_old^-1 M_old^-1 b and S_new = M_old^-1 P M_old S_old.
     compose = [S_old, h_old, M_old](const AffineCorrection& x) {
@@ -296,7 +298,7 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
   if (q.transform) {
     const double turn_deg =
         std::acos(std::clamp((R_model.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / M_PI;
-    writes.push_back({"sensor_to_vehicle", 0x33, Values(M_old), {}, {}, ""});
+    writes.push_back(Planned(0x33, Values(M_old)));
     const Composition triad = compose;
     compose = [triad, transform_values](const AffineCorrection& x) {
       std::vector<double> v = triad(x);
@@ -356,20 +358,21 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
   return plan;
 }
 
+nlohmann::json JsonNumbers(const std::vector<double>& values) {
+  nlohmann::json a = nlohmann::json::array();
+  for (double x : values) a.push_back(std::isfinite(x) ? nlohmann::json(x) : nlohmann::json());
+  return a;
+}
+
 nlohmann::json ToJson(const DeviceWritePlan& plan) {
   nlohmann::json writes = nlohmann::json::array();
-  const auto numbers = [](const std::vector<double>& v) {
-    nlohmann::json a = nlohmann::json::array();
-    for (double x : v) a.push_back(std::isfinite(x) ? nlohmann::json(x) : nlohmann::json());
-    return a;
-  };
   for (const StoredWrite& w : plan.writes) {
     writes.push_back({{"quantity", w.quantity},
                       {"name", drivers::mip::StoredQuantityName(w.descriptor)},
                       {"descriptor", fmt::format("0x0C 0x{:02X}", w.descriptor)},
-                      {"stored", numbers(w.stored)},
-                      {"to_write", numbers(w.to_write)},
-                      {"sigma", numbers(w.sigma)},
+                      {"stored", JsonNumbers(w.stored)},
+                      {"to_write", JsonNumbers(w.to_write)},
+                      {"sigma", JsonNumbers(w.sigma)},
                       {"unit", w.unit}});
   }
   nlohmann::json stream_A = nlohmann::json::array();

@@ -83,6 +83,9 @@ struct StoredWrite {
   std::string unit;              // g, rad/s, Gauss, "" (the matrix)
 };
 
+// A list of numbers as JSON, a non-finite one as null.
+nlohmann::json JsonNumbers(const std::vector<double>& values);
+
 struct DeviceWritePlan {
   std::string device, model, serial;
   int version = 0;

@@ -19,6 +19,7 @@
 #include "daemon/service.h"
 #include "daemon/service_device_write_job.h"
 #include "drivers/mip/mip_stored.h"
+#include "drivers/mip/mip_stored_write.h"
 #include "drivers/transport/transport.h"
 #include "protocol/free_json.h"
 #include "protocol/messages.h"
@@ -30,57 +31,6 @@ namespace {
 // The device's output is averaged over this long before and after a write (at least 20 samples,
 // at most 1000).
 constexpr double kWindowSeconds = 2.0;
-
-nlohmann::json Numbers(const std::vector<double>& v) {
-  nlohmann::json a = nlohmann::json::array();
-  for (double x : v) a.push_back(x);
-  return a;
-}
-
-const char* KeyOf(std::uint8_t descriptor) {
-  switch (descriptor) {
-    case 0x37:
-      return "accel_bias_g";
-    case 0x38:
-      return "gyro_bias_radps";
-    case 0x3A:
-      return "hard_iron_gauss";
-    case 0x33:
-      return "sensor_to_vehicle";
-    default:
-      return "soft_iron";
-  }
-}
-
-const char* UnitOf(std::uint8_t descriptor) {
-  switch (descriptor) {
-    case 0x37:
-      return "g";
-    case 0x38:
-      return "rad/s";
-    case 0x3A:
-      return "Gauss";
-    default:
-      return "";
-  }
-}
-
-// `stored` with `descriptor`'s values replaced by `values`.
-void SetStored(StoredCalibration* stored, std::uint8_t descriptor, const std::vector<double>& v) {
-  if ((descriptor == 0x3B || descriptor == 0x33) && v.size() == 9) {
-    Eigen::Matrix3d m;
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) m(r, c) = v[static_cast<std::size_t>(3 * r + c)];
-    }
-    (descriptor == 0x3B ? stored->soft_iron : stored->transform) = m;
-    return;
-  }
-  if (v.size() != 3) return;
-  const Eigen::Vector3d x(v[0], v[1], v[2]);
-  if (descriptor == 0x37) stored->accel_bias = x;
-  if (descriptor == 0x38) stored->gyro_bias = x;
-  if (descriptor == 0x3A) stored->hard_iron = x;
-}
 
 std::string Join(const std::vector<std::string>& parts, const char* separator) {
   std::string out;
@@ -242,7 +192,7 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
     for (const StoredWrite& w : plan.writes) {
       job->steps.push_back(
           {w.descriptor, w.to_write, drivers::mip::StoredValues(job->device_before, w.descriptor)});
-      SetStored(&job->device_after, w.descriptor, w.to_write);
+      drivers::mip::SetStoredValues(&job->device_after, w.descriptor, w.to_write);
     }
     job->as_if = as_if_now;
     job->save = args.save;
@@ -273,12 +223,12 @@ void Service::HandleDeviceWrite(const std::shared_ptr<ClientSession>& client,
       const auto back = drivers::mip::StoredValues(r.as_if, d);
       if (back.empty() || now == back) continue;
       job->steps.push_back({d, back, now});
-      list.push_back({{"quantity", KeyOf(d)},
+      list.push_back({{"quantity", drivers::mip::StoredQuantityKey(d)},
                       {"name", drivers::mip::StoredQuantityName(d)},
                       {"descriptor", fmt::format("0x0C 0x{:02X}", d)},
-                      {"stored", Numbers(now)},
-                      {"to_write", Numbers(back)},
-                      {"unit", UnitOf(d)}});
+                      {"stored", JsonNumbers(now)},
+                      {"to_write", JsonNumbers(back)},
+                      {"unit", drivers::mip::StoredQuantityUnit(d)}});
     }
     if (!actual) refusals.push_back(args.device + " has not told its stored calibration yet");
     if (actual && !SameStoredCalibration(*actual, r.in_device)) {

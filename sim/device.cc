@@ -8,6 +8,7 @@
 #include "drivers/bytes.h"
 #include "drivers/mip/mip_decoder.h"
 #include "drivers/mip/mip_encoder.h"
+#include "drivers/mip/mip_stored.h"
 #include "drivers/xbus/mtdata2.h"
 #include "drivers/xbus/xbus_decoder.h"
 #include "drivers/xbus/xbus_encoder.h"
@@ -111,7 +112,12 @@ class MipEmulator final : public ScanningEmulator {
 
   bool streaming() const override { return !idle_ && sensor_stream_on_; }
   drivers::Protocol protocol() const override { return drivers::Protocol::kMip; }
-  void ApplyStored(Sample* s) const override { ApplyMipStored(id_.mip_stored, stored_, s); }
+  // The simulator's sample carries the stored calibration the session was made with (the
+  // identity's power-up values); the device outputs it with stored_ in use: each triad's raw
+  // value recovered through the one and corrected through the other (bit for bit when equal).
+  void ApplyStored(Sample* s) const override {
+    drivers::mip::ReexpressMipOutput(id_.mip_stored, stored_, s);
+  }
   std::optional<drivers::mip::StoredCalibration> mip_stored() const override { return stored_; }
   std::optional<drivers::mip::StoredCalibration> mip_nonvolatile() const override {
     return nonvolatile_;

@@ -74,8 +74,4 @@ bool WriteMipNonvolatile(const std::string& path, const StoredCalibration& value
   return true;
 }
 
-void ApplyMipStored(const StoredCalibration& carried, const StoredCalibration& now, Sample* s) {
-  drivers::mip::ReexpressMipOutput(carried, now, s);
-}
-
 }  // namespace turncal::sim

@@ -39,10 +39,4 @@ bool ReadMipNonvolatile(const std::string& path, const StoredCalibration& known,
 bool WriteMipNonvolatile(const std::string& path, const StoredCalibration& values,
                          std::string* error);
 
-// The simulator's sample, which carries the stored calibration `carried` (the identity's
-// power-up values the session was made with), as the device outputs it with `now` in use: each
-// triad's raw value recovered through `carried` and corrected through `now`. Triads whose values
-// are the same are left bit for bit as they are.
-void ApplyMipStored(const StoredCalibration& carried, const StoredCalibration& now, Sample* s);
-
 }  // namespace turncal::sim

@@ -176,4 +176,49 @@ StoredWriteOutcome WriteStoredCalibration(Dialogue* d, const std::vector<StoredW
   return out;
 }
 
+void SetStoredValues(StoredCalibration* stored, std::uint8_t descriptor,
+                     const std::vector<double>& values) {
+  if ((descriptor == 0x3B || descriptor == 0x33) && values.size() == 9) {
+    Eigen::Matrix3d m;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) m(r, c) = values[static_cast<std::size_t>(3 * r + c)];
+    }
+    (descriptor == 0x3B ? stored->soft_iron : stored->transform) = m;
+    return;
+  }
+  if (values.size() != 3) return;
+  const Eigen::Vector3d x(values[0], values[1], values[2]);
+  if (descriptor == 0x37) stored->accel_bias = x;
+  if (descriptor == 0x38) stored->gyro_bias = x;
+  if (descriptor == 0x3A) stored->hard_iron = x;
+}
+
+const char* StoredQuantityKey(std::uint8_t descriptor) {
+  switch (descriptor) {
+    case 0x37:
+      return "accel_bias_g";
+    case 0x38:
+      return "gyro_bias_radps";
+    case 0x3A:
+      return "hard_iron_gauss";
+    case 0x33:
+      return "sensor_to_vehicle";
+    default:
+      return "soft_iron";
+  }
+}
+
+const char* StoredQuantityUnit(std::uint8_t descriptor) {
+  switch (descriptor) {
+    case 0x37:
+      return "g";
+    case 0x38:
+      return "rad/s";
+    case 0x3A:
+      return "Gauss";
+    default:
+      return "";
+  }
+}
+
 }  // namespace turncal::drivers::mip

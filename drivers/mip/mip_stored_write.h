@@ -55,5 +55,13 @@ StoredWriteOutcome WriteStoredCalibration(Dialogue* dialogue,
 
 // The values of one quantity in a read-back (empty when the device has no such command).
 std::vector<double> StoredValues(const StoredCalibration& stored, std::uint8_t descriptor);
+// Its inverse: `stored` with `descriptor`'s values replaced by `values` (3, or 9 row-major);
+// values of another size leave it as it is.
+void SetStoredValues(StoredCalibration* stored, std::uint8_t descriptor,
+                     const std::vector<double>& values);
+// A quantity's key in turncal's JSON (accel_bias_g, gyro_bias_radps, hard_iron_gauss,
+// soft_iron, sensor_to_vehicle) and its unit (g, rad/s, Gauss; "" for the matrices).
+const char* StoredQuantityKey(std::uint8_t descriptor);
+const char* StoredQuantityUnit(std::uint8_t descriptor);
 
 }  // namespace turncal::drivers::mip

@@ -6,7 +6,6 @@
 #include "sim/mip_storage.h"
 
 #include <gtest/gtest.h>
-
 #include <unistd.h>
 #include <Eigen/Geometry>
 
@@ -16,6 +15,7 @@
 #include "core/frames/reference.h"
 #include "drivers/bytes.h"
 #include "drivers/mip/mip_encoder.h"
+#include "drivers/mip/mip_stored.h"
 #include "sim/device.h"
 
 namespace turncal::sim {
@@ -185,14 +185,14 @@ TEST(MipStoredOutput, ValuesTheSamplesAlreadyCarryAreRecoveredBeforeTheNewOnesAp
   now.hard_iron = Eigen::Vector3d(-0.01, 0, 0.05);
   now.soft_iron = Eigen::Matrix3d::Identity();
   now.accel_bias = Eigen::Vector3d::Zero();
-  ApplyMipStored(carried, now, &s);
+  drivers::mip::ReexpressMipOutput(carried, now, &s);
   EXPECT_LT((*s.mag - (raw_mag - *now.hard_iron)).norm(), 1e-15);
   EXPECT_NEAR(s.acc_mps2->x(), 0.001 * kStandardGravity_mps2, 1e-15);
   // The same values: the sample is left bit for bit.
   Sample same;
   same.mag = Eigen::Vector3d(0.1 / 3, 0.2, 0.3);
   const Eigen::Vector3d before = *same.mag;
-  ApplyMipStored(carried, carried, &same);
+  drivers::mip::ReexpressMipOutput(carried, carried, &same);
   EXPECT_EQ(*same.mag, before);
 }
 
