@@ -58,11 +58,16 @@ bool ReadPasswordFile(const std::string& password_file, std::string* password, s
   return true;
 }
 
+std::string HostName() {
+  char name[256] = {};
+  if (::gethostname(name, sizeof(name) - 1) != 0) return "";
+  return name;
+}
+
 std::string StationName(const std::string& configured) {
   if (!configured.empty()) return configured;
-  char name[256] = {};
-  if (::gethostname(name, sizeof(name) - 1) != 0 || name[0] == '\0') return "station";
-  return name;
+  const std::string host = HostName();
+  return host.empty() ? "station" : host;
 }
 
 }  // namespace turncal::daemon

@@ -31,7 +31,9 @@ std::string ResolvePasswordFile(const std::string& password_file);
 // Reads the password (its first line). False with a message when the file cannot be read or
 // group/others may read it.
 bool ReadPasswordFile(const std::string& password_file, std::string* password, std::string* error);
-// The station's name: `configured`, else the host name.
+// This machine's host name ("" when it cannot be read).
+std::string HostName();
+// The station's name: `configured`, else the host name (else "station").
 std::string StationName(const std::string& configured);
 
 }  // namespace turncal::daemon

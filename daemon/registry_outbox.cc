@@ -3,7 +3,6 @@
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -27,12 +26,6 @@ namespace {
 // Between two heartbeats (the station's last contact) while nothing waits.
 constexpr auto kHeartbeat = std::chrono::seconds(60);
 constexpr double kFirstRetryS = 0.5;
-
-std::string HostName() {
-  char name[256] = {};
-  if (::gethostname(name, sizeof(name) - 1) != 0) return "";
-  return name;
-}
 
 std::string SerialOrName(const nlohmann::json& identity, const std::string& device) {
   for (const char* key : {"serial", "device_id"}) {

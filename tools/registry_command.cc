@@ -321,24 +321,6 @@ WHERE d.serial = $1 AND c.model = $2 AND ($3::integer IS NULL OR c.version = $3:
   AND ($4::text IS NULL OR s.name = $4) AND ($3::integer IS NOT NULL OR c.passed)
 ORDER BY c.calibrated_at DESC, c.id DESC LIMIT 2)sql";
 
-// The certificate number the page shows (report/certificate.h's CertificateNumber), from its
-// embedded data; "" when it cannot be found.
-std::string CertificateNumberOf(const std::string& html) {
-  const std::string tag = "<script type=\"application/json\"";
-  const std::size_t at = html.find(tag);
-  if (at == std::string::npos) return "";
-  const std::size_t begin = html.find('>', at);
-  const std::size_t end = html.find("</script>", begin);
-  if (begin == std::string::npos || end == std::string::npos) return "";
-  const nlohmann::json data =
-      nlohmann::json::parse(html.substr(begin + 1, end - begin - 1), nullptr, false);
-  if (!data.is_object()) return "";
-  for (const char* key : {"number", "certificate_number"}) {
-    if (data.contains(key) && data[key].is_string()) return data[key].get<std::string>();
-  }
-  return "";
-}
-
 // Certificates are kept from schema 2 on.
 bool HasCertificates(const RegistryDb& db) {
   if (db.schema_version() >= 2) return true;
@@ -399,10 +381,13 @@ int RunCertificate(const RegistryArgs& a) {
   std::ifstream in(a.output, std::ios::binary);
   const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   const report::CertificateCheck check = report::VerifyCertificateHtml(html);
-  if (!check.ok ||
-      !db.Query("INSERT INTO certificates (sha256, calibration_id, number, html) "
-                "VALUES ($1, $2::bigint, $3, $4) ON CONFLICT (sha256) DO NOTHING",
-                {check.hash_claimed, row[7], CertificateNumberOf(html), html}, nullptr, &error)) {
+  // The number the page shows (WriteCertificate rendered this content, so it parses).
+  nlohmann::json content;
+  std::string number;
+  if (report::CertificateContent(source, &content, &error)) number = content.value("number", "");
+  if (!check.ok || !db.Query("INSERT INTO certificates (sha256, calibration_id, number, html) "
+                             "VALUES ($1, $2::bigint, $3, $4) ON CONFLICT (sha256) DO NOTHING",
+                             {check.hash_claimed, row[7], number, html}, nullptr, &error)) {
     fmt::print(stderr, "turncal registry: the certificate was written but not registered: {}\n",
                check.ok ? error : check.reason);
     return 2;
