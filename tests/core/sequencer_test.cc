@@ -186,6 +186,29 @@ TEST(NoiseMeter, ASampleMissingATriadIsLeftOutNotTheTriad) {
   EXPECT_GE(meter.outliers(), k / 37);
 }
 
+// A sample without its device time (a frame whose time field a bit error took out under a weak
+// checksum) leaves the rate to the device clock. Before, one such sample in the attempt made the
+// meter take host receive times: for a device clock at ten times real time, ten times its rate
+// (faults_ber-1e-3: a 500 Hz MIP measured at 2814 Hz, its dwells 30 device seconds long).
+TEST(NoiseMeter, ASampleWithoutItsDeviceTimeLeavesTheRateToTheDeviceClock) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> n(0, 1e-3);
+  NoiseMeter meter(NoiseMeterOptions{});
+  NoiseMeter::Status status = NoiseMeter::Status::kCollecting;
+  for (int k = 0; status == NoiseMeter::Status::kCollecting; ++k) {
+    StillSample s;
+    s.t_host_ns = Ns(k * 2e-4);                    // read at 10x: 5000 samples per host second
+    if (k != 700) s.t_device_s = 10.0 + k * 2e-3;  // a 500 Hz device clock
+    s.v[kTriadAcc] = Eigen::Vector3d(n(rng), n(rng), -9.8 + n(rng));
+    s.present = 0b001;
+    status = meter.Add(s);
+  }
+  ASSERT_EQ(status, NoiseMeter::Status::kMeasured) << meter.failure();
+  EXPECT_NEAR(meter.profile().rate_hz, 500.0, 1e-6);
+  ASSERT_TRUE(meter.profile().device_period_s);
+  EXPECT_NEAR(*meter.profile().device_period_s, 2e-3, 1e-9);
+}
+
 // Host times that do not advance (a burst, a capture with broken stamps) cannot make the meter
 // keep samples without bound: it decides after 600 000 (60 s at 10 kHz).
 TEST(NoiseMeter, KeepsAtMostSixHundredThousandSamples) {
