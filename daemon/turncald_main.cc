@@ -4,12 +4,12 @@
 
 #include <CLI/CLI.hpp>
 
-#include "daemon/config.h"
-#include "daemon/journal_log.h"
-#include "daemon/notify.h"
-#include "daemon/options.h"
-#include "daemon/replay_once.h"
-#include "daemon/service.h"
+#include "daemon/service/config.h"
+#include "daemon/service/notify.h"
+#include "daemon/service/options.h"
+#include "daemon/service/service.h"
+#include "daemon/state/journal_log.h"
+#include "daemon/station/replay_once.h"
 #include "turncal/version.h"
 
 int main(int argc, char** argv) {

@@ -1,6 +1,6 @@
 #pragma once
-// The active calibration document (daemon/persistence.h: calibrations/DEVICE.MODEL.json, schema
-// 1) as the report reads it, and the keys the station writes so that a calibration can be
+// The active calibration document (daemon/state/persistence.h: calibrations/DEVICE.MODEL.json,
+// schema 1) as the report reads it, and the keys the station writes so that a calibration can be
 // re-evaluated offline without the daemon's configuration:
 //
 //   "context":    {"g_ned":[3], "B_ned":[3], "mounting":[[3]x3], "accel_output_frame":"case"}

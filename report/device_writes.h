@@ -1,8 +1,8 @@
 #pragma once
-// The report's section on what turncal wrote into the device (issue 23; daemon/device_write.h:
-// the state directory's device_writes/DEVICE.UTCTIME.json entries): per write or restore, when,
-// which calibration, the outcome, the values written, and the verification by measurement with
-// its largest |z|.
+// The report's section on what turncal wrote into the device (issue 23;
+// daemon/state/device_write_record.h: the state directory's device_writes/DEVICE.UTCTIME.json
+// entries): per write or restore, when, which calibration, the outcome, the values written, and the
+// verification by measurement with its largest |z|.
 
 #include <nlohmann/json.hpp>
 #include <string>

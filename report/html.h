@@ -1,7 +1,7 @@
 #pragma once
 // The calibration report (issue "Calibration report"): one self-contained HTML document for one
 // device -- inline CSS and inline SVG, no script, nothing fetched -- from the device's active
-// calibrations (daemon/persistence.h: calibrations/DEVICE.MODEL.json). Per model: identity,
+// calibrations (daemon/state/persistence.h: calibrations/DEVICE.MODEL.json). Per model: identity,
 // time, software, poses, gate verdict with reasons and notes; the parameter table in ppm,
 // degrees, mg, mG with 1 sigma and the gate's tolerance; the model's other form (G, K, the
 // mag22 gauge); residuals per pose before and after calibration; pose coverage on the sphere;

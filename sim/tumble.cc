@@ -3,27 +3,15 @@
 #include <cmath>
 
 #include "core/frames/rotations.h"
+#include "core/modeling/parameter_matrices.h"
 
 namespace turncal::sim {
 namespace {
 
-// imu_tk's triad matrices (core/models/free_common.h writes the same for the models).
-Eigen::Matrix3d UpperTK(const double* p) {
-  Eigen::Matrix3d m;
-  m << p[0], -p[3] * p[1], p[4] * p[2], 0, p[1], -p[5] * p[2], 0, 0, p[2];
-  return m;
-}
-Eigen::Matrix3d FullTK(const double* p) {
-  Eigen::Matrix3d m;
-  m << p[0], -p[3] * p[1], p[4] * p[2], p[6] * p[0], p[1], -p[5] * p[2], -p[7] * p[0], p[8] * p[1],
-      p[2];
-  return m;
-}
-Eigen::Matrix3d Symmetric(const double* s) {
-  Eigen::Matrix3d m;
-  m << s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5];
-  return m;
-}
+// imu_tk's triad matrices, as the models write them (core/modeling/parameter_matrices.h).
+using params::FullTK;
+using params::Symmetric;
+using params::UpperTK;
 
 Eigen::Vector3d Gaussian3(std::mt19937_64* rng, double sigma) {
   std::normal_distribution<double> n(0.0, sigma);

@@ -10,6 +10,7 @@
 
 #include "drivers/decoder_factory.h"
 #include "drivers/transport/recording.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 
@@ -20,6 +21,15 @@ class CountingSink : public drivers::DecoderSink {
   void OnFrame(const drivers::FrameView&) override {}
   void OnSample(const Sample&) override {}
 };
+
+// The codes RunCapture returns.
+constexpr Manual kCaptureManual = {
+    "Records a live port into a .tcap capture (bytes with their host times) until Ctrl-C or "
+    "SIGTERM. A capture replays through the whole pipeline: turncald --replay FILE --once.",
+    "turncal capture --device imu=mip:/dev/ttyUSB0@921600 -o session.tcap\n"
+    "turncal capture --device imu=xbus:tcp://10.0.0.5:4001 -o xsens.tcap --note \"bench 2\"",
+    "0 when stopped by a signal; 1 the port failed; 2 a command-line mistake",
+    "docs/capture-format.md"};
 
 int RunCapture(const std::string& spec_text, const std::string& output, const std::string& note) {
   std::string error;
@@ -100,7 +110,7 @@ int RunDevices(bool json) {
   const auto ports = drivers::ListSerialPorts(&error);
   if (!error.empty()) {
     fmt::print(stderr, "turncal devices: {}\n", error);
-    return 1;
+    return 2;  // as a daemon that cannot be reached (client_commands.cc, kDevicesManual)
   }
   for (const auto& p : ports) {
     if (json) {
@@ -137,6 +147,7 @@ void AddCaptureCommands(CLI::App* app) {
   auto note = std::make_shared<std::string>();
   auto* cmd = app->add_subcommand(
       "capture", "record a live port into a .tcap capture until SIGINT/SIGTERM (Ctrl-C)");
+  SetManual(cmd, kCaptureManual);
   cmd->add_option("--device", *spec, "NAME=PROTOCOL:PORT[@BAUD]")->required();
   cmd->add_option("-o,--output", *output, "the capture to write")->required();
   cmd->add_option("--note", *note, "free text stored in the capture's header");

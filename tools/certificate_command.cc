@@ -18,14 +18,38 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/atomic_file.h"
+#include "daemon/state/atomic_file.h"
+#include "daemon/state/state_dir.h"
 #include "drivers/transport/transport.h"
+#include "tools/help_text.h"
 #include "tools/report_state_dir.h"
 
 namespace turncal::tools {
 namespace fs = std::filesystem;
 
 namespace {
+
+// The codes CertFail, RunCertificateCommand and VerifyCertificateFile return.
+constexpr Manual kCertificateManual = {
+    "The calibration certificate of a device's calibration, one printable HTML file per "
+    "model (and with --pdf a PDF printed by headless Chromium): identity (serial, model, "
+    "firmware), station, date, environment (reference gravity and field), procedure (poses, "
+    "dwell, rates, noise model), every parameter with its standard uncertainty u = 1 sigma, "
+    "its expanded uncertainty U = 2u (k = 2, about 95 %, GUM) and the gate's tolerance on u, "
+    "the verdict, the software and a SHA-256 content hash. It reads the active calibration "
+    "(STATE_DIR/calibrations/DEVICE.MODEL.json) or, with --version, an earlier one "
+    "(history/). --verify recomputes the hash: any edit of the file fails. The same "
+    "calibration gives the same file (no date is added unless --issued).",
+    "turncal certificate --state-dir /var/lib/turncal --device imu1 --station lab-2 -o "
+    "cert.html   # cert.accel13.html, cert.mag13.html, ...\n"
+    "turncal certificate --state-dir /var/lib/turncal --device imu1 --model accel13 "
+    "--version 4 -o imu1-v4.html --pdf imu1-v4.pdf\n"
+    "turncal certificate --verify cert.accel13.html",
+    "0 written (or --verify: the hash matches); 1 --verify: the file was changed after "
+    "turncal wrote it; 2 no such calibration, a malformed calibration, a file that cannot "
+    "be written, Chromium missing or failing (--pdf), an unreadable file or not a "
+    "certificate (--verify), or a command-line mistake",
+    "docs/CERTIFICATES.md, docs/models.md (the parameters)"};
 
 int CertFail(const std::string& message) {
   fmt::print(stderr, "turncal certificate: {}\n", message);
@@ -129,14 +153,13 @@ bool CertCollect(const CertificateArgs& a, std::vector<nlohmann::json>* out, std
       return false;
     }
     for (const auto& model : a.models) {
-      const std::string name = a.device + "." + model;
+      const daemon::StateDir places(a.state_dir);
       std::string text;
-      std::string path = (fs::path(a.state_dir) / "calibrations" / (name + ".json")).string();
+      std::string path = places.ActiveCalibration(a.device, model).string();
       nlohmann::json j;
       if (CertReadFile(path, &text)) j = nlohmann::json::parse(text, nullptr, false);
       if (!j.is_object() || !j.contains("version") || j["version"] != a.version) {
-        path = (fs::path(a.state_dir) / "history" / fmt::format("{}.v{}.json", name, a.version))
-                   .string();
+        path = places.HistoryCalibration(a.device, model, a.version).string();
         if (!CertReadFile(path, &text)) {
           *error = fmt::format("no version {} of {} {} ('{}' cannot be read)", a.version, a.device,
                                model, path);
@@ -284,6 +307,7 @@ void AddCertificateCommand(CLI::App* app) {
       "certificate",
       "calibration certificate (HTML, PDF) of a device's calibration, with a content hash; "
       "--verify checks one");
+  SetManual(c, kCertificateManual);
   c->add_option("--state-dir", args->state_dir, "the state directory of turncald (calibrations/)");
   c->add_option("--device", args->device, "the device, as turncald names it");
   c->add_option("--model", args->models,

@@ -3,7 +3,8 @@
 // running turncald (docs/protocol.md). Every command takes --socket PATH (default
 // $TURNCAL_SOCKET or /run/turncal/turncal.sock) and --json (the daemon's replies as they are,
 // one JSON object a line). Exit codes: 0 done (pose: captured on every device), 1 pose rejected
-// on some device, 2 a usage or connection error, or an ERROR reply.
+// on some device, 2 a usage or connection error, or an ERROR reply. watch, pose and rate are in
+// watch_command.cc and pose_command.cc; AddClientCommands adds them in their place.
 
 #include <CLI/CLI.hpp>
 

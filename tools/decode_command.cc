@@ -9,6 +9,7 @@
 #include "drivers/capture/tcap.h"
 #include "drivers/decoder_factory.h"
 #include "drivers/xbus/xbus_encoder.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 
@@ -265,6 +266,16 @@ int RunCapture(const DecodeArgs& args, const drivers::DecoderOptions& base) {
   return reader.error().empty() ? 0 : 1;
 }
 
+// The codes RunDecode returns.
+constexpr Manual kDecodeManual = {
+    "Decodes a capture or a raw byte stream: frames and samples (SI units), then one SUMMARY "
+    "line with the counters (frames, samples, bad checksums, skipped bytes).",
+    "turncal decode session.tcap | tail -1\n"
+    "turncal decode stream.bin --protocol mip --json | head",
+    "0 decoded (bad frames are counted, not fatal); 2 the input cannot be read or a "
+    "command-line mistake",
+    "docs/DRIVERS.md, docs/TROUBLESHOOTING.md (baud rate)"};
+
 int RunDecode(const DecodeArgs& args) {
   drivers::DecoderOptions options;
   if (!MakeOptions(args, &options)) return 2;
@@ -304,6 +315,7 @@ void AddDecodeCommand(CLI::App* app) {
   auto args = std::make_shared<DecodeArgs>();
   auto* cmd = app->add_subcommand(
       "decode", "decode a raw byte stream: frames and samples, then a summary of the counters");
+  SetManual(cmd, kDecodeManual);
   cmd->add_option("file", args->file, "a .tcap capture, or a raw byte stream (.bin)")->required();
   cmd->add_option("--protocol", args->protocol,
                   "mip | gx2 | xbus | xbus-legacy (required for a raw stream; overrides a "

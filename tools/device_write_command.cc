@@ -8,6 +8,7 @@
 #include <string>
 
 #include "tools/client_connection.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 
@@ -88,6 +89,32 @@ void PrintOutcome(const nlohmann::json& r) {
   if (r.contains("history")) fmt::print("  recorded in {}\n", r.value("history", ""));
 }
 
+// The codes WriteFail and Run return.
+constexpr Manual kDeviceWriteManual = {
+    "Writes DEVICE's active calibration of MODEL into the device's stored calibration (MIP: "
+    "accelerometer and gyro bias, hard-iron offset, soft-iron matrix), composed with what "
+    "it stores now. Shows the plan first: the stored values, the values to write with their "
+    "1 sigma, the expected change of the output, what stays in turncald's stream (scale "
+    "factors and misalignments, which MIP cannot hold), and every refusal (gate not passed, "
+    "another serial, other stored values than the calibration was made with, Xbus, GX2). "
+    "With --transform it also writes the sensor-to-vehicle transform (0x33), so that the "
+    "device outputs in the frame the calibration corrects into (every output turns). "
+    "Then asks (or --yes), writes, reads back bit for bit, saves only with --save, and "
+    "verifies by measurement: the device's uncorrected output after the write must be the "
+    "output predicted from before it (0.1 % false alarms; a device that moved: at the next "
+    "captured pose). A failure rolls back. The replaced "
+    "values are kept in the state directory (device_writes/); --restore puts back what the "
+    "device held before turncal wrote into it. "
+    "Needs a permitted uid. {socket}",
+    "turncal device-write imu1 --model mag13 --dry-run\n"
+    "turncal device-write imu1 --model mag13 --save\n"
+    "turncal device-write imu1 --restore",
+    "0 written and verified (or --dry-run: the plan may be written); 1 written but not "
+    "verified, not confirmed, or (--dry-run) refused; 2 refused, failed (the device is "
+    "as it was, or the reply says its state), the daemon cannot be reached, or a "
+    "command-line mistake",
+    "docs/protocol.md (Writing a calibration into the device)"};
+
 int WriteFail(const std::string& message) {
   fmt::print(stderr, "turncal device-write: {}\n", message);
   return 2;
@@ -149,6 +176,7 @@ void AddDeviceWriteCommand(CLI::App* app) {
   auto args = std::make_shared<DeviceWriteArgs>();
   auto* cmd = app->add_subcommand(
       "device-write", "write a device's active calibration into its stored calibration (MIP)");
+  SetManual(cmd, kDeviceWriteManual);
   cmd->add_option("--socket", args->socket, "turncald's socket ($TURNCAL_SOCKET)")
       ->capture_default_str();
   cmd->add_flag("--json", args->json, "print the daemon's JSON replies, one object a line");

@@ -12,13 +12,14 @@
 #include "core/estimation/free_calibrator.h"
 #include "core/estimation/sensor_class.h"
 #include "core/sequencing/free_intervals.h"
-#include "daemon/atomic_file.h"
-#include "daemon/capture_replay.h"
+#include "daemon/state/atomic_file.h"
+#include "daemon/station/capture_replay.h"
 #include "drivers/capture/raw_stream.h"
 #include "drivers/capture/tcap.h"
 #include "drivers/capture/text_log.h"
 #include "drivers/decoder_factory.h"
 #include "report/free_report.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 namespace {
@@ -186,6 +187,29 @@ std::vector<std::string> Split(const std::string& list) {
   return out;
 }
 
+// The codes Run returns.
+constexpr Manual kFreeManual = {
+    "Calibrates without a turntable: a tumble by hand or on a fixture with unknown angles. "
+    "The sequencer finds the static intervals itself (free mode: its stillness thresholds "
+    "from the noise it measures, or from --sensor-class), then fits the free models -- "
+    "accel9 (|f| = g), gyro9 (the gyro's turn between intervals against gravity's direction; "
+    "gyro9g adds the g-sensitivity), magellipsoid (hard and soft iron; magsphere when the "
+    "data cannot carry an ellipsoid, with the reason), accmag (the rotation between the "
+    "magnetometer and the accelerometer from the constant dip) -- each with 1 sigma, the "
+    "chi^2 fit check, the rank and its weakest direction, the spatial coverage (MicroStrain's "
+    "18 x 32 bins), the gate and the next orientation to add. Inputs: a .tcap capture (its "
+    "pose events ignored), a raw device stream (--protocol; --rate when it carries no "
+    "clock), a text or CSV log (--columns, per-triad --*-offset and --*-scale), or imu_tk's "
+    "two .mat files.",
+    "turncal free tumble.tcap --intervals\n"
+    "turncal free xsens_acc.mat xsens_gyro.mat --acc-offset 32768 --acc-scale 0.0026391 "
+    "--gyr-offset 32768 --gyr-scale 0.0001598 --gravity 9.81744 --models accel9,gyro9g\n"
+    "turncal free log.csv --columns t,ax,ay,az,mx,my,mz --field 0.5 --html report.html\n"
+    "turncal free compass.bin --protocol mip --rate 50 --sensor-class consumer",
+    "0 every model fitted and passed its gate; 1 a model was refused or could not be fitted; "
+    "2 the input cannot be read or a command-line mistake",
+    "docs/FREE.md, docs/ACCURACY.md (\"Without a turntable\")"};
+
 int Run(const FreeArgs& a) {
   std::string error, source;
   std::vector<Sample> samples;
@@ -290,6 +314,7 @@ void AddFreeCommand(CLI::App* app) {
       "free",
       "Calibrate without a turntable (a tumble by hand or on a fixture): the static intervals, "
       "then accel9, gyro9, magellipsoid, accmag with sigma, coverage, gate and advice");
+  SetManual(cmd, kFreeManual);
   cmd->add_option("files", a->files,
                   "a .tcap capture, a raw device stream (--protocol), a text/CSV log (--columns), "
                   "or imu_tk's two .mat files (accelerometer then gyro)")

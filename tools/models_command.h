@@ -1,5 +1,5 @@
 #pragma once
-// `turncal models [--json]`: the measurement models and their parameters.
+// `turncal models [--json]`: every measurement model, turntable and free, and its parameters.
 
 #include <CLI/CLI.hpp>
 

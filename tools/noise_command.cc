@@ -10,10 +10,11 @@
 #include <sstream>
 
 #include "core/analysis/allan.h"
-#include "daemon/atomic_file.h"
-#include "daemon/capture_replay.h"
+#include "daemon/state/atomic_file.h"
+#include "daemon/station/capture_replay.h"
 #include "drivers/capture/tcap.h"
 #include "drivers/decoder_factory.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 
@@ -180,6 +181,22 @@ std::string Svg(const std::vector<AxisResult>& results) {
   return o + "</svg>\n";
 }
 
+// The codes Run returns.
+constexpr Manual kNoiseManual = {
+    "The overlapping Allan deviation of a static recording, per triad and axis, and the noise "
+    "model fitted to it: white-noise density N, a Gauss-Markov bias instability (sigma, tau), "
+    "a random walk, and the IEEE flat-bottom figure. Record the sensor at rest for several "
+    "times the longest correlation time you care about; use --from/--to to keep only the "
+    "rest. The fitted values go into turncald.toml's [station] as the noise prior: "
+    "acc_noise_density, acc_bias_instability (GM sigma), bias_tau_s (GM tau), acc_random_walk "
+    "and the mag_ equivalents (docs/ACCURACY.md \"Drift\").",
+    "turncal noise rest.tcap --svg rest-allan.svg\n"
+    "turncal noise imu.bin --protocol mip --to 600 --json\n"
+    "turncal noise xsens_acc.mat --triad acc --to 45   # imu_tk's text columns (raw counts)",
+    "0 done; 1 no triad with enough samples, or the plot cannot be written; 2 the input "
+    "cannot be read or a command-line mistake",
+    "docs/ACCURACY.md (the noise model), SENSORS.md"};
+
 int Run(const NoiseArgs& args) {
   std::string error;
   const std::optional<bool> is_capture = drivers::FileLooksLikeCapture(args.file);
@@ -340,6 +357,7 @@ void AddNoiseCommand(CLI::App* app) {
       "noise",
       "Allan deviation of a static recording per triad and axis, with the fitted noise model "
       "(white density, Gauss-Markov bias instability, random walk)");
+  SetManual(cmd, kNoiseManual);
   cmd->add_option("file", args->file,
                   "a .tcap capture, a raw device stream (with --protocol), or text columns: time "
                   "in s then x y z (imu_tk's .mat files, CSV)")

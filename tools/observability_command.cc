@@ -11,9 +11,11 @@
 #include "core/analysis/publish_gate.h"
 #include "core/frames/units.h"
 #include "core/planning/pose_planner.h"
+#include "montecarlo/nominal_target.h"
 #include "protocol/observability_json.h"
 #include "protocol/pose_file.h"
 #include "sim/synthetic.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 
@@ -109,6 +111,14 @@ void PrintDirections(const char* title, const std::vector<NamedDirection>& list)
   }
 }
 
+// The codes RunStructural, RunData and the observability command's callback return.
+constexpr Manual kObservabilityManual = {
+    "Rank, null directions (in parameter names) and Cramer-Rao sigma of a model: the paper's "
+    "structural test, or the data-level test over a pose list.",
+    "turncal observability --model mag22 --structural\n"
+    "turncal observability --model accel13 --poses cube.csv --json",
+    "0; 2 a command-line mistake or an unreadable pose list", "docs/OBSERVABILITY.md"};
+
 int RunStructural(const MeasurementModel& model, const ObservabilityArgs& args,
                   const SensorClass& sensor) {
   ObservabilityOptions options;
@@ -192,6 +202,17 @@ bool ParseRange(const std::string& text, AxisRange* out) {
   return true;
 }
 
+// The codes RunPlan returns.
+constexpr Manual kPlanManual = {
+    "The D-optimal next pose over a grid of reachable table angles, and the greedy plan until "
+    "the predicted publish gate passes.",
+    "turncal plan --model accel13 --model mag13\n"
+    "turncal plan --poses captured.csv --gamma -60:60:30 --json",
+    "0 a plan (also when the gate is not predicted within the horizon); 2 a command-line "
+    "mistake, an unreadable pose list, or options the planner refuses (too many candidate poses "
+    "or rate segments)",
+    "docs/OBSERVABILITY.md"};
+
 int RunPlan(const ObservabilityArgs& args) {
   SensorClass sensor;
   SensorClassByName(args.sensor_class, &sensor);
@@ -226,36 +247,27 @@ int RunPlan(const ObservabilityArgs& args) {
       fmt::print(stderr, "turncal plan: {}\n", error);
       return 2;
     }
-    PlanningTarget t;
-    t.model = model.get();
+    PlanningTarget t = montecarlo::NominalPlanningTarget(
+        *model, sensor, args.drift_model != "independent", args.dwell_s, args.rate_hz);
     t.theta = Point(*model, args, sensor, false);
-    const CalibratorOptions o = args.drift_model == "independent"
-                                    ? OptionsForClass(*model, sensor)
-                                    : DriftOptionsForClass(*model, sensor);
-    t.sqrt_information = ExpectedPoseSqrtInformation(*model, sensor, o, args.dwell_s, args.rate_hz);
-    t.drift = o.drift;
     // The captured poses as if taken in the file's order from home at the table's rates.
     for (const auto& p : captured)
       t.captured.push_back({p, Eigen::Vector3d::Zero(), t.sqrt_information, nullptr});
     if (t.drift.enabled()) t.captured_windows = options.motion.DwellWindows(captured, args.dwell_s);
-    if (model->sensor() == SensorKind::kGyroscope) {
-      t.noise_density = o.noise_density;
-      t.rate_accuracy = o.rate_accuracy;
-    }
-    t.pose_offset_sigma = o.pose_offset_sigma;
-    GateDefaultsForClass(args.sensor_class, &t.gate);
     t.gate.accept_gauge_dependent_correction = args.accept_gauge;
     targets.push_back(t);
     models.push_back(std::move(model));
   }
   const NextPoseAdvice a = PlanNextPose(targets, options);
+  // The planner refuses only what the options ask (a grid or a rate list with too many
+  // candidates): a mistake, 2, as the ranges it checks above (kPlanManual).
   if (args.json) {
     fmt::print("{}\n", ToJson(a).dump());
-    return a.ok ? 0 : 1;
+    return a.ok ? 0 : 2;
   }
   if (!a.ok) {
     fmt::print(stderr, "turncal plan: {}\n", a.error);
-    return 1;
+    return 2;
   }
   auto show = [](const TablePose& p) {
     if (p.is_rate()) {
@@ -336,6 +348,12 @@ int RunPlan(const ObservabilityArgs& args) {
   return 0;
 }
 
+constexpr Manual kPosesManual = {
+    "Prints a pose list (CSV, degrees) of a standard design, for --poses FILE of the other "
+    "commands and for a controller script.",
+    "turncal poses --design cube > cube.csv\nturncal poses --design random --count 40 --seed 3",
+    "0; 2 a command-line mistake", "docs/OBSERVABILITY.md"};
+
 int RunPoses(const std::string& design, int count, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::vector<TablePose> poses;
@@ -373,6 +391,7 @@ void AddObservabilityCommands(CLI::App* app) {
   poses_cmd->add_option("--seed", *seed, "random seed")->capture_default_str();
   poses_cmd->callback(
       [design, count, seed] { throw CLI::RuntimeError(RunPoses(*design, *count, *seed)); });
+  SetManual(poses_cmd, kPosesManual);
 
   auto args = std::make_shared<ObservabilityArgs>();
   auto* obs = app->add_subcommand(
@@ -401,6 +420,7 @@ void AddObservabilityCommands(CLI::App* app) {
     throw CLI::RuntimeError(args->structural ? RunStructural(*model, *args, sensor)
                                              : RunData(*model, *args, sensor));
   });
+  SetManual(obs, kObservabilityManual);
 
   auto plan_args = std::make_shared<ObservabilityArgs>();
   auto* plan = app->add_subcommand(
@@ -459,6 +479,7 @@ void AddObservabilityCommands(CLI::App* app) {
       "credit a gyroscope with no move between static poses ([sequencer] moves = false)");
   AddCommonOptions(plan, plan_args.get());
   plan->callback([plan_args] { throw CLI::RuntimeError(RunPlan(*plan_args)); });
+  SetManual(plan, kPlanManual);
 }
 
 }  // namespace turncal::tools

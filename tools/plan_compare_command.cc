@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "sim/simulated_session.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 
@@ -52,6 +53,15 @@ struct Tally {
     return n ? sum / n : 0.0;
   }
 };
+
+// The codes RunPlanCompare returns.
+constexpr Manual kPlanVsCubeManual = {
+    "Simulated sessions: how many poses the real calibrator and gate need along the 26-pose "
+    "cube and with next-pose planning.",
+    "turncal plan-vs-cube --model accel13 --class consumer --runs 50",
+    "0; 2 a command-line "
+    "mistake",
+    "docs/OBSERVABILITY.md"};
 
 int RunPlanCompare(const PlanCompareArgs& args) {
   SensorClass sensor;
@@ -150,6 +160,7 @@ void AddPlanCompareCommand(CLI::App* app) {
       "simulated sessions in memory (independent pose noise; for drift and bytes use montecarlo "
       "--pipeline): poses and table seconds the real calibrator and gate need along the 26-pose "
       "cube sequence and with next-pose planning");
+  SetManual(cmd, kPlanVsCubeManual);
   cmd->add_option("--model", args->model, "model (turncal models)")->capture_default_str();
   cmd->add_option("--class", args->sensor_class, "industrial|consumer (noise and tolerances)")
       ->check(CLI::IsMember({"industrial", "consumer"}))

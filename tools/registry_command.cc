@@ -8,11 +8,12 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
-#include "daemon/atomic_file.h"
-#include "daemon/config.h"
-#include "daemon/registry_db.h"
+#include "daemon/registry/registry_db.h"
+#include "daemon/service/config.h"
+#include "daemon/state/atomic_file.h"
 #include "report/certificate.h"
 #include "tools/certificate_command.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 
@@ -30,6 +31,32 @@ struct RegistryArgs {
   bool json = false;
   bool passing_only = false;
 };
+
+// The codes Open and the Run functions below return.
+constexpr Manual kRegistryManual = {
+    "The calibration registry that every station's outbox fills (PostgreSQL; [registry] in "
+    "turncald.toml). history SERIAL lists every calibration of a device at every station "
+    "(a device that moved between stations shows both); latest SERIAL shows its latest "
+    "passing calibration of each model with the parameters and their sigma; export writes "
+    "CSV (one row per calibration and parameter) or JSON (whole documents with the writes "
+    "into the device); stations shows each station's last contact; certificate SERIAL "
+    "--model M writes the calibration certificate of its latest passing (or --version N) "
+    "calibration (docs/CERTIFICATES.md) and records it with its hash; verify FILE checks that "
+    "a "
+    "certificate is unchanged and that the registry issued it; migrate brings the schema to "
+    "this turncal's "
+    "version. The connection: --db, else TURNCAL_REGISTRY, else "
+    "--config's [registry] (the password from its password_file).",
+    "turncal registry history 6251.12345 --db 'host=db.lab dbname=turncal'\n"
+    "turncal registry latest 6251.12345 --model accel13 --json\n"
+    "turncal registry export --format csv --passing -o calibrations.csv\n"
+    "turncal registry stations --config /etc/turncal/turncald.toml\n"
+    "turncal registry certificate 6251.12345 --model mag13 -o cert.html --pdf cert.pdf\n"
+    "turncal registry verify cert.html",
+    "0 done (verify: unchanged and issued by the registry); 1 nothing found (history, "
+    "latest, certificate), or verify: edited or not issued by the registry; 2 the registry "
+    "cannot be reached, refused the query, or a command-line mistake",
+    "docs/REGISTRY.md, README (A registry for several stations)"};
 
 // The connection: --db, else TURNCAL_REGISTRY, else --config's (or /etc/turncal/turncald.toml's)
 // [registry]. Exit 2 with a message when none works.
@@ -464,6 +491,7 @@ void AddRegistryCommand(CLI::App* app) {
       app->add_subcommand("registry",
                           "the calibration registry across stations (PostgreSQL): history, latest, "
                           "export, stations, migrate");
+  SetManual(cmd, kRegistryManual);
   cmd->require_subcommand(1);
   auto run = [](int rc) { throw CLI::RuntimeError(rc); };
 

@@ -1,7 +1,7 @@
 #pragma once
 // `turncal registry ...` (issue 24, docs/REGISTRY.md): the calibration registry that every
-// station's outbox fills (daemon/registry_outbox.h), queried: a serial's history, its latest
-// passing calibration, an export to CSV or JSON, the stations' last contact, the schema's
+// station's outbox fills (daemon/registry/registry_outbox.h), queried: a serial's history, its
+// latest passing calibration, an export to CSV or JSON, the stations' last contact, the schema's
 // migration, and a certificate straight from the registry.
 
 #include <CLI/CLI.hpp>

@@ -7,8 +7,8 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
-#include "daemon/atomic_file.h"
-#include "daemon/device_write.h"
+#include "daemon/state/atomic_file.h"
+#include "daemon/state/device_write_record.h"
 #include "drivers/transport/transport.h"
 #include "report/html.h"
 #include "tools/client_connection.h"

@@ -9,6 +9,9 @@
 #include <set>
 #include <sstream>
 
+#include "daemon/state/atomic_file.h"
+#include "daemon/state/persistence.h"
+#include "daemon/state/state_dir.h"
 #include "protocol/sequencer_json.h"
 
 namespace turncal::tools {
@@ -23,20 +26,9 @@ std::string DeviceOfFileName(const fs::path& file) {
   return dot == std::string::npos ? stem : stem.substr(0, dot);
 }
 
-bool ReadJsonFile(const fs::path& path, nlohmann::json* out, std::string* error) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream text;
-  if (in) text << in.rdbuf();
-  if (!in || in.bad()) {
-    *error = fmt::format("cannot read '{}'", path.string());
-    return false;
-  }
-  try {
-    *out = nlohmann::json::parse(text.str());
-  } catch (const nlohmann::json::exception& e) {  // parse errors, numbers out of range (1e400)
-    *error = fmt::format("'{}' is not valid JSON: {}", path.string(), e.what());
-    return false;
-  }
+// A calibration document: JSON with "device" and "model".
+bool ReadCalibrationFile(const fs::path& path, nlohmann::json* out, std::string* error) {
+  if (!daemon::ReadJsonFile(path, out, error)) return false;
   if (!out->is_object() || !out->contains("device") || !(*out)["device"].is_string() ||
       !out->contains("model") || !(*out)["model"].is_string()) {
     *error = fmt::format("'{}' is not a calibration (no \"device\" and \"model\")", path.string());
@@ -45,20 +37,15 @@ bool ReadJsonFile(const fs::path& path, nlohmann::json* out, std::string* error)
   return true;
 }
 
-// The journal's records of `device`, in order; empty when the file is absent.
+// The journal's records of `device`, in order, as written; empty when the file is absent.
 std::vector<nlohmann::json> JournalRecords(const fs::path& journal, const std::string& device) {
+  std::vector<daemon::JournalEntry> entries;
+  int skipped = 0;
+  std::string why;
   std::vector<nlohmann::json> records;
-  std::ifstream in(journal, std::ios::binary);
-  std::string line;
-  while (in && std::getline(in, line)) {
-    const auto j = nlohmann::json::parse(line, nullptr, false);
-    if (j.is_discarded() || !j.is_object() || !j.contains("device") || !j["device"].is_string() ||
-        j["device"].get<std::string>() != device || !j.contains("record")) {
-      continue;
-    }
-    PoseRecord record;
-    std::string why;
-    if (protocol::ParsePoseRecord(j["record"], &record, &why)) records.push_back(j["record"]);
+  if (!daemon::PoseJournal::LoadFile(journal.string(), &entries, &skipped, &why)) return records;
+  for (auto& e : entries) {
+    if (e.device == device) records.push_back(std::move(e.record_json));
   }
   return records;
 }
@@ -85,7 +72,7 @@ bool SamePoses(const nlohmann::json& poses, const std::vector<nlohmann::json>& r
 bool ReadStateDirCalibrations(const std::string& state_dir, const std::string& device,
                               std::map<std::string, DeviceCalibrations>* out, std::string* error) {
   out->clear();
-  const fs::path dir = fs::path(state_dir) / "calibrations";
+  const fs::path dir = daemon::StateDir(state_dir).CalibrationsDir();
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) {
     *error = fmt::format("no calibrations found: '{}' is not a directory{}", dir.string(),
@@ -120,7 +107,7 @@ bool ReadStateDirCalibrations(const std::string& state_dir, const std::string& d
   for (const auto& f : files) {
     if (!device.empty() && DeviceOfFileName(f) != device) continue;
     nlohmann::json calibration;
-    if (!ReadJsonFile(f, &calibration, error)) return false;
+    if (!ReadCalibrationFile(f, &calibration, error)) return false;
     const std::string name = calibration["device"].get<std::string>();
     // The file name decides which device a calibration is (and so the report's file name): a
     // document that names another device is refused, not filed elsewhere.
@@ -144,12 +131,13 @@ std::string AttachJournalRecords(const std::string& state_dir, nlohmann::json* c
   const std::string device = c.value("device", "");
   const nlohmann::json poses = provenance.value("poses", nlohmann::json::array());
   // The current session's journal first, then archived sessions, newest first.
-  std::vector<fs::path> journals = {fs::path(state_dir) / "journal.jsonl"};
+  const daemon::StateDir places(state_dir);
+  std::vector<fs::path> journals = {places.Journal()};
   std::vector<fs::path> archived;
   std::error_code ec;
-  for (fs::directory_iterator it(fs::path(state_dir) / "sessions", ec), end; !ec && it != end;
+  for (fs::directory_iterator it(places.SessionsDir(), ec), end; !ec && it != end;
        it.increment(ec)) {
-    archived.push_back(it->path() / "journal.jsonl");
+    archived.push_back(daemon::StateDir(it->path()).Journal());
   }
   std::sort(archived.rbegin(), archived.rend());
   journals.insert(journals.end(), archived.begin(), archived.end());

@@ -1,5 +1,5 @@
 #pragma once
-// Reading a state directory's active calibrations for `turncal report` (daemon/persistence.h:
+// Reading a state directory's active calibrations for `turncal report` (daemon/state/persistence.h:
 // STATE_DIR/calibrations/DEVICE.MODEL.json), without the daemon.
 
 #include <map>

@@ -8,10 +8,11 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "daemon/capture_replay.h"
+#include "daemon/station/capture_replay.h"
 #include "protocol/pose_file.h"
 #include "protocol/sequencer_json.h"
 #include "sim/synthetic.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 namespace {
@@ -37,6 +38,14 @@ std::string PoseText(const TablePose& p) {
   return fmt::format("({:.1f}, {:.1f}, {:.1f}) deg", p.phi_rad * 180 / M_PI,
                      p.gamma_rad * 180 / M_PI, p.psi_rad * 180 / M_PI);
 }
+
+// The codes RunSequence returns.
+constexpr Manual kSequenceManual = {
+    "Replays a capture through the decoders and the position sequencer only: which poses were "
+    "captured or rejected, and why. Useful to tune stillness settings on a real recording.",
+    "turncal sequence session.tcap\n"
+    "turncal sequence table.tcap --schedule poses.csv --dwell 5 --json",
+    "0; 2 the capture cannot be read or a command-line mistake", "docs/SEQUENCER.md"};
 
 int RunSequence(const SequenceArgs& args) {
   daemon::ReplayOptions options;
@@ -188,6 +197,7 @@ void AddSequenceCommand(CLI::App* app) {
       "sequence",
       "replay a capture through the decoders and the position sequencer: which poses were "
       "captured or rejected, and why");
+  SetManual(cmd, kSequenceManual);
   cmd->add_option("file", args->file, "a .tcap capture")->required();
   cmd->add_option("--schedule", args->schedule,
                   "schedule mode: poses in order (JSON or CSV, degrees) assigned to still "

@@ -21,13 +21,14 @@
 
 #include "core/frames/units.h"
 #include "core/modeling/measurement_model.h"
-#include "daemon/atomic_file.h"
+#include "daemon/state/atomic_file.h"
 #include "drivers/capture/tcap.h"
 #include "protocol/pose_file.h"
 #include "protocol/pose_json.h"
 #include "sim/capture.h"
 #include "sim/live.h"
 #include "sim/session_sim.h"
+#include "tools/help_text.h"
 
 namespace turncal::tools {
 
@@ -234,6 +235,19 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
       {"samples", session.samples.size()},
       {"poses", pose_list}};
 }
+
+// The codes RunController and RunSim return.
+constexpr Manual kSimManual = {
+    "Simulates a whole turntable session: a .tcap capture of a MIP, GX2 or Xbus device and a "
+    "truth file. With --live it streams into ptys in real time (or --live-speed times "
+    "faster); with --controller it also plays the lab's controller on turncald's socket.",
+    "turncal sim --protocol mip --seed 1 --truth-out truth.json -o session.tcap\n"
+    "turncal sim --protocol xbus --live /tmp/imu --poses poses.csv --live-speed 2\n"
+    "turncal sim --protocol mip --protocol xbus --live /tmp/a /tmp/b --controller "
+    "/run/turncal/turncal.sock",
+    "0 written (with --controller: every pose captured); 1 some pose was not captured or a "
+    "write failed; 2 a command-line mistake",
+    "docs/SIMULATOR.md"};
 
 int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
   std::vector<sim::LiveSimDevice> devices;
@@ -480,6 +494,7 @@ void AddSimCommand(CLI::App* app) {
   auto args = std::make_shared<SimCommandArgs>();
   auto* cmd = app->add_subcommand(
       "sim", "simulate a complete turntable session as a .tcap capture with a truth file");
+  SetManual(cmd, kSimManual);
   cmd->add_option("--protocol", args->protocols,
                   "mip | gx2 | xbus | xbus-legacy (with --controller, one per --live, in order)")
       ->required();

@@ -2,17 +2,17 @@
 
 #include <fmt/format.h>
 
-#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 
 #include "core/analysis/publish_gate.h"
 #include "core/estimation/calibrator.h"
 #include "core/modeling/accel_physical.h"
+#include "montecarlo/calibrator_montecarlo.h"
 #include "protocol/observability_json.h"
-#include "sim/session_sim.h"
 #include "sim/synthetic.h"
-#include "tools/pipeline_montecarlo.h"
+#include "tools/help_text.h"
+#include "tools/pipeline_montecarlo_command.h"
 
 namespace turncal::tools {
 
@@ -52,20 +52,6 @@ void AddSimOptions(CLI::App* cmd, SimArgs* args) {
   cmd->add_flag("--json", args->json, "JSON output");
 }
 
-std::vector<TablePose> Design(const SimArgs& args, std::mt19937_64* rng) {
-  if (args.design == "random") return RandomPoses(args.poses, rng);
-  if (args.design == "about-z") return AboutZPoses(args.poses);
-  const auto cube = CubePoses26();
-  std::vector<TablePose> poses;
-  for (int i = 0; i < args.poses; ++i) {
-    TablePose p = cube[i % cube.size()];
-    const int repeat = i / static_cast<int>(cube.size());
-    p.psi_rad += repeat * M_PI / 4;  // repeats turn by 45 deg
-    poses.push_back(p);
-  }
-  return poses;
-}
-
 // The model and sensor class the arguments name; nullptr (with the error printed) when unknown.
 std::unique_ptr<MeasurementModel> LoadModel(const SimArgs& args, const char* command,
                                             SensorClass* sensor) {
@@ -76,6 +62,18 @@ std::unique_ptr<MeasurementModel> LoadModel(const SimArgs& args, const char* com
   return model;
 }
 
+// The codes RunFit returns. No estimate is a result, printed (in JSON with "ok": false), not a
+// mistake: 1, as `free` and `montecarlo` give it.
+constexpr Manual kFitSimManual = {
+    "Simulates one calibration session in memory, calibrates it and prints every parameter "
+    "with its 1 sigma, the truth and the error in sigma units.",
+    "turncal fit-sim --model accel13 --poses 26 --design cube\n"
+    "turncal fit-sim --model mag22 --class consumer --seed 7 --json",
+    "0 an estimate; 1 no estimate (too few poses for the model; the calibrator's reason is "
+    "printed); 2 an unknown model, a pose the calibrator refuses, or a command-line "
+    "mistake",
+    "docs/ACCURACY.md"};
+
 int RunFit(const SimArgs& args) {
   SensorClass sensor;
   auto model = LoadModel(args, "fit-sim", &sensor);
@@ -84,7 +82,7 @@ int RunFit(const SimArgs& args) {
   std::mt19937_64 rng(args.seed);
   const Eigen::VectorXd truth = DrawTruth(*model, sensor, &rng);
   Calibrator calibrator(OptionsForClass(*model, sensor));
-  for (const auto& pose : Design(args, &rng)) {
+  for (const auto& pose : montecarlo::DesignPoses(args.design, args.poses, &rng)) {
     if (!calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng),
                              &error)) {
       fmt::print(stderr, "turncal fit-sim: {}\n", error);
@@ -163,119 +161,81 @@ int RunFit(const SimArgs& args) {
   return 0;
 }
 
+// The codes RunMonteCarlo and RunPipelineMonteCarloCommand return.
+constexpr Manual kMonteCarloManual = {
+    "Repeats simulated sessions and checks that the reported sigma matches the scatter of the "
+    "errors (the honesty of the uncertainty).",
+    "turncal montecarlo --model accel13 --runs 1000\n"
+    "turncal montecarlo --model mag13 --noise session --runs 200\n"
+    "turncal montecarlo --pipeline --model accel13 --class consumer --protocol xbus --plan "
+    "shuffled --runs 200   # sessions as bytes through the station, as turncald --replay "
+    "--once runs them",
+    "0 every criterion holds; 1 one does not (a parameter's std z outside [0.9, 1.1] or "
+    "|mean z| > 0.15, chi^2 p-values not uniform, a run without an estimate); 2 a "
+    "command-line mistake",
+    "docs/ACCURACY.md"};
+
+// The calibrator alone (montecarlo/calibrator_montecarlo.h): 0 when every parameter is honest
+// and every run solved, 1 otherwise, 2 on an unknown model.
 int RunMonteCarlo(const SimArgs& args) {
-  SensorClass sensor;
-  auto model = LoadModel(args, "montecarlo", &sensor);
-  if (!model) return 2;
-  std::string error;
-  const int N = model->num_parameters();
-  // One pose design for every run (the Cramer-Rao bound depends on it); new truth and noise each
-  // run.
-  std::mt19937_64 design_rng(args.seed);
-  auto poses = Design(args, &design_rng);
-  if (args.shuffle) std::shuffle(poses.begin(), poses.end(), design_rng);
-  Eigen::VectorXd sum_sq_err = Eigen::VectorXd::Zero(N), sum_var = Eigen::VectorXd::Zero(N),
-                  sum_z = Eigen::VectorXd::Zero(N), sum_z2 = Eigen::VectorXd::Zero(N);
-  int ok = 0, failed = 0;
-  double solve_time = 0;
-  // For --noise session the other sensor's model only feeds the simulator.
-  const bool accel = model->sensor() == SensorKind::kAccelerometer;
-  auto other = MakeModel(accel ? "mag13" : "accel13", ModelContext{}, &error);
-  for (int run = 0; run < args.runs; ++run) {
-    std::mt19937_64 rng(args.seed * 1000003 + static_cast<std::uint64_t>(run));
-    Eigen::VectorXd truth;
-    const bool drift = args.noise == "session" && args.drift_model == "gauss-markov";
-    Calibrator calibrator(drift ? DriftOptionsForClass(*model, sensor)
-                                : OptionsForClass(*model, sensor));
-    if (args.noise == "session") {
-      // The simulator's full noise model: Gauss-Markov bias wander sampled at the output rate,
-      // quantisation, settling; dwell windows cut at the known times.
-      SessionSimOptions o;
-      o.sensor = sensor;
-      o.rate_hz = 100;
-      o.dwell_s = args.dwell_s;
-      o.seed = args.seed * 1000003 + static_cast<std::uint64_t>(run);
-      const SimulatedSession session = accel ? SimulateSession(*model, *other, poses, o)
-                                             : SimulateSession(*other, *model, poses, o);
-      truth = accel ? session.accel_truth : session.mag_truth;
-      // The bias the calibration estimates: over the last pose with the drift model, averaged
-      // over the dwells with independent offsets.
-      if (drift) {
-        truth.tail<3>() +=
-            accel ? session.LastPoseAccBiasOffset() : session.LastPoseMagBiasOffset();
-      } else {
-        truth.tail<3>() +=
-            accel ? session.EffectiveAccBiasOffset() : session.EffectiveMagBiasOffset();
-      }
-      for (const auto& e : session.events) {
-        calibrator.add_pose(DwellRecord(session, e, model->sensor()), &error);
-      }
-    } else {
-      truth = DrawTruth(*model, sensor, &rng);
-      for (const auto& pose : poses) {
-        calibrator.add_pose(SimulateRecord(*model, truth, pose, sensor, args.dwell_s, &rng),
-                            &error);
-      }
-    }
-    const Estimate e = calibrator.solve();
-    if (!e.ok) {
-      ++failed;
-      continue;
-    }
-    ++ok;
-    solve_time += e.solve_time_s;
-    const Eigen::VectorXd err = e.theta - truth;
-    sum_sq_err += err.cwiseAbs2();
-    sum_var += e.sigma.cwiseAbs2();
-    const Eigen::VectorXd z = err.cwiseQuotient(e.sigma);
-    sum_z += z;
-    sum_z2 += z.cwiseAbs2();
+  montecarlo::CalibratorMonteCarloOptions o;
+  o.model = args.model;
+  o.sensor_class = args.sensor_class;
+  o.poses = args.poses;
+  o.design = args.design;
+  o.shuffle = args.shuffle;
+  o.dwell_s = args.dwell_s;
+  o.seed = args.seed;
+  o.runs = args.runs;
+  o.noise = args.noise;
+  o.drift_model = args.drift_model;
+  const montecarlo::CalibratorMonteCarloSummary s = montecarlo::RunCalibratorMonteCarlo(o);
+  if (!s.error.empty()) {
+    fmt::print(stderr, "turncal montecarlo: {}\n", s.error);
+    return 2;
   }
+  const Eigen::VectorXd mean_z = s.z.Mean(), std_z = s.z.Std();
   nlohmann::json rows = nlohmann::json::array();
   if (!args.json) {
     fmt::print(
         "Monte Carlo: {} runs of {} ({} class, {} poses, {} design, {:.1f} s dwell, {} noise, seed "
         "{}); {} solved, {} failed; mean solve {:.2f} ms\n\n",
-        args.runs, args.model, sensor.name, poses.size(), args.design, args.dwell_s, args.noise,
-        args.seed, ok, failed, ok ? 1e3 * solve_time / ok : 0.0);
+        args.runs, args.model, s.sensor_class, s.poses, args.design, args.dwell_s, args.noise,
+        args.seed, s.solved, s.failed, s.mean_solve_ms);
     fmt::print("| param | RMSE | mean CR sigma | RMSE / sigma | mean z | std z | verdict |\n");
     fmt::print("|---|---|---|---|---|---|---|\n");
   }
   int bad = 0;
-  for (int i = 0; i < N; ++i) {
-    const double rmse = std::sqrt(sum_sq_err[i] / ok);
-    const double sigma = std::sqrt(sum_var[i] / ok);
-    const double mean_z = sum_z[i] / ok;
-    const double std_z = std::sqrt(std::max(0.0, sum_z2[i] / ok - mean_z * mean_z));
-    const bool honest = rmse <= 1.1 * sigma && std_z >= 0.9 && std_z <= 1.1;
+  for (int i = 0; i < static_cast<int>(s.parameters.size()); ++i) {
+    const bool honest = s.Honest(i);
     bad += !honest;
-    const auto& p = model->parameters()[i];
     if (args.json) {
-      rows.push_back({{"name", p.name},
-                      {"rmse", rmse},
-                      {"sigma", sigma},
-                      {"mean_z", mean_z},
-                      {"std_z", std_z},
+      rows.push_back({{"name", s.parameters[i]},
+                      {"rmse", s.rmse[i]},
+                      {"sigma", s.sigma[i]},
+                      {"mean_z", mean_z[i]},
+                      {"std_z", std_z[i]},
                       {"honest", honest}});
     } else {
-      fmt::print("| {} | {:.3g} | {:.3g} | {:.3f} | {:+.3f} | {:.3f} | {} |\n", p.name, rmse, sigma,
-                 rmse / sigma, mean_z, std_z, honest ? "ok" : "NOT HONEST");
+      fmt::print("| {} | {:.3g} | {:.3g} | {:.3f} | {:+.3f} | {:.3f} | {} |\n", s.parameters[i],
+                 s.rmse[i], s.sigma[i], s.rmse[i] / s.sigma[i], mean_z[i], std_z[i],
+                 honest ? "ok" : "NOT HONEST");
     }
   }
   if (args.json) {
     fmt::print("{}\n", nlohmann::json{{"model", args.model},
-                                      {"class", sensor.name},
+                                      {"class", s.sensor_class},
                                       {"runs", args.runs},
-                                      {"solved", ok},
-                                      {"poses", poses.size()},
+                                      {"solved", s.solved},
+                                      {"poses", s.poses},
                                       {"params", rows}}
                            .dump());
   } else {
     fmt::print(
         "\nCriteria: RMSE <= 1.1 x sigma and std z in [0.9, 1.1]; {} of {} parameters fail.\n", bad,
-        N);
+        s.parameters.size());
   }
-  return bad == 0 && failed == 0 ? 0 : 1;
+  return s.Passed() ? 0 : 1;
 }
 
 }  // namespace
@@ -287,6 +247,7 @@ void AddSimFitCommands(CLI::App* app) {
       "simulate one calibration session in memory, calibrate, print the parameter table");
   AddSimOptions(fit, fit_args.get());
   fit->callback([fit_args] { throw CLI::RuntimeError(RunFit(*fit_args)); });
+  SetManual(fit, kFitSimManual);
 
   auto mc_args = std::make_shared<SimArgs>();
   mc_args->poses = 60;
@@ -315,101 +276,20 @@ void AddSimFitCommands(CLI::App* app) {
                "through the whole pipeline: each run a session as bytes (turncal sim), replayed "
                "through the station as turncald --replay --once does, with only --model "
                "configured (options below; --poses, --design and --noise do not apply)");
-  mc->add_option("--protocol", pipe->protocol, "with --pipeline: mip | gx2 | xbus | xbus-legacy")
-      ->check(CLI::IsMember({"mip", "gx2", "xbus", "xbus-legacy"}))
-      ->capture_default_str();
-  mc->add_option("--plan", pipe->plan,
-                 "with --pipeline: default (26 cube directions in loop order + 10) | shuffled "
-                 "(the same poses, a new order each run) | planner (the D-optimal plan to the "
-                 "gate; a gyro model's with the rate segments and moves of --gyro-sources)")
-      ->check(CLI::IsMember({"default", "shuffled", "planner"}))
-      ->capture_default_str();
-  mc->add_option("--gyro-sources", pipe->gyro_sources,
-                 "with --pipeline and a gyro model: mixed (the plan's static poses and the "
-                 "default rate segments, interleaved; no moves) | rates (the rate segments "
-                 "alone) | moves (the static poses and the moves between them) | all (the "
-                 "static poses with their moves, then the rate segments)")
-      ->check(CLI::IsMember({"mixed", "rates", "moves", "all"}))
-      ->capture_default_str();
-  mc->add_option("--table-rate", pipe->table_rate_dps,
-                 "with --pipeline: the simulated table moves at this rate, deg/s, and the planner "
-                 "plans for it (default: every move takes 3 s)")
-      ->check(CLI::PositiveNumber);
-  mc->add_option("--table-accel", pipe->table_accel_dps2,
-                 "with --pipeline and --table-rate: the table's angular acceleration, deg/s^2")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  mc->add_option("--planner-objective", pipe->planner_objective,
-                 "with --plan planner: minimise table time or poses")
-      ->check(CLI::IsMember({"time", "poses"}))
-      ->capture_default_str();
-  mc->add_option("--planner-drift", pipe->planner_drift,
-                 "with --plan planner: plan with the class's drift model or independent poses "
-                 "(the planner before issue 19)")
-      ->check(CLI::IsMember({"gauss-markov", "independent"}))
-      ->capture_default_str();
-  mc->add_option("--jobs", pipe->jobs, "with --pipeline: runs in parallel")
-      ->check(CLI::Range(1, 64))
-      ->capture_default_str();
-  mc->add_option("--warmup", pipe->warmup,
-                 "with --pipeline: warm-up transient of every triad (a gyro model's too), 1 sigma "
-                 "at power-on in units of the class's bias instability (0: none)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  mc->add_option("--warmup-tau", pipe->warmup_tau_s, "with --pipeline: warm-up time constant, s")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  mc->add_option("--random-walk", pipe->random_walk,
-                 "with --pipeline: bias random walk of both triads, in units of the class's bias "
-                 "instability per sqrt(100 s) (0: none)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  mc->add_option("--lever-arm", pipe->lever_arm_m,
-                 "with --pipeline: the IMU's offset from the table's centre, X Y Z in the table's "
-                 "inner frame, m (default none)")
-      ->expected(3);
-  mc->add_option("--station-warmup", pipe->station_warmup,
-                 "with --pipeline: the station's warm-up allowance ([station] warmup, in bias "
-                 "instabilities, with --warmup-tau); default none");
-  mc->add_flag("--independent", pipe->independent,
-               "with --pipeline: the station's model before issue 19 (an independent offset per "
-               "pose; [station] drift_model = \"independent\"), for comparisons");
-  mc->add_option("--at", pipe->at,
-                 "with --pipeline: judge the estimate at the end of the plan (end) or the "
-                 "calibration the gate first activated (first-gate)")
-      ->check(CLI::IsMember({"end", "first-gate"}))
-      ->capture_default_str();
-  mc->add_option("--drift-scale", pipe->drift_scale,
-                 "with --pipeline: the simulated bias instability in units of the class's (the "
-                 "station's prior stays the class's)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  mc->add_flag(
-      "--no-identify", [pipe](std::int64_t) { pipe->identify_drift = false; },
-      "with --pipeline: the station does not identify the drift's strength ([station] "
-      "identify_drift = false)");
-  mc->add_option("--gate-min-dof", pipe->gate_min_dof,
-                 "with --pipeline: the gate's least number of redundant equations (default 3)")
-      ->check(CLI::Range(0, 1000));
-  mc->add_option(
-      "--runs-out", pipe->runs_out,
-      "with --pipeline: one JSON line per run (seed, z per parameter, chi^2 p-value, "
-      "the gate and its reasons, the poses the sequencer rejected and why) to this file");
-  mc->add_option("--keep", pipe->keep_dir,
-                 "with --pipeline: keep the captures of runs with a parameter beyond 4 sigma in "
-                 "this folder (run-SEED.tcap), for turncald --replay");
+  AddPipelineMonteCarloOptions(mc, pipe.get());
   mc->callback([mc_args, pipe, pipeline] {
     if (*pipeline) {
-      pipe->model = mc_args->model;
-      pipe->sensor_class = mc_args->sensor_class;
-      pipe->runs = mc_args->runs;
-      pipe->seed = mc_args->seed;
-      pipe->dwell_s = mc_args->dwell_s;
+      pipe->engine.model = mc_args->model;
+      pipe->engine.sensor_class = mc_args->sensor_class;
+      pipe->engine.runs = mc_args->runs;
+      pipe->engine.seed = mc_args->seed;
+      pipe->engine.dwell_s = mc_args->dwell_s;
       pipe->json = mc_args->json;
-      throw CLI::RuntimeError(RunPipelineMonteCarlo(*pipe));
+      throw CLI::RuntimeError(RunPipelineMonteCarloCommand(*pipe));
     }
     throw CLI::RuntimeError(RunMonteCarlo(*mc_args));
   });
+  SetManual(mc, kMonteCarloManual);
 }
 
 }  // namespace turncal::tools

@@ -8,8 +8,7 @@
 #include "tools/decode_command.h"
 #include "tools/device_write_command.h"
 #include "tools/free_command.h"
-#include "tools/free_montecarlo.h"
-#include "tools/help_text.h"
+#include "tools/free_montecarlo_command.h"
 #include "tools/models_command.h"
 #include "tools/noise_command.h"
 #include "tools/observability_command.h"
@@ -40,9 +39,9 @@ int main(int argc, char** argv) {
   turncal::tools::AddDeviceWriteCommand(&app);
   turncal::tools::AddCertificateCommand(&app);
   turncal::tools::AddRegistryCommand(&app);
-  // Description, examples, exit status and where to read more under every command's --help
-  // (tests/tools/help_test.sh checks that no command lacks them).
-  turncal::tools::AddManualFooters(&app);
+  // Each command sets its manual (description, examples, exit status, where to read more) under
+  // its --help where it is added (tools/help_text.h; tests/tools/help_test.sh checks that no
+  // command lacks one).
   app.footer(
       "\nEvery command: turncal COMMAND --help shows its options, examples and exit status.\n"
       "Start with ./scripts/demo and README.md; the daemon is turncald (turncald --help).");

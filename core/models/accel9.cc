@@ -19,7 +19,7 @@ struct Accel9Correction {
   }
 };
 
-class Accel9 final : public FreeModel {
+class Accel9 final : public free::NormFreeModel {
  public:
   explicit Accel9(const FreeContext& context) : context_(context) {
     const auto G = ParameterKind::kSensor;
@@ -98,15 +98,6 @@ class Accel9 final : public FreeModel {
     return terms;
   }
 
-  std::vector<Misfit> Misfits(const FreeData& data, const Eigen::VectorXd& theta) const override {
-    std::vector<Misfit> out;
-    for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
-      const auto& iv = data.intervals[k];
-      if (iv.acc)
-        out.push_back({"norm", k, Correct(theta, iv.acc->mean).norm() - context_.gravity_mps2});
-    }
-    return out;
-  }
   Eigen::VectorXd Identity(const FreeData&) const override {
     Eigen::VectorXd t = Eigen::VectorXd::Zero(9);
     t.head<3>().setOnes();
@@ -115,12 +106,10 @@ class Accel9 final : public FreeModel {
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
     return Accel9Correction::Apply(theta.data(), raw);
   }
-  Eigen::Vector3d Direction(const FreeData&, const Eigen::VectorXd& theta,
-                            const FreeInterval& interval) const override {
-    return interval.acc ? Correct(theta, interval.acc->mean) : Eigen::Vector3d::Zero();
-  }
 
  private:
+  double NormMagnitude() const override { return context_.gravity_mps2; }
+
   FreeContext context_;
   std::string name_ = "accel9";
   std::vector<ParameterInfo> params_;

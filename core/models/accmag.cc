@@ -89,7 +89,7 @@ class AccMag final : public FreeModel {
   std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
     return {{SensorKind::kAccelerometer, kA + 6}, {SensorKind::kMagnetometer, kM}};
   }
-  double magnitude() const { return context_.field_magnitude > 0 ? context_.field_magnitude : 1.0; }
+  double magnitude() const { return free::FieldMagnitude(context_); }
 
   Eigen::VectorXd Scales(const FreeData& data, const Eigen::VectorXd& theta) const override {
     Eigen::VectorXd s = Eigen::VectorXd::Ones(kN);

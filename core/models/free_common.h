@@ -16,41 +16,15 @@
 
 #include "core/frames/rotations.h"
 #include "core/modeling/free_model.h"
+#include "core/modeling/parameter_matrices.h"
 
 namespace turncal::free {
 
-// imu_tk's triad correction, x = T K (raw - b), over 9 parameters kx ky kz m_yz m_zy m_zx bx by bz:
-// K = diag(k), T = [1 -m_yz m_zy; 0 1 -m_zx; 0 0 1] (upper triangular, small angles: the triad
-// fixes its own frame, z its axis and y in its y-z plane).
-template <typename T>
-Mat3<T> UpperTK(const T* p) {
-  Mat3<T> m;
-  m << p[0], -p[3] * p[1], p[4] * p[2], T(0), p[1], -p[5] * p[2], T(0), T(0), p[2];
-  return m;
-}
-
-// gyro9's full misalignment, T = [1 -m_yz m_zy; m_xz 1 -m_zx; -m_xy m_yx 1] (imu_tk's), times K:
-// parameters kx ky kz m_yz m_zy m_zx m_xz m_xy m_yx.
-template <typename T>
-Mat3<T> FullTK(const T* p) {
-  Mat3<T> m;
-  m << p[0], -p[3] * p[1], p[4] * p[2], p[6] * p[0], p[1], -p[5] * p[2], -p[7] * p[0], p[8] * p[1],
-      p[2];
-  return m;
-}
-
-// Symmetric S from s11 s12 s13 s22 s23 s33.
-template <typename T>
-Mat3<T> Symmetric(const T* s) {
-  Mat3<T> m;
-  m << s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5];
-  return m;
-}
-
-template <typename T>
-Vec3<T> Vector(const T* v) {
-  return Vec3<T>(v[0], v[1], v[2]);
-}
+// The parameter blocks' matrices (core/modeling/parameter_matrices.h).
+using params::FullTK;
+using params::Symmetric;
+using params::UpperTK;
+using params::Vector;
 
 // The 9 parameters of UpperTK from an upper-triangular C with a positive diagonal.
 inline void UpperTKFromMatrix(const Eigen::Matrix3d& C, double* p) {
@@ -185,5 +159,43 @@ inline void Means(const FreeData& data, SensorKind triad, double offset_sigma,
     if (index) index->push_back(i);
   }
 }
+
+// The field's magnitude the magnetometer models correct to: the reference's, or 1 (relative)
+// when it is not known.
+inline double FieldMagnitude(const FreeContext& context) {
+  return context.field_magnitude > 0 ? context.field_magnitude : 1.0;
+}
+
+// A free model of one triad whose corrected mean has a known magnitude in every still interval
+// (accel9: gravity; magellipsoid, magsphere: the field): its misfits are the corrected means'
+// norms less that magnitude, its direction the corrected mean.
+class NormFreeModel : public FreeModel {
+ public:
+  std::vector<Misfit> Misfits(const FreeData& data, const Eigen::VectorXd& theta) const override {
+    std::vector<Misfit> out;
+    for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
+      if (const TriadStats* t = Triad(data.intervals[static_cast<std::size_t>(k)])) {
+        out.push_back({"norm", k, Correct(theta, t->mean).norm() - NormMagnitude()});
+      }
+    }
+    return out;
+  }
+  Eigen::Vector3d Direction(const FreeData&, const Eigen::VectorXd& theta,
+                            const FreeInterval& interval) const override {
+    const TriadStats* t = Triad(interval);
+    return t ? Correct(theta, t->mean) : Eigen::Vector3d::Zero();
+  }
+
+ protected:
+  // |Correct(mean)| in every still interval: gravity, or the field's magnitude.
+  virtual double NormMagnitude() const = 0;
+  // The model's triad over `interval` (null when the interval has none).
+  const TriadStats* Triad(const FreeInterval& interval) const {
+    const std::optional<TriadStats>& t = sensor() == SensorKind::kAccelerometer ? interval.acc
+                                         : sensor() == SensorKind::kGyroscope   ? interval.gyr
+                                                                                : interval.mag;
+    return t ? &*t : nullptr;
+  }
+};
 
 }  // namespace turncal::free

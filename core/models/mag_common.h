@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/modeling/measurement_model.h"
+#include "core/modeling/parameter_matrices.h"
 
 namespace turncal::mag {
 
@@ -33,24 +34,10 @@ inline void AppendVector(std::vector<ParameterInfo>* p, const char* prefix, Para
   }
 }
 
-template <typename T>
-Mat3<T> MatrixRowMajor(const T* g) {
-  Mat3<T> m;
-  m << g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8];
-  return m;
-}
-
-template <typename T>
-Mat3<T> Symmetric(const T* k) {
-  Mat3<T> m;
-  m << k[0], k[1], k[2], k[1], k[3], k[4], k[2], k[4], k[5];
-  return m;
-}
-
-template <typename T>
-Vec3<T> Vector(const T* v) {
-  return Vec3<T>(v[0], v[1], v[2]);
-}
+// The parameter blocks' matrices (core/modeling/parameter_matrices.h).
+using params::MatrixRowMajor;
+using params::Symmetric;
+using params::Vector;
 
 // B_q = G^-1 (B_m - b): the field in the table's inner frame q.
 inline Eigen::Vector3d CorrectWithG(const double* g, const double* b, const Eigen::Vector3d& raw) {

@@ -20,7 +20,7 @@ struct EllipsoidCorrection {
   }
 };
 
-class MagEllipsoid final : public FreeModel {
+class MagEllipsoid final : public free::NormFreeModel {
  public:
   explicit MagEllipsoid(const FreeContext& context) : context_(context) {
     const auto S = ParameterKind::kSensor;
@@ -41,7 +41,7 @@ class MagEllipsoid final : public FreeModel {
     return {{SensorKind::kMagnetometer, 0}};
   }
 
-  double magnitude() const { return context_.field_magnitude > 0 ? context_.field_magnitude : 1.0; }
+  double magnitude() const { return free::FieldMagnitude(context_); }
 
   Eigen::VectorXd Scales(const FreeData&, const Eigen::VectorXd& theta) const override {
     const double gain = free::Symmetric(theta.data() + 3).norm() / std::sqrt(3.0);
@@ -97,14 +97,6 @@ class MagEllipsoid final : public FreeModel {
     return terms;
   }
 
-  std::vector<Misfit> Misfits(const FreeData& data, const Eigen::VectorXd& theta) const override {
-    std::vector<Misfit> out;
-    for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
-      const auto& iv = data.intervals[k];
-      if (iv.mag) out.push_back({"norm", k, Correct(theta, iv.mag->mean).norm() - magnitude()});
-    }
-    return out;
-  }
   Eigen::VectorXd Identity(const FreeData&) const override {
     Eigen::VectorXd t = Eigen::VectorXd::Zero(9);
     t[3] = t[6] = t[8] = 1.0;
@@ -113,12 +105,10 @@ class MagEllipsoid final : public FreeModel {
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
     return EllipsoidCorrection::Apply(theta.data(), raw);
   }
-  Eigen::Vector3d Direction(const FreeData&, const Eigen::VectorXd& theta,
-                            const FreeInterval& interval) const override {
-    return interval.mag ? Correct(theta, interval.mag->mean) : Eigen::Vector3d::Zero();
-  }
 
  private:
+  double NormMagnitude() const override { return magnitude(); }
+
   FreeContext context_;
   std::string name_ = "magellipsoid";
   std::vector<ParameterInfo> params_;

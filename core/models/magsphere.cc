@@ -28,7 +28,7 @@ struct SphereFunctor {
   }
 };
 
-class MagSphere final : public FreeModel {
+class MagSphere final : public free::NormFreeModel {
  public:
   explicit MagSphere(const FreeContext& context) : context_(context) {
     const auto S = ParameterKind::kSensor;
@@ -47,7 +47,7 @@ class MagSphere final : public FreeModel {
   std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
     return {{SensorKind::kMagnetometer, 0}};
   }
-  double magnitude() const { return context_.field_magnitude > 0 ? context_.field_magnitude : 1.0; }
+  double magnitude() const { return free::FieldMagnitude(context_); }
 
   Eigen::VectorXd Scales(const FreeData&, const Eigen::VectorXd& theta) const override {
     return Eigen::VectorXd::Constant(4, std::max(std::abs(theta[3]), 1e-300));
@@ -95,14 +95,6 @@ class MagSphere final : public FreeModel {
     return terms;
   }
 
-  std::vector<Misfit> Misfits(const FreeData& data, const Eigen::VectorXd& theta) const override {
-    std::vector<Misfit> out;
-    for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
-      const auto& iv = data.intervals[k];
-      if (iv.mag) out.push_back({"norm", k, Correct(theta, iv.mag->mean).norm() - magnitude()});
-    }
-    return out;
-  }
   // No hard iron and the radius that leaves the raw magnitude as it is.
   Eigen::VectorXd Identity(const FreeData&) const override {
     Eigen::VectorXd t = Eigen::VectorXd::Zero(4);
@@ -112,12 +104,10 @@ class MagSphere final : public FreeModel {
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
     return SphereDistance::Apply(theta.data(), raw) * (magnitude() / theta[3]);
   }
-  Eigen::Vector3d Direction(const FreeData&, const Eigen::VectorXd& theta,
-                            const FreeInterval& interval) const override {
-    return interval.mag ? Correct(theta, interval.mag->mean) : Eigen::Vector3d::Zero();
-  }
 
  private:
+  double NormMagnitude() const override { return magnitude(); }
+
   FreeContext context_;
   std::string name_ = "magsphere";
   std::vector<ParameterInfo> params_;

@@ -38,6 +38,18 @@ double VarianceRatioLimit(double alpha, double n_dof, double dof) {
 
 }  // namespace
 
+int TriadOfSensor(SensorKind kind) {
+  switch (kind) {
+    case SensorKind::kAccelerometer:
+      return kTriadAcc;
+    case SensorKind::kGyroscope:
+      return kTriadGyr;
+    case SensorKind::kMagnetometer:
+      return kTriadMag;
+  }
+  return kTriadAcc;
+}
+
 const char* TriadName(int triad) {
   static const char* const kNames[] = {"acc", "gyr", "mag"};
   return triad >= 0 && triad < 3 ? kNames[triad] : "?";

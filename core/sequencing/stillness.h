@@ -34,8 +34,9 @@ namespace turncal {
 inline constexpr int kTriadAcc = 0;
 inline constexpr int kTriadGyr = 1;
 inline constexpr int kTriadMag = 2;
-const char* TriadName(int triad);  // "acc", "gyr", "mag"
-const char* TriadUnit(int triad);  // "m/s^2", "rad/s", "(device unit)"
+const char* TriadName(int triad);    // "acc", "gyr", "mag"
+int TriadOfSensor(SensorKind kind);  // kTriadAcc, kTriadGyr or kTriadMag
+const char* TriadUnit(int triad);    // "m/s^2", "rad/s", "(device unit)"
 
 // A sample as the detector and sequencer keep it: fixed size, no strings.
 struct StillSample {

@@ -1,7 +1,7 @@
 // turncald's TOML configuration: the shipped example parses to the documented defaults; typos,
 // wrong types and impossible values are errors that name the key and line.
 
-#include "daemon/config.h"
+#include "daemon/service/config.h"
 
 #include <gtest/gtest.h>
 

@@ -1,8 +1,8 @@
-// What a calibration writes into a MIP device (daemon/device_write_plan.h, issue 23): the values
-// composed with what the device stores make its new output, corrected by what stays in the
-// stream, give exactly the calibration's correction of the old output (up to the f32 the device
+// What a calibration writes into a MIP device (daemon/device_write/device_write_plan.h, issue 23):
+// the values composed with what the device stores make its new output, corrected by what stays in
+// the stream, give exactly the calibration's correction of the old output (up to the f32 the device
 // holds); their sigma is the covariance carried through; every refusal names its reason.
-#include "daemon/device_write_plan.h"
+#include "daemon/device_write/device_write_plan.h"
 
 #include <gtest/gtest.h>
 

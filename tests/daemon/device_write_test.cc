@@ -1,7 +1,9 @@
-// What turncald keeps of a write into a device and how it verifies one (daemon/device_write.h):
-// the record's round trip through the state directory, the history's distinct names, and the
-// verification by measurement against windows of a simulated output whose noise is known.
-#include "daemon/device_write.h"
+// What turncald keeps of a write into a device and how it verifies one
+// (daemon/state/device_write_record.h): the record's round trip through the state directory, the
+// history's distinct names, and the verification by measurement against windows of a simulated
+// output whose noise is known.
+#include "daemon/device_write/write_verification.h"
+#include "daemon/state/device_write_record.h"
 
 #include <gtest/gtest.h>
 

@@ -13,11 +13,11 @@
 #include <random>
 #include <string>
 
-#include "daemon/config.h"
-#include "daemon/free_pipeline.h"
-#include "daemon/persistence.h"
-#include "daemon/replay_once.h"
-#include "daemon/station.h"
+#include "daemon/service/config.h"
+#include "daemon/state/persistence.h"
+#include "daemon/station/free_pipeline.h"
+#include "daemon/station/replay_once.h"
+#include "daemon/station/station.h"
 #include "protocol/calibration_json.h"
 #include "protocol/free_json.h"
 #include "report/html.h"

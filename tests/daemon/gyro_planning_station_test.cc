@@ -9,8 +9,8 @@
 #include <string>
 
 #include "core/frames/units.h"
-#include "daemon/replay_once.h"
-#include "daemon/station.h"
+#include "daemon/station/replay_once.h"
+#include "daemon/station/station.h"
 #include "sim/capture.h"
 #include "sim/session_sim.h"
 #include "tests/daemon/sim_replay.h"

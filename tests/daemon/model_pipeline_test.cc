@@ -1,13 +1,13 @@
-// The corrected output's sigma (daemon/model_pipeline.h): a gyroscope's g-sensitivity comes off
-// the raw rate with the specific force, so B_g's uncertainty is in the corrected rate's sigma.
+// The corrected output's sigma (daemon/station/model_pipeline.h): a gyroscope's g-sensitivity comes
+// off the raw rate with the specific force, so B_g's uncertainty is in the corrected rate's sigma.
 
-#include "daemon/model_pipeline.h"
+#include "daemon/station/model_pipeline.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-#include "daemon/station.h"
+#include "daemon/station/station.h"
 
 namespace turncal::daemon {
 namespace {

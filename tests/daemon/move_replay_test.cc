@@ -1,7 +1,7 @@
 // Issue 21, the third source through the pipeline: a simulated session as bytes (sim/capture.h),
-// replayed through the decoders into the sequencer (daemon/capture_replay.h); the records carry
-// the moves that led to them (core/sequencing/move_tracker.h), and a move turns the table frame
-// as the table did.
+// replayed through the decoders into the sequencer (daemon/station/capture_replay.h); the records
+// carry the moves that led to them (core/sequencing/move_tracker.h), and a move turns the table
+// frame as the table did.
 
 #include <gtest/gtest.h>
 
@@ -10,7 +10,7 @@
 
 #include "core/estimation/calibrator.h"
 #include "core/estimation/move_residual.h"
-#include "daemon/capture_replay.h"
+#include "daemon/station/capture_replay.h"
 #include "sim/capture.h"
 #include "tests/daemon/sim_replay.h"
 

@@ -9,9 +9,9 @@
 #include <filesystem>
 #include <fstream>
 
-#include "daemon/config.h"
-#include "daemon/registry_db.h"
-#include "daemon/registry_outbox.h"
+#include "daemon/registry/registry_db.h"
+#include "daemon/registry/registry_outbox.h"
+#include "daemon/service/config.h"
 
 namespace turncal::daemon {
 namespace {

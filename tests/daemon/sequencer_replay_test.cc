@@ -1,6 +1,6 @@
 // Issue "Position sequencer", acceptance on captures from `turncal sim` (built in-process by the
 // same function, sim/capture.h), replayed through the decoders into the sequencer exactly as
-// live data would go (daemon/capture_replay.h).
+// live data would go (daemon/station/capture_replay.h).
 
 #include <gtest/gtest.h>
 
@@ -9,7 +9,7 @@
 #include <cstdio>
 #include <set>
 
-#include "daemon/capture_replay.h"
+#include "daemon/station/capture_replay.h"
 #include "sim/capture.h"
 #include "sim/synthetic.h"
 #include "tests/daemon/sim_replay.h"

@@ -1,7 +1,7 @@
 #pragma once
 // Tests' helpers: a `turncal sim` capture built in-process (sim/capture.h), encoded to .tcap bytes
-// and replayed through the decoders into the sequencer (daemon/capture_replay.h), or written to a
-// .tcap file in the test's temporary folder.
+// and replayed through the decoders into the sequencer (daemon/station/capture_replay.h), or
+// written to a .tcap file in the test's temporary folder.
 
 #include <gtest/gtest.h>
 
@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "daemon/capture_replay.h"
+#include "daemon/station/capture_replay.h"
 #include "sim/capture.h"
 
 namespace turncal {

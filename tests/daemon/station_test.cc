@@ -3,7 +3,7 @@
 // of each protocol family the published estimates are within 4 sigma of the simulator's truth
 // and the gate passes.
 
-#include "daemon/station.h"
+#include "daemon/station/station.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -14,8 +14,8 @@
 #include <fstream>
 
 #include "core/frames/units.h"
-#include "daemon/persistence.h"
-#include "daemon/replay_once.h"
+#include "daemon/state/persistence.h"
+#include "daemon/station/replay_once.h"
 #include "sim/capture.h"
 #include "sim/synthetic.h"
 #include "tests/daemon/sim_replay.h"

@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "daemon/capture_replay.h"
+#include "daemon/station/capture_replay.h"
 #include "drivers/capture/tcap.h"
 
 namespace {

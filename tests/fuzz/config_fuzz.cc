@@ -1,5 +1,6 @@
-// libFuzzer target for turncald's configuration (daemon/config.h, ParseConfig: what LoadConfig
-// and a SIGHUP reload read; systemd/turncald.toml.example documents it). The input is the file.
+// libFuzzer target for turncald's configuration (daemon/service/config.h, ParseConfig: what
+// LoadConfig and a SIGHUP reload read; systemd/turncald.toml.example documents it). The input is
+// the file.
 //
 // Invariants checked on every input:
 // - nothing escapes as an exception (turncald would die at start or on SIGHUP);
@@ -18,7 +19,7 @@
 #include <string>
 #include <string_view>
 
-#include "daemon/config.h"
+#include "daemon/service/config.h"
 
 namespace {
 

@@ -1,8 +1,8 @@
 // libFuzzer target for turncald's request parsing (protocol/messages.h; docs/protocol.md
 // "Connection and framing", "Requests"): a client's bytes through RequestFramer, each line through
 // ParseRequestLine and ParseCommand, and each command's arguments through its Parse*Request,
-// exactly as daemon/socket_server.cc and daemon/service.cc call them -- everything before a
-// request acts on the daemon.
+// exactly as daemon/service/socket_server.cc and daemon/service/service.cc call them -- everything
+// before a request acts on the daemon.
 //
 // Input: byte 0 chooses the line cap (the real 65536 bytes, or 1 to 128 so that the fuzzer
 // reaches oversized lines), the rest is the client's byte stream, split into reads whose sizes

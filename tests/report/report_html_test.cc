@@ -20,8 +20,8 @@
 #include <regex>
 
 #include "core/modeling/measurement_model.h"
-#include "daemon/persistence.h"
-#include "daemon/station.h"
+#include "daemon/state/persistence.h"
+#include "daemon/station/station.h"
 #include "protocol/sequencer_json.h"
 #include "sim/capture.h"
 #include "sim/session_sim.h"

@@ -1,0 +1,67 @@
+#pragma once
+// One device in the station: its sequencer (stillness, poses, noise profile), its models
+// (daemon/station/model_pipeline.h), the poses and records its calibrations are made from, and what
+// the device said about itself. The station (daemon/station/station.h) feeds it samples and
+// announcements and wires its events to the models, persistence and subscribers.
+
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/analysis/publish_gate.h"
+#include "core/planning/pose_planner.h"
+#include "core/sequencing/sequencer.h"
+#include "daemon/station/free_pipeline.h"
+#include "daemon/station/model_pipeline.h"
+
+namespace turncal::daemon {
+
+struct DevicePipeline {
+  std::string name;
+  std::unique_ptr<Sequencer> sequencer;
+  std::vector<ModelPipeline> models;  // empty with the free pose source
+  // The free pose source's models (daemon/station/free_pipeline.h); null otherwise.
+  std::unique_ptr<FreeDevice> free;
+  std::vector<TablePose> poses_used;
+  std::vector<PoseRecord> records_used;  // the same poses' records (a calibration's evidence)
+  int poses = 0;
+  bool noise_stored = false;  // the sequencer uses the profile kept in the state directory
+  GateOptions gate;           // the station's, or the device's own
+  nlohmann::json identity;    // from the device dialogue (null in replays)
+  nlohmann::json current;     // the pose being collected: its last sequencer event
+  // reports/NAME.html is rewritten after an activation, at most every kReportIntervalNs (the
+  // render re-solves the calibration pose by pose: tens of ms on the worker).
+  bool report_due = false;
+  std::int64_t report_written_ns = std::numeric_limits<std::int64_t>::min() / 2;
+
+  // The sequencer's options for a device of the station: the station's, with the bias wander
+  // the stillness and creep tests allow for (the sensor class's drift, or the configured one).
+  static SequencerOptions SequencerOptionsFor(const StationOptions& options,
+                                              const SensorClass& sensor);
+
+  // Records the drift model `m` identified in the noise profile (the stillness tests allow for
+  // it); true when the profile's stored copy should be rewritten (the scale moved by more than
+  // 1 %, or the triad had none).
+  bool RecordIdentifiedDrift(const ModelPipeline& m);
+
+  // What the next-pose planner needs of each model: its poses, weights and the device's noise.
+  std::vector<PlanningTarget> PlanningTargets(double dwell_s) const;
+  // The rest the moves captured so far spanned besides the table's motion and settling at
+  // `motion`'s rates (the mean, at least 0), for the planner's moves; `fallback` without one.
+  double MoveRestSeconds(const TableMotion& motion, double fallback) const;
+
+  // The calibration document of model `m`'s current estimate (schema 1, docs/protocol.md).
+  nlohmann::json CalibrationJson(const ModelPipeline& m, const std::string& sensor_class,
+                                 const ModelContext& context) const;
+  // The device's entry in `status` and in RESULT.
+  nlohmann::json StatusJson() const;
+  nlohmann::json ResultJson() const;
+  // The sequencer's moves between static poses: enabled, taken (handed to a record), dropped and
+  // why the latest was.
+  nlohmann::json MovesJson() const;
+};
+
+}  // namespace turncal::daemon

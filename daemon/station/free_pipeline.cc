@@ -1,0 +1,293 @@
+#include "daemon/station/free_pipeline.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/sequencing/stillness.h"
+#include "daemon/station/model_pipeline.h"
+#include "daemon/station/station.h"
+#include "protocol/calibration_json.h"
+#include "protocol/free_json.h"
+
+namespace turncal::daemon {
+
+FreeContext FreeContextFor(const StationOptions& options, const SensorClass& sensor) {
+  FreeContext c;
+  const ReferenceVectors& ref = options.context.reference;
+  c.gravity_mps2 = ref.g_ned.norm();
+  c.field_magnitude = options.free.field_known ? ref.B_ned.norm() : 0.0;
+  c.latitude_deg = ref.latitude_deg;
+  const double horizontal = ref.B_ned.head<2>().norm();
+  c.dip_deg = std::atan2(ref.B_ned.z(), horizontal) * 180 / M_PI;
+  if (options.drift_model) {
+    c.acc_drift = DriftForClass(sensor, SensorKind::kAccelerometer);
+    c.mag_drift = DriftForClass(sensor, SensorKind::kMagnetometer);
+    c.gyr_drift = DriftForClass(sensor, SensorKind::kGyroscope);
+  } else {
+    c.acc_offset_sigma = sensor.acc_bias_instability;
+    c.mag_offset_sigma = sensor.mag_bias_instability;
+    c.gyr_offset_sigma = sensor.gyr_bias_instability;
+  }
+  return c;
+}
+
+FreeCalibratorOptions FreeOptionsFor(const StationOptions& options, const GateOptions& gate) {
+  FreeCalibratorOptions o;
+  o.min_coverage = options.free.min_coverage_percent / 100;
+  o.precision = gate;
+  return o;
+}
+
+const char* FreeOutputFrame(const std::string& model) {
+  return model == "magellipsoid" || model == "magsphere" ? "magnetometer" : "accelerometer";
+}
+
+int MovesUsed(const FreeEstimate& estimate) {
+  return static_cast<int>(
+      std::count_if(estimate.terms.begin(), estimate.terms.end(),
+                    [](const FreeTermResidual& t) { return t.kind == "direction"; }));
+}
+
+void FreeUpdate::Run(const std::vector<std::string>& configured,
+                     const std::vector<FreeInterval>& all, const FreeContext& context,
+                     const FreeCalibratorOptions& options) {
+  intervals = all.size();
+  models = configured.empty() ? DefaultFreeModels(all) : configured;
+  results.clear();
+  if (!CalibrateFreeModels(models, all, context, options, &results, &error)) return;
+  advice = NextOrientations(results, all, context);
+}
+
+int FreeModelState::triad() const { return TriadOfSensor(sensor); }
+
+void FreeModelState::Apply(int version, const std::string& model, const Eigen::VectorXd& theta,
+                           const Eigen::MatrixXd& covariance, const std::string& upstream_model,
+                           const Eigen::VectorXd& upstream_theta,
+                           const std::optional<TimeWindow>& bias_window,
+                           const FreeContext& context) {
+  std::string error;
+  std::shared_ptr<const FreeModel> m = MakeFreeModel(model, context, &error);
+  if (!m || theta.size() != m->num_parameters()) return;
+  std::shared_ptr<const FreeModel> up =
+      upstream_model.empty() ? nullptr : MakeFreeModel(upstream_model, context, &error);
+  applied_version = version;
+  applied_model = m;
+  applied_theta = theta;
+  applied_covariance = covariance.rows() == theta.size() ? covariance : Eigen::MatrixXd();
+  applied_upstream_model = up && upstream_theta.size() == up->num_parameters() ? up : nullptr;
+  applied_upstream_theta = applied_upstream_model ? upstream_theta : Eigen::VectorXd();
+  applied_bias_window = bias_window;
+  applied_drift = m->sensor() == SensorKind::kAccelerometer ? context.acc_drift
+                  : m->sensor() == SensorKind::kGyroscope   ? context.gyr_drift
+                                                            : context.mag_drift;
+}
+
+bool FreeModelState::ApplyStored(const nlohmann::json& stored, std::string* error) {
+  protocol::FreeCalibrationDocument doc;
+  if (!protocol::ParseFreeCalibration(stored, &doc, error)) return false;
+  Apply(doc.version, doc.model, doc.theta, doc.covariance, doc.upstream_model, doc.upstream_theta,
+        doc.bias_window, doc.context);
+  if (applied_version != doc.version) {
+    *error = "the stored calibration's model cannot be made";
+    return false;
+  }
+  return true;
+}
+
+Eigen::Vector3d FreeModelState::Correct(const Eigen::Vector3d& raw, const Eigen::Vector3d* acc_raw,
+                                        double t_s, std::optional<Eigen::Vector3d>* sigma) const {
+  const int g = applied_model->index_of("g11");
+  std::optional<Eigen::Vector3d> force;
+  if (g >= 0 && acc_raw && applied_upstream_model) {
+    force = applied_upstream_model->Correct(applied_upstream_theta, *acc_raw);
+  }
+  auto corrected = [&](const Eigen::VectorXd& theta) {
+    Eigen::Vector3d r = raw;
+    if (force) {
+      Eigen::Matrix3d B;
+      for (int k = 0; k < 9; ++k) B(k / 3, k % 3) = theta[g + k];
+      r -= B * *force;
+    }
+    return applied_model->Correct(theta, r);
+  };
+  const Eigen::Vector3d value = corrected(applied_theta);
+  if (sigma) {
+    sigma->reset();
+    const Eigen::Index n = applied_theta.size();
+    if (applied_covariance.rows() == n && applied_covariance.allFinite()) {
+      Eigen::MatrixXd covariance = applied_covariance;
+      // How far the bias may have wandered since the calibration's window.
+      if (applied_bias_window && applied_drift.enabled()) {
+        const TimeWindow& w = *applied_bias_window;
+        const double since_s = t_s >= w.t0_s ? t_s : w.t1_s + 1e9;
+        for (const auto& [kind, start] : applied_model->BiasColumns()) {
+          if (kind != applied_model->sensor()) continue;
+          for (int axis = 0; axis < 3; ++axis) {
+            covariance(start + axis, start + axis) += applied_drift.VarianceSince(axis, w, since_s);
+          }
+        }
+      }
+      *sigma = PropagatedSigma(corrected, applied_theta, covariance);
+    }
+  }
+  return value;
+}
+
+nlohmann::json FreeModelState::PrecisionJson(const GateOptions& gate) const {
+  nlohmann::json precision = nlohmann::json::object();
+  const Estimate& e = result.estimate.estimate;
+  if (!e.ok || e.sigma.size() != static_cast<Eigen::Index>(e.parameters.size())) return precision;
+  for (std::size_t p = 0; p < e.parameters.size(); ++p) {
+    const double tolerance = FreeToleranceFor(e.parameters[p], gate);
+    if (tolerance <= 0) continue;
+    const double s = e.sigma[static_cast<Eigen::Index>(p)];
+    precision[e.parameters[p].name] = {
+        {"sigma", std::isfinite(s) ? nlohmann::json(s) : nlohmann::json()},
+        {"tolerance", tolerance}};
+  }
+  return precision;
+}
+
+nlohmann::json FreeModelState::ResultJson() const {
+  nlohmann::json j = protocol::FreeResultJson(result, advice);
+  j["requested"] = requested;
+  if (result.model.empty()) j["model"] = requested;  // not fitted yet
+  j["poses"] = result.estimate.intervals;
+  j["moves"] = MovesUsed(result.estimate);
+  j["upstream"] = upstream ? nlohmann::json(upstream->model) : nlohmann::json();
+  j["active_version"] = active_version;
+  j["applied_version"] = applied_version;
+  return j;
+}
+
+nlohmann::json FreeModelState::StatusJson() const {
+  const FreeEstimate& fe = result.estimate;
+  const std::string why =
+      fe.estimate.error.empty() ? "no static interval fitted yet" : fe.estimate.error;
+  nlohmann::json gate = {
+      {"pass", fe.estimate.ok && fe.gate_passed},
+      {"reasons",
+       fe.estimate.ok ? fe.gate_reasons : std::vector<std::string>{"no estimate: " + why}}};
+  return {{"model", result.model.empty() ? requested : result.model},
+          {"note", result.note},
+          {"poses", fe.intervals},
+          {"intervals", fe.intervals},
+          {"coverage", fe.coverage.fraction()},
+          {"gate", gate},
+          {"fit_check", ToString(fe.estimate.fit.verdict)},
+          {"advice", advice ? nlohmann::json(advice->text) : nlohmann::json()},
+          {"active_version", active_version},
+          {"applied_version", applied_version}};
+}
+
+FreeModelState* FreeDevice::Find(const std::string& requested) {
+  for (auto& m : models) {
+    if (m->requested == requested) return m.get();
+  }
+  return nullptr;
+}
+
+FreeModelState& FreeDevice::Get(const std::string& requested) {
+  if (FreeModelState* m = Find(requested)) return *m;
+  auto m = std::make_unique<FreeModelState>();
+  m->requested = requested;
+  std::string error;
+  if (auto model = MakeFreeModel(requested, context, &error)) m->sensor = model->sensor();
+  models.push_back(std::move(m));
+  return *models.back();
+}
+
+std::vector<FreeModelState*> FreeDevice::Take(const FreeUpdate& update) {
+  results = update.results;
+  advice = update.advice;
+  results_intervals = update.intervals;
+  std::vector<FreeModelState*> updated;
+  for (const auto& name : update.models) {
+    // The last result asked for under this name (an upstream fitted for another model has its
+    // own name; a magellipsoid that fell back to a sphere keeps the name asked for).
+    int found = -1;
+    for (std::size_t i = 0; i < update.results.size(); ++i) {
+      if (update.results[i].requested == name) found = static_cast<int>(i);
+    }
+    if (found < 0) continue;
+    FreeModelState& m = Get(name);
+    m.result = update.results[static_cast<std::size_t>(found)];
+    m.advice = static_cast<std::size_t>(found) < update.advice.size()
+                   ? update.advice[static_cast<std::size_t>(found)]
+                   : std::nullopt;
+    m.estimate_intervals = update.intervals;
+    m.upstream.reset();
+    std::string error;
+    auto model = MakeFreeModel(m.result.model, context, &error);
+    const std::string up = model ? model->upstream() : std::string();
+    for (const auto& r : update.results) {
+      if (!up.empty() && r.model == up && r.estimate.estimate.ok) m.upstream = r;
+    }
+    updated.push_back(&m);
+  }
+  return updated;
+}
+
+void FreeDevice::NoteSkipped(const std::string& reason) {
+  ++skipped;
+  skip_reasons.push_back(reason);
+  if (skip_reasons.size() > kMaxSkipReasons) skip_reasons.erase(skip_reasons.begin());
+}
+
+nlohmann::json FreeDevice::ResultJson(std::size_t intervals) const {
+  nlohmann::json models_json = nlohmann::json::object();
+  for (const auto& m : models) models_json[m->requested] = m->ResultJson();
+  return {{"pose_source", "free"},
+          {"intervals", intervals},
+          {"skipped", skipped},
+          {"skip_reasons", skip_reasons},
+          {"context", protocol::ToJson(context)},
+          {"models", models_json}};
+}
+
+nlohmann::json FreeDevice::StatusJson(std::size_t intervals) const {
+  nlohmann::json models_json = nlohmann::json::object();
+  for (const auto& m : models) models_json[m->requested] = m->StatusJson();
+  return {{"pose_source", "free"},
+          {"intervals", intervals},
+          {"skipped", skipped},
+          {"last_skip", skip_reasons.empty() ? "" : skip_reasons.back()},
+          {"models", models_json}};
+}
+
+nlohmann::json FreeDevice::NextPoseJson(const std::string& device) const {
+  nlohmann::json advice_json = nlohmann::json::array();
+  bool all_pass = !models.empty();
+  for (const auto& m : models) {
+    const bool pass = m->result.estimate.estimate.ok && m->result.estimate.gate_passed;
+    all_pass = all_pass && pass;
+    nlohmann::json a = {{"model", m->requested},
+                        {"fitted", m->result.model},
+                        {"gate_pass", pass},
+                        {"gate_reasons", m->result.estimate.gate_reasons},
+                        {"coverage", m->result.estimate.coverage.fraction()}};
+    if (m->advice) {
+      a["text"] = m->advice->text;
+      a["sigma_ratio"] = m->advice->sigma_ratio;
+    } else {
+      a["text"] = nullptr;
+    }
+    advice_json.push_back(a);
+  }
+  if (models.empty()) {
+    return {{"class", "NEXT_POSE"},
+            {"ok", false},
+            {"device", device},
+            {"pose_source", "free"},
+            {"error",
+             "free mode: no static interval has been fitted yet; hold the device still in a "
+             "first orientation"}};
+  }
+  return {{"class", "NEXT_POSE"},  {"ok", true},
+          {"device", device},      {"pose_source", "free"},
+          {"advice", advice_json}, {"gates_pass", all_pass}};
+}
+
+}  // namespace turncal::daemon

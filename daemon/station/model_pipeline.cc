@@ -1,0 +1,279 @@
+#include "daemon/station/model_pipeline.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "daemon/station/station.h"
+#include "protocol/calibration_json.h"
+#include "protocol/observability_json.h"
+
+namespace turncal::daemon {
+
+nlohmann::json DriftScaleJson(const Estimate& e) {
+  nlohmann::json j = protocol::ToJson(e.drift_scale);
+  j["used"] = e.drift_scale_used;
+  return j;
+}
+
+nlohmann::json ParamsJson(const Estimate& e) {
+  nlohmann::json params = nlohmann::json::object();
+  // A refused solve (too few poses) names its parameters but has no values yet.
+  if (e.theta.size() != static_cast<Eigen::Index>(e.parameters.size()) ||
+      e.sigma.size() != e.theta.size()) {
+    return params;
+  }
+  for (std::size_t i = 0; i < e.parameters.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    params[e.parameters[i].name] = {
+        {"value", e.theta[k]},
+        {"sigma", std::isfinite(e.sigma[k]) ? nlohmann::json(e.sigma[k]) : nlohmann::json()}};
+  }
+  return params;
+}
+
+ModelPipeline ModelPipeline::Make(const std::string& name, const StationOptions& options,
+                                  const SensorClass& sensor) {
+  ModelPipeline m;
+  std::string error;
+  m.model = MakeModel(name, options.context, &error);
+  CalibratorOptions co = options.drift_model ? DriftOptionsForClass(*m.model, sensor)
+                                             : OptionsForClass(*m.model, sensor);
+  // The class's drift (or the one configured) is the prior; the session's poses identify
+  // its strength.
+  co.identify_drift = options.drift_model && options.identify_drift;
+  co.rate_accuracy = options.rate_accuracy;
+  m.calibrator = std::make_unique<Calibrator>(co);
+  return m;
+}
+
+void ModelPipeline::Apply(int version, const Eigen::VectorXd& theta,
+                          const Eigen::MatrixXd& covariance,
+                          const std::optional<TimeWindow>& bias_window, const BiasDrift& drift) {
+  applied_version = version;
+  applied_theta = theta;
+  applied_covariance = covariance;
+  applied_bias_window = bias_window;
+  applied_drift = drift;
+  applied_c = model->Correct(theta, Eigen::Vector3d::Zero());
+  for (int i = 0; i < 3; ++i) {
+    applied_A.col(i) = model->Correct(theta, Eigen::Vector3d::Unit(i)) - applied_c;
+  }
+  // Affine when a point away from the probes maps the same both ways.
+  const Eigen::Vector3d probe(0.83, -1.37, 2.11);
+  const Eigen::Vector3d exact = model->Correct(theta, probe);
+  const Eigen::Vector3d affine = applied_A * probe + applied_c;
+  applied_affine = exact.allFinite() && (exact - affine).norm() <= 1e-12 * (1.0 + exact.norm());
+}
+
+bool CalibrationValues(const MeasurementModel& model, const nlohmann::json& stored,
+                       Eigen::VectorXd* theta, Eigen::MatrixXd* covariance) {
+  const auto& params = model.parameters();
+  Eigen::VectorXd t(static_cast<Eigen::Index>(params.size()));
+  bool ok = stored.is_object() && stored.contains("params") && stored["params"].is_object();
+  for (std::size_t i = 0; ok && i < params.size(); ++i) {
+    const auto it = stored["params"].find(params[i].name);
+    ok = it != stored["params"].end() && it->is_object() && (*it)["value"].is_number();
+    if (ok) t[static_cast<Eigen::Index>(i)] = (*it)["value"].get<double>();
+  }
+  if (!ok) return false;
+  *theta = t;
+  covariance->resize(0, 0);
+  const auto& cov = stored.value("covariance", nlohmann::json());
+  if (cov.is_array() && cov.size() == params.size()) {
+    Eigen::MatrixXd c(t.size(), t.size());
+    bool good = true;
+    for (std::size_t r = 0; good && r < params.size(); ++r) {
+      good = cov[r].is_array() && cov[r].size() == params.size();
+      for (std::size_t k = 0; good && k < params.size(); ++k) {
+        good = cov[r][k].is_number();
+        if (good) {
+          c(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(k)) = cov[r][k].get<double>();
+        }
+      }
+    }
+    if (good) *covariance = c;
+  }
+  return true;
+}
+
+bool ModelPipeline::ApplyStored(const nlohmann::json& stored) {
+  Eigen::VectorXd theta;
+  Eigen::MatrixXd covariance;
+  if (!stored.contains("version") || !stored["version"].is_number_integer() ||
+      !CalibrationValues(*model, stored, &theta, &covariance)) {
+    return false;
+  }
+  std::optional<TimeWindow> window;
+  TimeWindow w;
+  if (stored.contains("bias_window") && protocol::ParseTimeWindow(stored["bias_window"], &w)) {
+    window = w;
+  }
+  BiasDrift drift;
+  if (stored.contains("calibrator") && stored["calibrator"].is_object() &&
+      stored["calibrator"].contains("drift")) {
+    protocol::ParseBiasDrift(stored["calibrator"]["drift"], &drift);
+  }
+  Apply(stored["version"].get<int>(), theta, Eigen::MatrixXd(), window, drift);
+  if (covariance.size() > 0) applied_covariance = covariance;
+  return true;
+}
+
+void ModelPipeline::AddAndSolve(const PoseRecord& record, const GateOptions& gate_options,
+                                ModelUpdate* job) {
+  std::lock_guard lock(*calibrator_mutex);
+  job->added = calibrator->add_pose(record, &job->error);
+  job->moves_refused = calibrator->moves_refused();
+  job->last_move_refusal = calibrator->last_move_refusal();
+  if (!job->added) return;
+  job->estimate = calibrator->solve();
+  if (job->estimate.ok) {
+    const DataReport data = AnalyzeData(*model, job->estimate.theta, calibrator->weighted_poses(),
+                                        ObservabilityOptions{});
+    job->rank = data.analysis.rank;
+    job->gate = EvaluateGate(*model, job->estimate, data, gate_options);
+  } else {
+    job->gate.reasons.push_back("no estimate: " + job->estimate.error);
+  }
+}
+
+namespace {
+
+// 1 sigma per axis of model.Correct(theta, raw) from cov(theta): J cov J^T with J by central
+// differences (steps of 1e-6 of each parameter's scale); nullopt without a usable covariance.
+// `bias_drift_var`, per axis, is added to the bias parameters' variance: how far the bias may
+// have wandered since the calibration. With `f_q` a g-sensitivity (gyro21's B_g) comes off the
+// raw rate first, so its covariance counts too.
+std::optional<Eigen::Vector3d> CorrectionSigma(
+    const MeasurementModel& model, const Eigen::VectorXd& theta, Eigen::MatrixXd covariance,
+    const Eigen::Vector3d& raw, const Eigen::Vector3d& bias_drift_var, const Eigen::Vector3d* f_q) {
+  const Eigen::Index n = theta.size();
+  if (covariance.rows() != n || covariance.cols() != n || !covariance.allFinite()) {
+    return std::nullopt;
+  }
+  const auto& params = model.parameters();
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const std::string& name = params[static_cast<std::size_t>(k)].name;
+    if (name == "bx" || name == "by" || name == "bz")
+      covariance(k, k) += bias_drift_var[name[1] - 'x'];
+  }
+  const int g = f_q ? model.index_of("Bg_xx") : -1;
+  const auto corrected = [&](const Eigen::VectorXd& at) {
+    Eigen::Vector3d r = raw;
+    if (g >= 0) {
+      Eigen::Matrix3d B;
+      for (int e = 0; e < 9; ++e) B(e / 3, e % 3) = at[g + e];
+      r -= B * *f_q;
+    }
+    return model.Correct(at, r);
+  };
+  return PropagatedSigma(corrected, theta, covariance);
+}
+
+}  // namespace
+
+Eigen::Vector3d PropagatedSigma(
+    const std::function<Eigen::Vector3d(const Eigen::VectorXd&)>& corrected,
+    const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance) {
+  const Eigen::Index n = theta.size();
+  Jacobian3 jacobian(3, n);
+  Eigen::VectorXd t = theta;
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const double h = 1e-6 * std::max(1.0, std::abs(theta[k]));
+    t[k] = theta[k] + h;
+    const Eigen::Vector3d up = corrected(t);
+    t[k] = theta[k] - h;
+    const Eigen::Vector3d down = corrected(t);
+    t[k] = theta[k];
+    jacobian.col(k) = (up - down) / (2 * h);
+  }
+  const Eigen::Matrix3d c = jacobian * covariance * jacobian.transpose();
+  return c.diagonal().cwiseMax(0.0).cwiseSqrt();
+}
+
+int ModelPipeline::triad() const { return TriadOfSensor(model->sensor()); }
+
+const TriadStats* ModelPipeline::TriadOf(const PoseRecord& record) const {
+  return TriadFor(model->sensor(), record);
+}
+
+Eigen::Vector3d ModelPipeline::Correct(const Eigen::Vector3d& raw_in, double t_s,
+                                       std::optional<Eigen::Vector3d>* sigma,
+                                       const Eigen::Vector3d* f_q) const {
+  // The g-sensitivity's share comes off the raw rate first; the rest of the correction is the
+  // model's affine map (Correct with no force).
+  Eigen::Vector3d raw = raw_in;
+  if (const int g = model->index_of("Bg_xx"); g >= 0 && f_q) {
+    Eigen::Matrix3d B;
+    for (int k = 0; k < 9; ++k) B(k / 3, k % 3) = applied_theta[g + k];
+    raw -= B * *f_q;
+  }
+  const Eigen::Vector3d value = applied_affine ? Eigen::Vector3d(applied_A * raw + applied_c)
+                                               : model->Correct(applied_theta, raw);
+  if (sigma) {
+    Eigen::Vector3d drift_var = Eigen::Vector3d::Zero();
+    if (applied_bias_window && applied_drift.enabled()) {
+      const TimeWindow& w = *applied_bias_window;
+      // A clock before the calibration's (the host restarted since): the time since is
+      // unknown, so the wander's long-term limit (infinite for a random walk).
+      const double since_s = t_s >= w.t0_s ? t_s : w.t1_s + 1e9;
+      for (int axis = 0; axis < 3; ++axis) {
+        drift_var[axis] = applied_drift.VarianceSince(axis, w, since_s);
+      }
+    }
+    *sigma = CorrectionSigma(*model, applied_theta, applied_covariance, raw_in, drift_var, f_q);
+  }
+  return value;
+}
+
+nlohmann::json ModelPipeline::PrecisionJson(const GateOptions& gate_options) const {
+  nlohmann::json precision = nlohmann::json::object();
+  if (estimate.ok && estimate.sigma.size() == model->num_parameters()) {
+    const auto& params = model->parameters();
+    for (int j : GatedParameters(*model)) {
+      const double sigma = estimate.sigma[j];
+      precision[params[static_cast<std::size_t>(j)].name] = {
+          {"sigma", std::isfinite(sigma) ? nlohmann::json(sigma) : nlohmann::json()},
+          {"tolerance", ToleranceFor(params[static_cast<std::size_t>(j)], gate_options)}};
+    }
+  }
+  return precision;
+}
+
+nlohmann::json ModelPipeline::StatusJson() const {
+  const CalibratorOptions& co = calibrator->options();
+  return {{"poses", estimate.poses},
+          {"moves", estimate.moves},
+          {"moves_refused", moves_refused},
+          {"last_move_refusal", last_move_refusal},
+          {"gate", ToJson(gate)},
+          {"fit_check", ToString(estimate.fit.verdict)},
+          {"noise_model", co.drift.enabled()
+                              ? protocol::ToJson(estimate.ok ? estimate.drift : co.drift)
+                              : nlohmann::json{{"pose_offset_sigma", co.pose_offset_sigma}}},
+          {"drift_scale",
+           estimate.ok && co.identify_drift ? DriftScaleJson(estimate) : nlohmann::json()},
+          {"active_version", active_version},
+          {"applied_version", applied_version}};
+}
+
+nlohmann::json ModelPipeline::ResultJson() const {
+  const Estimate& e = estimate;
+  return {{"ok", e.ok},
+          {"poses", e.poses},
+          {"moves", e.moves},
+          {"params", ParamsJson(e)},
+          {"rank", rank},
+          {"chi2", e.chi2},
+          {"dof", e.dof},
+          {"p_value", e.p_value},
+          {"fit_check", protocol::ToJson(e.fit, model->sensor())},
+          {"drift_scale",
+           e.ok && calibrator->options().identify_drift ? DriftScaleJson(e) : nlohmann::json()},
+          {"bias_window", e.bias_window ? protocol::ToJson(*e.bias_window) : nlohmann::json()},
+          {"gauge", e.gauge},
+          {"warnings", e.warnings},
+          {"gate", ToJson(gate)},
+          {"active_version", active_version}};
+}
+
+}  // namespace turncal::daemon

@@ -1,0 +1,116 @@
+#pragma once
+// One model of one device in the station: its calibrator and latest estimate, the gate's verdict,
+// the active calibration's version, and the calibration applied to live samples (with the
+// correction's sigma growing with the time since). The station (daemon/station/station.h) wires it
+// to the device's poses, the solve worker, persistence and events.
+
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+#include "core/analysis/observability.h"
+#include "core/analysis/publish_gate.h"
+#include "core/estimation/calibrator.h"
+#include "core/estimation/sensor_class.h"
+#include "core/modeling/measurement_model.h"
+#include "core/sequencing/sample.h"
+
+namespace turncal::daemon {
+
+struct StationOptions;
+
+// {NAME:{"value","sigma"}} in the model's order; sigma null when undetermined.
+nlohmann::json ParamsJson(const Estimate& e);
+// The drift's identified strength, with the scale the solve used ("used": 1 while the poses do
+// not reject the prior).
+nlohmann::json DriftScaleJson(const Estimate& e);
+
+// The 1 sigma per axis of a correction `corrected(theta)` from theta's `covariance`: J C J^T, J by
+// central differences (steps of 1e-6 of each parameter's scale).
+Eigen::Vector3d PropagatedSigma(
+    const std::function<Eigen::Vector3d(const Eigen::VectorXd&)>& corrected,
+    const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance);
+
+// A calibration document's parameter values in `model`'s order, and its covariance (empty when
+// the document has none or it is not the model's size). False when a parameter is missing.
+bool CalibrationValues(const MeasurementModel& model, const nlohmann::json& calibration,
+                       Eigen::VectorXd* theta, Eigen::MatrixXd* covariance);
+
+// What one pose's update computes (on the solve worker when there is one).
+struct ModelUpdate {
+  std::size_t device_poses = 0;  // the device's poses when the update was queued, this one included
+  bool added = false;
+  std::string error;
+  Estimate estimate;
+  int rank = 0;
+  GateResult gate;
+  // A gyroscope's moves the calibrator could not use, and why the latest was refused.
+  int moves_refused = 0;
+  std::string last_move_refusal;
+};
+
+struct ModelPipeline {
+  std::unique_ptr<MeasurementModel> model;
+  std::unique_ptr<Calibrator> calibrator;
+  Estimate estimate;
+  // How many of the device's poses (poses_used, records_used) `estimate` saw: later poses may be
+  // captured while its solve runs, and a calibration carries only its own evidence.
+  std::size_t estimate_poses = 0;
+  GateResult gate;
+  int rank = 0;
+  int moves_refused = 0;  // as of the latest update (ModelUpdate)
+  std::string last_move_refusal;
+  int active_version = 0;  // 0: no active calibration
+  Estimate active;
+  // The calibration live samples are corrected with: the active one, or the one stored in the
+  // state directory when the station started (version 0 / empty: none).
+  int applied_version = 0;
+  Eigen::VectorXd applied_theta;
+  Eigen::MatrixXd applied_covariance;  // empty when unknown
+  // With a drift model: when the applied bias held, and how the bias wanders since (the
+  // corrected output's sigma grows with the time since).
+  std::optional<TimeWindow> applied_bias_window;
+  BiasDrift applied_drift;
+  // The correction as y = A raw + c, when the model's correction is affine in the raw sample (all
+  // four models are: checked numerically when the calibration is applied). Live samples are
+  // corrected with it, without the model's per-sample matrix solves.
+  bool applied_affine = false;
+  Eigen::Matrix3d applied_A = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d applied_c = Eigen::Vector3d::Zero();
+  // The calibrator is solved on the service's worker thread; this guards it.
+  std::unique_ptr<std::mutex> calibrator_mutex = std::make_unique<std::mutex>();
+
+  // The model `name` with the calibrator the station's options and sensor class call for.
+  static ModelPipeline Make(const std::string& name, const StationOptions& options,
+                            const SensorClass& sensor);
+
+  // The triad the model calibrates (kTriadAcc, kTriadGyr or kTriadMag).
+  int triad() const;
+  // The record's statistics of that triad (nullptr when it has none).
+  const TriadStats* TriadOf(const PoseRecord& record) const;
+  // Applies a calibration to live samples.
+  void Apply(int version, const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance,
+             const std::optional<TimeWindow>& bias_window, const BiasDrift& drift);
+  // Applies a calibration document read from the state directory; false when it is unreadable.
+  bool ApplyStored(const nlohmann::json& stored);
+  // Adds the pose and solves, analyses and gates (under the calibrator's lock).
+  void AddAndSolve(const PoseRecord& record, const GateOptions& gate, ModelUpdate* job);
+  // The applied calibration's correction of one raw triad sample, and with `sigma` its 1 sigma
+  // (the covariance plus the bias's wander since the calibration, at host time t_s).
+  // A gyroscope model's g-sensitivity needs the specific force in the table frame, `f_q` (the
+  // station passes the raw accelerometer turned by the nominal mounting; gyro12 ignores it).
+  Eigen::Vector3d Correct(const Eigen::Vector3d& raw, double t_s,
+                          std::optional<Eigen::Vector3d>* sigma,
+                          const Eigen::Vector3d* f_q = nullptr) const;
+
+  // Every gated parameter's sigma against its tolerance (ESTIMATE's precision).
+  nlohmann::json PrecisionJson(const GateOptions& gate) const;
+  // The model's entry in `status` and in RESULT.
+  nlohmann::json StatusJson() const;
+  nlohmann::json ResultJson() const;
+};
+
+}  // namespace turncal::daemon

@@ -1,0 +1,247 @@
+#pragma once
+// One turntable station (DESIGN.md "Data flow", docs/ARCHITECTURE.md): per device a pipeline
+// (daemon/station/device_pipeline.h: its sequencer, poses and noise profile), per model of each
+// device a pipeline (daemon/station/model_pipeline.h: calibrator, estimate, gate, applied
+// calibration). The station wires them: after every captured pose the estimates are updated on the
+// solve worker, the data-level observability analysis and the publish gate run, poses and
+// calibrations are persisted, and events say what happened. When a model's gate passes for the
+// first time its calibration becomes active (versioned). The result has the shape DESIGN.md
+// promises for `--result-out` and `turncal result --json`.
+//
+// Same code for live devices and replays: the Station is a ReplayTarget, and the service loop
+// (issue "The daemon") will feed it from transports.
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/analysis/observability.h"
+#include "core/analysis/publish_gate.h"
+#include "core/estimation/calibrator.h"
+#include "core/estimation/sensor_class.h"
+#include "core/planning/pose_planner.h"
+#include "core/sequencing/sequencer.h"
+#include "daemon/station/capture_replay.h"
+#include "daemon/station/device_pipeline.h"
+#include "daemon/station/free_pipeline.h"
+#include "daemon/station/model_pipeline.h"
+#include "protocol/sample_line.h"
+
+namespace turncal::daemon {
+
+// One device's own models and gate (config [[device]] models, [device.gate]); absent: the
+// station's.
+struct DeviceModelOptions {
+  std::optional<std::vector<std::string>> models;
+  std::optional<GateOptions> gate;
+};
+
+// Where a station's poses come from (DESIGN.md "Pose sources"): announced by the controller
+// (schedule files and a capture's pose events go the same way), or none at all ("free", issue
+// 22): the sequencer finds the static intervals of a tumble itself and the free models (accel9,
+// gyro9, magellipsoid, accmag, ...: core/modeling/free_model.h) calibrate from them
+// (daemon/station/free_pipeline.h, docs/FREE.md "In the daemon").
+enum class PoseSource { kAnnounced, kFree };
+const char* ToString(PoseSource source);
+bool ParsePoseSource(const std::string& text, PoseSource* out);
+
+// [free]: the free pose source's own settings.
+struct FreeStationOptions {
+  // The gate: the share of MicroStrain's 576 latitude-longitude bins the corrected triad's
+  // directions must fill, percent (0: not checked).
+  double min_coverage_percent = 0.0;
+  // The field's magnitude from [reference] (true), or unknown (false: the magnetometer models'
+  // soft iron is then relative, |h| = 1, and the result says so).
+  bool field_known = true;
+};
+
+struct StationOptions {
+  SequencerOptions sequencer;
+  PoseSource pose_source = PoseSource::kAnnounced;
+  FreeStationOptions free;
+  // Models to estimate per device; a magnetometer model only where the records carry mag. With
+  // the free pose source these are free models, and an empty list means what the data carry
+  // (DefaultFreeModels: accel9, gyro9 with moves, magellipsoid, accmag).
+  std::vector<std::string> models = {"accel13", "mag13"};
+  // Noise and tolerance class (SENSORS.md): the calibrator's noise floor and pose-to-pose offset,
+  // and the gate's default tolerances.
+  std::string sensor_class = "industrial";
+  // false: the model before issue 19, an independent offset of the bias instability per pose
+  // (kept for comparisons; its sigma are not honest in ordered plans).
+  bool drift_model = true;
+  // The calibrator's drift model (docs/ACCURACY.md "Drift"): the class's bias instability as a
+  // Gauss-Markov process of this correlation time, and a warm-up allowance after power-on of
+  // this many bias instabilities (1 sigma at the first pose) settling with warmup_tau_s.
+  // Negative: the class's (100 s; no warm-up; 60 s).
+  double bias_tau_s = -1.0;
+  // Identify the drift's strength from the session's poses, with the class's as the prior
+  // (core/estimation/drift_identify.h); false: the class's drift as it is.
+  bool identify_drift = true;
+  double warmup_in_instabilities = -1.0;
+  double warmup_tau_s = -1.0;
+  // The noise prior measured on this sensor (turncal noise on a long rest) instead of the
+  // class's: white density and Gauss-Markov sigma of the accelerometer (m/s^2/sqrt(Hz), m/s^2),
+  // the magnetometer's per-sample noise and Gauss-Markov sigma (device unit), and a bias random
+  // walk of each (unit/sqrt(s); the class has none). Negative: the class's.
+  double acc_noise_density = -1.0;
+  double acc_bias_instability = -1.0;
+  double mag_noise_rms = -1.0;
+  double mag_bias_instability = -1.0;
+  double acc_random_walk = -1.0;
+  double mag_random_walk = -1.0;
+  // The table's motion and what the next-pose planner minimises (core/planning/pose_planner.h).
+  TableMotion table;
+  // The table's rate accuracy for rate segments, relative 1 sigma ([table] rate_accuracy).
+  double rate_accuracy = 1e-5;
+  // What the next-pose planner minimises ([table] plan_for), and the rate segments it may
+  // recommend to a gyroscope ([table] plan_rates_dps; none: the table has no rate mode). The
+  // rate ripple the sequencer allows ([table] rate_ripple) is SequencerOptions::rate_steady's.
+  PlanObjective plan_objective = PlanObjective::kTime;
+  RatePlan plan_rates;
+  ModelContext context;
+  GateOptions gate;  // tolerances and min_dof replaced by the class's unless gate_tolerances_set
+  bool gate_tolerances_set = false;
+  std::map<std::string, DeviceModelOptions> per_device;  // by device name
+  // Where the pose journal and the active calibrations live (daemon/state/persistence.h); empty:
+  // nothing is persisted. A journal found there is replayed first: the session resumes.
+  std::string state_dir;
+  // Called with every activated calibration once its file in state_dir is durable, on the
+  // thread that wrote it (the solve worker): the registry's outbox
+  // (daemon/registry/registry_outbox.h).
+  std::function<void(const nlohmann::json& calibration)> on_calibration_saved;
+  bool IsValid(std::string* error) const;
+  // The sensor class with this station's noise prior and drift settings in it: one rule for
+  // every field above that can replace the class's value, a negative value is the class's and
+  // any other replaces it (IsValid refuses a zero where only a positive value means anything: a
+  // correlation time, a white density, a bias instability).
+  SensorClass ResolvedSensorClass() const;
+};
+
+class Station : public ReplayTarget {
+ public:
+  // Every event, as the socket will publish it ({"class":...}).
+  using EventSink = std::function<void(const nlohmann::json&)>;
+  // `options` must be valid.
+  Station(std::vector<std::string> device_names, const StationOptions& options, EventSink sink);
+  ~Station() override;
+
+  void OnSample(int device, const Sample& sample) override;
+  bool OnAnnounce(const Announcement& announcement, const std::vector<int>& devices,
+                  std::string* error) override;
+  // Timeouts of one device's sequencer, in that device's host clock (a replayed device's clock is
+  // its capture's, so the service ticks only live devices).
+  void TickDevice(int device, std::int64_t now_ns);
+  // A pose for one device only (`turncal pose --device D`).
+  bool AnnounceTo(int device, const Announcement& announcement, std::string* error);
+  void OnTick(std::int64_t now_ns) override;
+  void OnFinish(std::int64_t now_ns) override;
+
+  // {"class":"RESULT","devices":{NAME:{"poses":N,"models":{MODEL:{"params":{NAME:{"value","sigma"}},
+  //  "rank","gate":{"pass","reasons"},"active_version",...}}}}}
+  nlohmann::json Result() const;
+
+  // What the live dialogue learned about a device (identity, firmware, device-side stored
+  // calibration): recorded in the provenance of every calibration it gets.
+  void SetDeviceIdentity(int device, nlohmann::json identity);
+
+  // The correction of a live sample with the device's applied calibrations (MODELS.md
+  // "Correction of live samples"): false when the device has none. Each triad is corrected by
+  // its model's applied calibration; `versions` receives MODEL:version of those used.
+  using Corrected = protocol::CorrectedSample;  // protocol/sample_line.h
+  bool Correct(int device, const Sample& sample, Corrected* out, bool with_sigma = false) const;
+  bool HasAppliedCalibration(int device) const;
+
+  // Per device: poses, the pose being collected (its last progress), sample counts, and per model
+  // the gate's verdict and the active version (`status` on the socket).
+  nlohmann::json Status(int device) const;
+  // The noise the device's sequencer measured (nullptr before it has).
+  const NoiseProfile* NoiseOf(int device) const;
+
+  // Makes the current estimate of DEVICE's MODEL active although the gate refused it (the
+  // operator's explicit override). `who` (operator, reason, peer uid) is recorded in the
+  // calibration with the gate's reasons. False with a message when there is no estimate.
+  bool PublishOverride(const std::string& device, const std::string& model,
+                       const nlohmann::json& who, std::string* error);
+
+  // The next pose to capture (D-optimal over every model of the device), as NEXT_POSE.
+  nlohmann::json NextPose(const std::string& device) const;
+
+  int DeviceIndex(const std::string& name) const;  // -1 when unknown
+  // DEVICE's model MODEL (a pose model of an announced station), nullptr when it has none.
+  const MeasurementModel* ModelOf(const std::string& device, const std::string& model) const;
+
+  // Where pose updates (calibrator solve, data observability, gate) run: `work` off the event
+  // loop, then `done` back on it, in order. Unset (replays, tests): both at once, inline. Work
+  // still queued when the station is destroyed must be drained first; its `done` is then a no-op.
+  using Executor = std::function<void(std::function<void()> work, std::function<void()> done)>;
+  void SetExecutor(Executor executor);
+
+  // Writes reports/DEVICE.html now for every device with an activation not yet in its report
+  // (the service calls it before it stops; OnFinish does for replays). Reports are otherwise
+  // written from TickDevice/OnTick, at most every kReportIntervalNs per device.
+  void WriteDueReports();
+  static constexpr std::int64_t kReportIntervalNs = 60'000'000'000;
+
+  // CPU time of this thread (ms) that the loop spent handling a captured pose (its answer, the
+  // journal append queued, the update queued; with no executor also the solve): the last one and
+  // the longest. Taken with the thread's CPU clock only when a pose is captured.
+  double capture_cpu_ms_last() const { return capture_cpu_ms_last_; }
+  double capture_cpu_ms_max() const { return capture_cpu_ms_max_; }
+
+  // What reached the state directory: writes that succeeded and failed (journal appends,
+  // calibrations, noise profiles, reports), and the last failure's message while the latest
+  // write failed ("" once a write succeeds again). A failed write is also an ERROR event, and
+  // POSE_CAPTURED / CALIBRATION_ACTIVE carry "saved": false.
+  nlohmann::json PersistenceStatus() const;
+
+  using ModelState = ModelPipeline;
+  using DeviceState = DevicePipeline;
+
+ private:
+  void OnSequencerEvent(std::size_t device, const SequencerEvent& event);  // timed captures
+  void HandleSequencerEvent(std::size_t device, const SequencerEvent& event);
+  void WriteReport(std::size_t device, std::int64_t now_ns, bool now);
+  void Update(std::size_t device, const PoseRecord& record, double t_s);
+  // The free pose source (daemon/station/free_pipeline.h): every free model of the device fitted
+  // again to all of its intervals, then gated and activated.
+  void QueueFreeFit(std::size_t device, double t_s);
+  void ApplyFree(std::size_t device, const FreeUpdate& job, double t_s, bool resuming);
+  void ActivateFree(DeviceState& d, FreeModelState& m, double t_s,
+                    const nlohmann::json& override_who);
+  // Writes a calibration document (calibrations/DEVICE.MODEL.json, off the loop), then runs
+  // `apply` and publishes `event` with "saved" (the write's outcome).
+  void PersistCalibration(DeviceState& d, const std::string& model, nlohmann::json calibration,
+                          nlohmann::json event, std::function<void()> apply);
+  bool free_mode() const { return options_.pose_source == PoseSource::kFree; }
+  // `work` on the executor (inline without one), then `done` unless the station is gone.
+  void Defer(std::function<void()> work, std::function<void()> done);
+  void RecordIdentifiedDrift(std::size_t device, const ModelState& m);
+  void Apply(std::size_t device, std::size_t model, double t_s, const ModelUpdate& job,
+             bool resuming);
+  void Resume();
+  void Publish(const nlohmann::json& event);
+  void Activate(DeviceState& d, ModelState& m, double t_s, const nlohmann::json& override_who);
+  void LoadApplied();
+  // Counts a state-directory write's outcome; publishes ERROR when it failed.
+  void NoteWrite(const std::string& device, const std::string& error);
+  bool EnsureJournal();  // (re)opens the journal of a session with a state directory
+
+  StationOptions options_;
+  SensorClass sensor_;
+  EventSink sink_;
+  std::vector<std::unique_ptr<DeviceState>> devices_;
+  std::shared_ptr<class PoseJournal> journal_;  // shared with queued appends
+  bool journal_wanted_ = false;  // the session has a state directory: keep trying to open it
+  std::uint64_t writes_ok_ = 0, writes_failed_ = 0;
+  std::string write_error_;
+  bool resuming_ = false;
+  Executor executor_;
+  std::shared_ptr<bool> alive_ = std::make_shared<bool>(true);
+  double capture_cpu_ms_last_ = 0.0, capture_cpu_ms_max_ = 0.0;
+};
+
+}  // namespace turncal::daemon

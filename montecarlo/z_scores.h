@@ -1,0 +1,36 @@
+#pragma once
+// The z-scores of many Monte Carlo runs, z = (estimate - truth) / sigma per parameter, and what
+// they say about the reported sigma: an honest sigma gives z with mean 0 and spread 1 (and about
+// 0.27 % of them beyond 3 sigma, 0.006 % beyond 4, for a normal z).
+
+#include <Eigen/Core>
+
+namespace turncal::montecarlo {
+
+class ZScoreSummary {
+ public:
+  explicit ZScoreSummary(int parameters = 0);
+
+  // One run's z-scores, one per parameter.
+  void Add(const Eigen::VectorXd& z);
+
+  int runs() const { return runs_; }
+  int parameters() const { return static_cast<int>(sum_.size()); }
+  // Per parameter, over the runs added: the mean, the spread (the population standard deviation,
+  // sqrt(mean z^2 - mean^2), 0 when rounding makes that negative) and the counts of |z| > 3 and
+  // |z| > 4. With no run, mean and spread are NaN and 0.
+  Eigen::VectorXd Mean() const;
+  Eigen::VectorXd Std() const;
+  const Eigen::VectorXi& BeyondThree() const { return beyond_3_; }
+  const Eigen::VectorXi& BeyondFour() const { return beyond_4_; }
+  // The Monte Carlo engines' verdict on a parameter (docs/ACCURACY.md): spread in [0.9, 1.1] and
+  // |mean| <= 0.15.
+  bool Honest(int parameter) const;
+
+ private:
+  int runs_ = 0;
+  Eigen::VectorXd sum_, sum_sq_;
+  Eigen::VectorXi beyond_3_, beyond_4_;
+};
+
+}  // namespace turncal::montecarlo

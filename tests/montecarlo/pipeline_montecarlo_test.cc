@@ -1,0 +1,85 @@
+// The pipeline's Monte Carlo (montecarlo/pipeline_montecarlo.h, `turncal montecarlo
+// --pipeline`): options it refuses, and a few sessions as bytes through the station whose
+// z-scores have a plausible spread. The spread itself is measured over 200 sessions per row in
+// docs/ACCURACY.md; here only that the engine scores what the station estimates.
+#include "montecarlo/pipeline_montecarlo.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace turncal::montecarlo {
+namespace {
+
+TEST(PipelineMonteCarlo, UnknownOptionsAreRefusedBeforeAnyRun) {
+  PipelineMonteCarloOptions o;
+  o.runs = 2;
+  o.protocol = "nmea";
+  PipelineMonteCarloSummary s = RunPipelineMonteCarlo(o);
+  EXPECT_TRUE(s.bad_options);
+  EXPECT_EQ(s.error, "unknown protocol 'nmea'");
+  EXPECT_TRUE(s.runs.empty());
+  o.protocol = "mip";
+  o.sensor_class = "military";
+  s = RunPipelineMonteCarlo(o);
+  EXPECT_TRUE(s.bad_options);
+  EXPECT_EQ(s.error, "unknown class 'military'");
+  o.sensor_class = "industrial";
+  o.model = "accel99";
+  s = RunPipelineMonteCarlo(o);
+  EXPECT_TRUE(s.bad_options);
+  EXPECT_NE(s.error.find("accel99"), std::string::npos) << s.error;
+}
+
+// Four sessions of accel13 (an Xbus device at 100 Hz, the default plan, shuffled) on two
+// threads: every run gives an estimate with a finite z for each of the 13 parameters, the runs
+// keep their seeds' order whichever thread ran them, the gate passed, and the 52 z-scores have
+// the spread of an honest sigma: their RMS is within [0.5, 1.6] (chi^2 with ~52 degrees of
+// freedom, fewer for the correlated parameters of one run: outside with P < 1e-3), none beyond
+// 5 sigma.
+TEST(PipelineMonteCarlo, AFewSessionsThroughTheStationGiveHonestZScores) {
+  PipelineMonteCarloOptions o;
+  o.model = "accel13";
+  o.protocol = "xbus";
+  o.plan = "shuffled";
+  o.runs = 4;
+  o.jobs = 2;
+  o.seed = 3;
+  int progress_calls = 0, last = 0;
+  o.progress = [&](int finished) {
+    ++progress_calls;
+    EXPECT_GT(finished, last);
+    last = finished;
+  };
+  const PipelineMonteCarloSummary s = RunPipelineMonteCarlo(o);
+  ASSERT_TRUE(s.error.empty()) << s.error;
+  ASSERT_EQ(s.runs.size(), 4u);
+  EXPECT_EQ(s.solved, 4) << s.first_error;
+  EXPECT_EQ(progress_calls, 4);
+  ASSERT_EQ(s.parameters.size(), 13u);
+  double sum_sq = 0;
+  int count = 0;
+  for (std::size_t r = 0; r < s.runs.size(); ++r) {
+    const PipelineRun& run = s.runs[r];
+    EXPECT_EQ(run.seed, 3 * 1000003 + r);
+    ASSERT_TRUE(run.ok) << run.error;
+    ASSERT_EQ(run.z.size(), 13);
+    EXPECT_LT(run.z.cwiseAbs().maxCoeff(), 5.0);
+    EXPECT_GT(run.poses, 20);
+    EXPECT_GT(run.session_s, 0.0);
+    EXPECT_GE(run.p_value, 0.0);
+    EXPECT_LE(run.p_value, 1.0);
+    sum_sq += run.z.squaredNorm();
+    count += 13;
+  }
+  const double rms = std::sqrt(sum_sq / count);
+  EXPECT_GT(rms, 0.5);
+  EXPECT_LT(rms, 1.6);
+  EXPECT_EQ(s.z.runs(), 4);
+  EXPECT_GE(s.ks.p, 0.0);
+  EXPECT_LE(s.ks.p, 1.0);
+  EXPECT_EQ(s.gate_pass, 4);
+}
+
+}  // namespace
+}  // namespace turncal::montecarlo

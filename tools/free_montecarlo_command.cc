@@ -1,0 +1,204 @@
+#include "tools/free_montecarlo_command.h"
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <algorithm>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "montecarlo/free_montecarlo.h"
+#include "tools/help_text.h"
+
+namespace turncal::tools {
+namespace {
+
+struct FreeMonteCarloArgs {
+  montecarlo::FreeMonteCarloOptions engine;
+  bool verbose = false;
+  bool json = false;
+};
+
+// The codes RunFreeMonteCarloCommand returns.
+constexpr Manual kFreeMonteCarloManual = {
+    "Repeats simulated tumbles (random orientations of a three-axis table, as bytes, the "
+    "announced poses ignored) through free mode, and checks a free model's sigma against "
+    "its errors: mean and std of z per parameter, the count beyond 3 sigma, the chi^2 "
+    "p-values against uniform, the gate.",
+    "turncal free-montecarlo --model accel9 --runs 200\n"
+    "turncal free-montecarlo --model gyro9 --class consumer --runs 200\n"
+    "turncal free-montecarlo --model magellipsoid --cap 20 --runs 50   # low coverage",
+    "0 every parameter's std z in [0.9, 1.1] with |mean z| <= 0.15; 1 otherwise, or no run "
+    "gave an estimate; 2 a command-line mistake",
+    "docs/ACCURACY.md (\"Without a turntable\")"};
+
+// The gate's five commonest reasons, one line each.
+std::string ReasonsText(const montecarlo::FreeMonteCarloSummary& s) {
+  std::string text;
+  for (const auto& [count, why] : s.top_reasons) text += fmt::format("  {} runs: {}\n", count, why);
+  return text;
+}
+
+void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
+                   const montecarlo::FreeMonteCarloSummary& s) {
+  const Eigen::VectorXd mean = s.z.Mean(), std_z = s.z.Std();
+  nlohmann::json rows = nlohmann::json::array();
+  for (std::size_t i = 0; i < s.parameters.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    rows.push_back({{"name", s.parameters[i]},
+                    {"mean_z", mean[k]},
+                    {"std_z", std_z[k]},
+                    {"beyond_3_sigma", s.z.BeyondThree()[k]},
+                    {"honest", s.z.Honest(static_cast<int>(i))}});
+  }
+  fmt::print("{}\n", nlohmann::json{{"model", o.model},
+                                    {"class", o.sensor_class},
+                                    {"protocol", o.protocol},
+                                    {"drift", o.drift},
+                                    {"warmup", o.warmup},
+                                    {"runs", o.runs},
+                                    {"ok", s.solved},
+                                    {"orientations", o.orientations},
+                                    {"cap_deg", o.cap_deg},
+                                    {"mean_intervals", s.intervals_mean},
+                                    {"gate_passed", s.gate_passed},
+                                    {"gated", s.gated},
+                                    {"gate_reasons", s.top_reasons},
+                                    {"ks_d", s.ks.d},
+                                    {"ks_p", s.ks.p},
+                                    {"p_value_deciles", s.p_value_deciles},
+                                    {"params", rows}}
+                         .dump());
+}
+
+void PrintFreeText(const montecarlo::FreeMonteCarloOptions& o,
+                   const montecarlo::FreeMonteCarloSummary& s) {
+  const Eigen::VectorXd mean = s.z.Mean(), std_z = s.z.Std();
+  int bad = 0;
+  std::string table =
+      "| param | mean z | std z | beyond 3 sigma | verdict |\n|---|---|---|---|---|\n";
+  for (std::size_t i = 0; i < s.parameters.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    const bool honest = s.z.Honest(static_cast<int>(i));
+    bad += !honest;
+    table += fmt::format("| {} | {:+.3f} | {:.3f} | {} | {} |\n", s.parameters[i], mean[k],
+                         std_z[k], s.z.BeyondThree()[k], honest ? "ok" : "NOT HONEST");
+  }
+  fmt::print(
+      "free {} ({} class, {}, drift {}{}), {} tumbles of {} orientations (up within {:.0f} deg "
+      "of "
+      "+z), "
+      "each as bytes through free mode: {} estimated ({} failed{}), {:.1f} intervals on "
+      "average, gate passed {} of {}\n{}\n{}\nchi^2 p-values against uniform: KS D = {:.3f}, p = "
+      "{:.3g}; per tenth from 0 to 1: {}\nCriteria: std z in [0.9, 1.1] and |mean z| <= 0.15; "
+      "{} of {} parameters fail.\n",
+      o.model, o.sensor_class, o.protocol, o.drift,
+      o.warmup > 0 ? fmt::format(", warm-up {} bias instabilities", o.warmup) : "", o.runs,
+      o.orientations, o.cap_deg, s.solved, o.runs - s.solved,
+      s.first_error.empty() ? "" : ", the first: " + s.first_error, s.intervals_mean, s.gate_passed,
+      s.gated, s.top_reasons.empty() ? "" : "refused for:\n" + ReasonsText(s), table, s.ks.d,
+      s.ks.p, fmt::join(s.p_value_deciles, " "), bad, s.parameters.size());
+}
+
+// Every run's estimate, truth, sigma and z on standard error (--verbose), and the progress.
+void ReportRun(const FreeMonteCarloArgs& args, const std::vector<std::string>& names, int run,
+               const montecarlo::FreeRun& r, int scored) {
+  for (std::size_t i = 0; args.verbose && i < names.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    fmt::print(stderr, "run {} {} est {:.9g} truth {:.9g} sigma {:.3g} z {:+.2f}\n", run, names[i],
+               r.theta[k], r.truth[k], r.sigma[k], r.z[k]);
+  }
+  if (!args.json && scored % std::max(1, args.engine.runs / 10) == 0) {
+    fmt::print(stderr, "  {} of {} runs\n", scored, args.engine.runs);
+  }
+}
+
+// 0 when every parameter is honest; 1 otherwise or when fewer than two runs gave an estimate;
+// 2 when an option cannot work (kFreeMonteCarloManual's EXIT STATUS).
+int RunFreeMonteCarloCommand(const FreeMonteCarloArgs& args) {
+  montecarlo::FreeMonteCarloOptions options = args.engine;
+  options.on_run = [&](int run, const montecarlo::FreeRun& r, int scored,
+                       const std::vector<std::string>& names) {
+    ReportRun(args, names, run, r, scored);
+  };
+  const montecarlo::FreeMonteCarloSummary s = montecarlo::RunFreeMonteCarlo(options);
+  if (!s.error.empty()) {
+    fmt::print(stderr, "turncal free-montecarlo: {}\n", s.error);
+    return 2;
+  }
+  if (s.solved < 2) {
+    fmt::print(stderr, "turncal free-montecarlo: {} of {} runs gave an estimate ({})\n", s.solved,
+               options.runs, s.first_error);
+    if (s.gated > 0) {
+      fmt::print("the gate passed {} of {} runs{}\n{}", s.gate_passed, s.gated,
+                 s.top_reasons.empty() ? "" : "; it refused for", ReasonsText(s));
+    }
+    return 1;
+  }
+  if (args.json) {
+    PrintFreeJson(options, s);
+  } else {
+    PrintFreeText(options, s);
+  }
+  return s.Passed() ? 0 : 1;
+}
+
+}  // namespace
+
+void AddFreeMonteCarloCommand(CLI::App* app) {
+  auto a = std::make_shared<FreeMonteCarloArgs>();
+  montecarlo::FreeMonteCarloOptions* o = &a->engine;
+  auto* cmd = app->add_subcommand(
+      "free-montecarlo",
+      "repeat simulated tumbles as bytes through free mode and check the free models' sigma");
+  cmd->add_option("--model", o->model, "accel9 | gyro9 | gyro9g | magellipsoid | accmag")
+      ->check(CLI::IsMember({"accel9", "gyro9", "gyro9g", "magellipsoid", "accmag"}))
+      ->capture_default_str();
+  cmd->add_option("--class", o->sensor_class, "industrial | consumer (SENSORS.md)")
+      ->check(CLI::IsMember({"industrial", "consumer"}))
+      ->capture_default_str();
+  cmd->add_option("--protocol", o->protocol, "mip | gx2 | xbus | xbus-legacy")
+      ->capture_default_str();
+  cmd->add_option("--runs", o->runs, "tumbles")
+      ->check(CLI::Range(2, 100000))
+      ->capture_default_str();
+  cmd->add_option("--seed", o->seed, "the first run's seed")->capture_default_str();
+  cmd->add_option("--jobs", o->jobs, "runs in parallel")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  cmd->add_option("--orientations", o->orientations, "static orientations per tumble")
+      ->check(CLI::Range(4, 1000))
+      ->capture_default_str();
+  cmd->add_option("--dwell", o->dwell_s, "seconds still per orientation")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--cap", o->cap_deg,
+                  "up within this many degrees of the table's +z (180: anywhere; small: low "
+                  "coverage)")
+      ->check(CLI::Range(0.0, 180.0))
+      ->capture_default_str();
+  cmd->add_flag(
+      "--field-unknown", [o](std::int64_t) { o->field_known = false; },
+      "the magnetometer models without the field's magnitude (relative scale)");
+  cmd->add_option("--drift", o->drift,
+                  "the station's model of the bias wander ([station] drift_model): gauss-markov "
+                  "(the class's, a process in time) or independent (an offset per interval of "
+                  "the class's bias instability)")
+      ->check(CLI::IsMember({"gauss-markov", "independent"}))
+      ->capture_default_str();
+  cmd->add_option("--warmup", o->warmup,
+                  "a warm-up after power-on of this many bias instabilities (every triad, the "
+                  "gyroscope's too), simulated and allowed for by the station")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--warmup-tau", o->warmup_tau_s, "the warm-up's time constant, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_flag("--verbose", a->verbose,
+                "every run's estimate, truth, sigma and z per parameter on standard error");
+  cmd->add_flag("--json", a->json, "one JSON object");
+  cmd->callback([a] { throw CLI::RuntimeError(RunFreeMonteCarloCommand(*a)); });
+  SetManual(cmd, kFreeMonteCarloManual);
+}
+
+}  // namespace turncal::tools
