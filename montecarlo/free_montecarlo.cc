@@ -19,6 +19,7 @@
 #include "core/estimation/sensor_class.h"
 #include "daemon/station/free_pipeline.h"
 #include "daemon/station/replay_once.h"
+#include "montecarlo/parallel_runs.h"
 #include "protocol/calibration_json.h"
 #include "sim/capture.h"
 #include "sim/free_truth.h"
@@ -79,18 +80,10 @@ class FreeMonteCarlo {
 
   // Every run, `jobs` at a time, in a scratch folder removed at the end.
   std::vector<FreeRun> RunAll() {
-    dir_ = std::filesystem::temp_directory_path() /
-           fmt::format("turncal-free-montecarlo-{}", static_cast<long>(::getpid()));
+    dir_ = ScratchDir("turncal-free-montecarlo");
     std::filesystem::create_directories(dir_);
-    std::vector<FreeRun> runs(static_cast<std::size_t>(o_.runs));
-    auto worker = [&] {
-      for (int run = next_++; run < o_.runs; run = next_++) {
-        RunOne(run, &runs[static_cast<std::size_t>(run)]);
-      }
-    };
-    std::vector<std::thread> threads;
-    for (int j = 0; j < std::max(1, o_.jobs); ++j) threads.emplace_back(worker);
-    for (auto& t : threads) t.join();
+    std::vector<FreeRun> runs = RunInParallel<FreeRun>(
+        o_.runs, o_.jobs, [this](int run, FreeRun* out) { RunOne(run, out); });
     std::filesystem::remove_all(dir_);
     return runs;
   }
@@ -233,7 +226,6 @@ class FreeMonteCarlo {
   std::vector<std::string> parameters_;
   bool gyro_ = false;
   std::filesystem::path dir_;
-  std::atomic<int> next_{0};
   int done_ = 0;  // runs scored, under mutex_
   std::mutex mutex_;
 };

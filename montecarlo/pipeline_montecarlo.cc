@@ -20,6 +20,7 @@
 #include "daemon/state/persistence.h"
 #include "daemon/station/replay_once.h"
 #include "montecarlo/nominal_target.h"
+#include "montecarlo/parallel_runs.h"
 #include "protocol/calibration_json.h"
 #include "sim/capture.h"
 #include "sim/session_sim.h"
@@ -179,18 +180,10 @@ class PipelineMonteCarlo {
 
   // Every run, `jobs` at a time, in a scratch folder removed at the end.
   std::vector<PipelineRun> RunAll() {
-    dir_ = std::filesystem::temp_directory_path() /
-           fmt::format("turncal-montecarlo-{}", static_cast<long>(::getpid()));
+    dir_ = ScratchDir("turncal-montecarlo");
     std::filesystem::create_directories(dir_);
-    std::vector<PipelineRun> runs(static_cast<std::size_t>(o_.runs));
-    auto worker = [&] {
-      for (int run = next_++; run < o_.runs; run = next_++) {
-        RunOne(run, &runs[static_cast<std::size_t>(run)]);
-      }
-    };
-    std::vector<std::thread> threads;
-    for (int j = 0; j < std::max(1, o_.jobs); ++j) threads.emplace_back(worker);
-    for (auto& t : threads) t.join();
+    std::vector<PipelineRun> runs = RunInParallel<PipelineRun>(
+        o_.runs, o_.jobs, [this](int run, PipelineRun* out) { RunOne(run, out); });
     std::filesystem::remove_all(dir_);
     return runs;
   }
@@ -413,7 +406,7 @@ class PipelineMonteCarlo {
   std::optional<TableMotion> table_;
   std::vector<TablePose> plan_;
   std::filesystem::path dir_;
-  std::atomic<int> next_{0}, done_{0};
+  std::atomic<int> done_{0};
   std::mutex progress_mutex_;
 };
 

@@ -215,6 +215,168 @@ nlohmann::json TolerancesJson(const MeasurementModel& model, const GateOptions& 
   return out;
 }
 
+namespace {
+
+bool Why(std::string* why, const std::string& what) {
+  *why = what;
+  return false;
+}
+
+// "parameter_order", "params" and "covariance" in the model's order.
+bool ReadParameters(const nlohmann::json& j, const MeasurementModel& model, CalibrationDocument* d,
+                    std::string* why) {
+  const auto& params = model.parameters();
+  const auto n = static_cast<Eigen::Index>(params.size());
+  if (j.contains("parameter_order")) {
+    std::vector<std::string> order;
+    if (!ReadStrings(j["parameter_order"], &order)) return Why(why, "parameter_order is malformed");
+    for (std::size_t i = 0; i < order.size() || i < params.size(); ++i) {
+      if (i >= order.size() || i >= params.size() || order[i] != params[i].name) {
+        return Why(why, "parameter_order differs from the model's");
+      }
+    }
+  }
+  if (!j.contains("params") || !j["params"].is_object()) return Why(why, "'params' is missing");
+  d->theta.resize(n);
+  d->sigma.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const std::string& name = params[static_cast<std::size_t>(i)].name;
+    const auto it = j["params"].find(name);
+    if (it == j["params"].end() || !it->is_object() || !it->contains("value") ||
+        !(*it)["value"].is_number() || !std::isfinite((*it)["value"].get<double>())) {
+      return Why(why, "parameter '" + name + "' has no finite value");
+    }
+    d->theta[i] = (*it)["value"].get<double>();
+    if (!ReadNumberOrNull(it->value("sigma", nlohmann::json()), &d->sigma[i])) {
+      return Why(why, "parameter '" + name + "': sigma is not a number");
+    }
+  }
+  if (j.contains("covariance") && !j["covariance"].empty()) {
+    const auto& c = j["covariance"];
+    if (!c.is_array() || c.size() != params.size()) return Why(why, "covariance is not N x N");
+    d->covariance.resize(n, n);
+    for (Eigen::Index r = 0; r < n; ++r) {
+      const auto& row = c[static_cast<std::size_t>(r)];
+      if (!row.is_array() || row.size() != params.size())
+        return Why(why, "covariance is not N x N");
+      for (Eigen::Index k = 0; k < n; ++k) {
+        if (!ReadNumberOrNull(row[static_cast<std::size_t>(k)], &d->covariance(r, k))) {
+          return Why(why, "covariance holds a non-number");
+        }
+      }
+    }
+  }
+  return true;
+}
+
+// The estimate's summary: version, software, time, gauge, rank, dof, chi2, p, the identified
+// drift, the two-sided fit check, the gate's verdict and an operator's override.
+bool ReadSummary(const nlohmann::json& j, CalibrationDocument* d, std::string* why) {
+  if (j.contains("version") && !j["version"].is_number_integer()) return Why(why, "bad version");
+  d->version = j.value("version", 0);
+  for (auto [key, target] : {std::pair{"software", &d->software}, std::pair{"time", &d->time},
+                             std::pair{"gauge", &d->gauge}}) {
+    if (j.contains(key) && !j[key].is_string())
+      return Why(why, fmt::format("'{}' is not text", key));
+    *target = j.value(key, std::string());
+  }
+  if ((j.contains("rank") && !j["rank"].is_number_integer()) ||
+      (j.contains("dof") && !j["dof"].is_number_integer()) ||
+      (j.contains("chi2") && !j["chi2"].is_number()) ||
+      (j.contains("p_value") && !j["p_value"].is_number())) {
+    return Why(why, "rank, dof, chi2 or p_value is not a number");
+  }
+  d->rank = j.value("rank", 0);
+  d->dof = j.value("dof", 0);
+  d->chi2 = j.value("chi2", 0.0);
+  d->p_value = j.value("p_value", 1.0);
+  if (j.contains("calibrator") && j["calibrator"].is_object() &&
+      j["calibrator"].contains("drift_scale") && j["calibrator"]["drift_scale"].is_object()) {
+    const auto& s = j["calibrator"]["drift_scale"];
+    if (s.value("identified", false) && s.contains("data_scale") && s["data_scale"].is_number()) {
+      d->drift_scale = s["data_scale"].get<double>();
+      if (s.contains("data_log_sigma") && s["data_log_sigma"].is_number()) {
+        d->drift_scale_log_sigma = s["data_log_sigma"].get<double>();
+      }
+      if (s.contains("used") && s["used"].is_number())
+        d->drift_scale_used = s["used"].get<double>();
+    }
+  }
+  if (j.contains("fit_check") && j["fit_check"].is_object()) {
+    const auto& f = j["fit_check"];
+    if (f.contains("verdict") && f["verdict"].is_string()) d->fit_verdict = f["verdict"];
+    if (f.contains("message") && f["message"].is_string()) d->fit_message = f["message"];
+  }
+  if (!j.contains("gate") || !ReadGate(j["gate"], &d->gate)) {
+    return Why(why, "'gate' is missing or malformed");
+  }
+  d->override_who = j.value("override", nlohmann::json());
+  return true;
+}
+
+// "provenance": the device's identity, the poses and (when recorded) their records.
+bool ReadProvenance(const nlohmann::json& j, CalibrationDocument* d, std::string* why) {
+  const nlohmann::json provenance = j.value("provenance", nlohmann::json::object());
+  if (!provenance.is_object()) return Why(why, "provenance is not an object");
+  d->identity = provenance.value("device_identity", nlohmann::json());
+  if (provenance.contains("poses")) {
+    if (!provenance["poses"].is_array()) return Why(why, "provenance.poses is not a list");
+    for (const auto& p : provenance["poses"]) {
+      TablePose pose;
+      if (!ParseTablePose(p, &pose, nullptr)) {
+        return Why(why, "provenance.poses holds a pose without angles");
+      }
+      d->poses.push_back(pose);
+    }
+  }
+  if (provenance.contains("records")) {
+    if (!provenance["records"].is_array()) return Why(why, "provenance.records is not a list");
+    for (std::size_t i = 0; i < provenance["records"].size(); ++i) {
+      PoseRecord r;
+      std::string record_why;
+      if (!ParsePoseRecord(provenance["records"][i], &r, &record_why)) {
+        return Why(why, fmt::format("provenance.records[{}]: {}", i, record_why));
+      }
+      d->records.push_back(r);
+    }
+  }
+  return true;
+}
+
+// The calibrator's options (the class's by default) and the gate's tolerances (the class's, or
+// the document's).
+bool ReadCalibratorAndTolerances(const nlohmann::json& j, const MeasurementModel& model,
+                                 CalibrationDocument* d, std::string* why) {
+  const auto& params = model.parameters();
+  SensorClass industrial = IndustrialClass();
+  d->calibrator = OptionsForClass(model, industrial);
+  if (j.contains("calibrator") &&
+      !ReadCalibrator(j["calibrator"], &d->calibrator, &d->sensor_class)) {
+    return Why(why, "'calibrator' is malformed");
+  }
+  GateOptions gate;
+  GateTolerancesForClass(d->sensor_class.empty() ? "industrial" : d->sensor_class,
+                         &gate.tolerances);
+  for (int i : GatedParameters(model)) {
+    const ParameterInfo& p = params[static_cast<std::size_t>(i)];
+    d->tolerances[p.name] = ToleranceFor(p, gate);
+  }
+  if (j.contains("tolerances")) {
+    if (!j["tolerances"].is_object()) return Why(why, "'tolerances' is not an object");
+    d->tolerances.clear();
+    for (const auto& [name, v] : j["tolerances"].items()) {
+      if (!v.is_number() || !(v.get<double>() > 0) || model.index_of(name) < 0) {
+        return Why(why, "tolerance of '" + name + "' is not a positive number of a parameter");
+      }
+      d->tolerances[name] = v.get<double>();
+    }
+    d->tolerances_recorded = true;
+  }
+  return true;
+}
+
+}  // namespace
+
 bool ParseCalibrationDocument(const nlohmann::json& j, CalibrationDocument* out,
                               std::string* error) {
   auto fail = [&](const std::string& what) {
@@ -244,132 +406,11 @@ bool ParseCalibrationDocument(const nlohmann::json& j, CalibrationDocument* out,
   d.measurement_model = MakeModel(d.model, d.context, &why);
   if (!d.measurement_model) return bad(why);
   const MeasurementModel& model = *d.measurement_model;
-  const auto& params = model.parameters();
-  const auto n = static_cast<Eigen::Index>(params.size());
 
-  if (j.contains("parameter_order")) {
-    std::vector<std::string> order;
-    if (!ReadStrings(j["parameter_order"], &order)) return bad("parameter_order is malformed");
-    for (std::size_t i = 0; i < order.size() || i < params.size(); ++i) {
-      if (i >= order.size() || i >= params.size() || order[i] != params[i].name) {
-        return bad("parameter_order differs from the model's");
-      }
-    }
-  }
-  if (!j.contains("params") || !j["params"].is_object()) return bad("'params' is missing");
-  d.theta.resize(n);
-  d.sigma.resize(n);
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const std::string& name = params[static_cast<std::size_t>(i)].name;
-    const auto it = j["params"].find(name);
-    if (it == j["params"].end() || !it->is_object() || !it->contains("value") ||
-        !(*it)["value"].is_number() || !std::isfinite((*it)["value"].get<double>())) {
-      return bad("parameter '" + name + "' has no finite value");
-    }
-    d.theta[i] = (*it)["value"].get<double>();
-    if (!ReadNumberOrNull(it->value("sigma", nlohmann::json()), &d.sigma[i])) {
-      return bad("parameter '" + name + "': sigma is not a number");
-    }
-  }
-  if (j.contains("covariance") && !j["covariance"].empty()) {
-    const auto& c = j["covariance"];
-    if (!c.is_array() || c.size() != params.size()) return bad("covariance is not N x N");
-    d.covariance.resize(n, n);
-    for (Eigen::Index r = 0; r < n; ++r) {
-      const auto& row = c[static_cast<std::size_t>(r)];
-      if (!row.is_array() || row.size() != params.size()) return bad("covariance is not N x N");
-      for (Eigen::Index k = 0; k < n; ++k) {
-        if (!ReadNumberOrNull(row[static_cast<std::size_t>(k)], &d.covariance(r, k))) {
-          return bad("covariance holds a non-number");
-        }
-      }
-    }
-  }
-  if (j.contains("version") && !j["version"].is_number_integer()) return bad("bad version");
-  d.version = j.value("version", 0);
-  for (auto [key, target] : {std::pair{"software", &d.software}, std::pair{"time", &d.time},
-                             std::pair{"gauge", &d.gauge}}) {
-    if (j.contains(key) && !j[key].is_string()) return bad(fmt::format("'{}' is not text", key));
-    *target = j.value(key, std::string());
-  }
-  if ((j.contains("rank") && !j["rank"].is_number_integer()) ||
-      (j.contains("dof") && !j["dof"].is_number_integer()) ||
-      (j.contains("chi2") && !j["chi2"].is_number()) ||
-      (j.contains("p_value") && !j["p_value"].is_number())) {
-    return bad("rank, dof, chi2 or p_value is not a number");
-  }
-  d.rank = j.value("rank", 0);
-  d.dof = j.value("dof", 0);
-  d.chi2 = j.value("chi2", 0.0);
-  d.p_value = j.value("p_value", 1.0);
-  if (j.contains("calibrator") && j["calibrator"].is_object() &&
-      j["calibrator"].contains("drift_scale") && j["calibrator"]["drift_scale"].is_object()) {
-    const auto& s = j["calibrator"]["drift_scale"];
-    if (s.value("identified", false) && s.contains("data_scale") && s["data_scale"].is_number()) {
-      d.drift_scale = s["data_scale"].get<double>();
-      if (s.contains("data_log_sigma") && s["data_log_sigma"].is_number()) {
-        d.drift_scale_log_sigma = s["data_log_sigma"].get<double>();
-      }
-      if (s.contains("used") && s["used"].is_number()) d.drift_scale_used = s["used"].get<double>();
-    }
-  }
-  if (j.contains("fit_check") && j["fit_check"].is_object()) {
-    const auto& f = j["fit_check"];
-    if (f.contains("verdict") && f["verdict"].is_string()) d.fit_verdict = f["verdict"];
-    if (f.contains("message") && f["message"].is_string()) d.fit_message = f["message"];
-  }
-  if (!j.contains("gate") || !ReadGate(j["gate"], &d.gate)) {
-    return bad("'gate' is missing or malformed");
-  }
-  d.override_who = j.value("override", nlohmann::json());
-
-  const nlohmann::json provenance = j.value("provenance", nlohmann::json::object());
-  if (!provenance.is_object()) return bad("provenance is not an object");
-  d.identity = provenance.value("device_identity", nlohmann::json());
-  if (provenance.contains("poses")) {
-    if (!provenance["poses"].is_array()) return bad("provenance.poses is not a list");
-    for (const auto& p : provenance["poses"]) {
-      TablePose pose;
-      if (!ParseTablePose(p, &pose, nullptr)) {
-        return bad("provenance.poses holds a pose without angles");
-      }
-      d.poses.push_back(pose);
-    }
-  }
-  if (provenance.contains("records")) {
-    if (!provenance["records"].is_array()) return bad("provenance.records is not a list");
-    for (std::size_t i = 0; i < provenance["records"].size(); ++i) {
-      PoseRecord r;
-      if (!ParsePoseRecord(provenance["records"][i], &r, &why)) {
-        return bad(fmt::format("provenance.records[{}]: {}", i, why));
-      }
-      d.records.push_back(r);
-    }
-  }
-
-  SensorClass industrial = IndustrialClass();
-  d.calibrator = OptionsForClass(model, industrial);
-  if (j.contains("calibrator") &&
-      !ReadCalibrator(j["calibrator"], &d.calibrator, &d.sensor_class)) {
-    return bad("'calibrator' is malformed");
-  }
-  GateOptions gate;
-  GateTolerancesForClass(d.sensor_class.empty() ? "industrial" : d.sensor_class, &gate.tolerances);
-  for (int i : GatedParameters(model)) {
-    const ParameterInfo& p = params[static_cast<std::size_t>(i)];
-    d.tolerances[p.name] = ToleranceFor(p, gate);
-  }
-  if (j.contains("tolerances")) {
-    if (!j["tolerances"].is_object()) return bad("'tolerances' is not an object");
-    d.tolerances.clear();
-    for (const auto& [name, v] : j["tolerances"].items()) {
-      if (!v.is_number() || !(v.get<double>() > 0) || model.index_of(name) < 0) {
-        return bad("tolerance of '" + name + "' is not a positive number of a parameter");
-      }
-      d.tolerances[name] = v.get<double>();
-    }
-    d.tolerances_recorded = true;
-  }
+  if (!ReadParameters(j, model, &d, &why)) return bad(why);
+  if (!ReadSummary(j, &d, &why)) return bad(why);
+  if (!ReadProvenance(j, &d, &why)) return bad(why);
+  if (!ReadCalibratorAndTolerances(j, model, &d, &why)) return bad(why);
   *out = std::move(d);
   return true;
 }

@@ -67,6 +67,7 @@ struct Device {
   // Faults.
   std::uint64_t written = 0, flipped = 0, lost_unplugged = 0, unplugged_frames = 0, unplugs = 0;
   std::uint64_t bits_to_flip = 0;  // clean bits before the next flipped one
+  std::mt19937_64 fault_rng;       // the line's channel (BitErrors)
   bool unplugged = false;
   double replug_vt = 0;
 };
@@ -89,13 +90,21 @@ void SayDropped(const Device& d, double vt) {
        {"frames", d.episode_dropped}});
 }
 
-// The binary symmetric channel: flips the bits of `bytes` (appended to d->out) at `rate`.
+// The binary symmetric channel of each device's line: flips the bits it sends (appended to
+// d->out) at `rate`. Every line has its own channel, seeded from the session's fault seed and
+// the device's place, so where a device's bits flip depends on its own bytes only, not on how
+// its bytes and the other devices' interleave in time (which a loaded machine changes).
 class BitErrors {
  public:
-  BitErrors(double rate, std::uint64_t seed) : rate_(rate), rng_(seed) {}
+  explicit BitErrors(double rate) : rate_(rate) {}
   bool on() const { return rate_ > 0; }
-  std::uint64_t Gap() { return std::geometric_distribution<std::uint64_t>(rate_)(rng_); }
-  void Apply(Device* d, std::size_t from) {
+  void Start(Device* d, std::uint64_t seed, std::size_t index) const {
+    std::seed_seq seq{static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32),
+                      static_cast<std::uint32_t>(index)};
+    d->fault_rng.seed(seq);
+    d->bits_to_flip = on() ? Gap(d) : 0;
+  }
+  void Apply(Device* d, std::size_t from) const {
     if (!on()) return;
     const std::uint64_t bits = 8 * static_cast<std::uint64_t>(d->out.size() - from);
     std::uint64_t at = 0;
@@ -104,14 +113,16 @@ class BitErrors {
       d->out[from + bit / 8] = static_cast<char>(d->out[from + bit / 8] ^ (1u << (bit % 8)));
       ++d->flipped;
       at = bit + 1;
-      d->bits_to_flip = Gap();
+      d->bits_to_flip = Gap(d);
     }
     d->bits_to_flip -= bits - at;
   }
 
  private:
+  std::uint64_t Gap(Device* d) const {
+    return std::geometric_distribution<std::uint64_t>(rate_)(d->fault_rng);
+  }
   double rate_;
-  std::mt19937_64 rng_;
 };
 
 bool OpenDevice(Device* d, std::string* error) {
@@ -184,7 +195,7 @@ void Flush(Device* d) {
 }
 
 // `vt`: session time now; `turn_gap_s`: wall seconds since the simulator's previous turn.
-void Emit(Device* d, Sample s, BitErrors* errors, double vt, double turn_gap_s) {
+void Emit(Device* d, Sample s, const BitErrors* errors, double vt, double turn_gap_s) {
   if (s.t_device_s) d->last_device_s = *s.t_device_s;
   if (s.counter) d->last_counter = *s.counter;
   if (d->unplugged) {
@@ -322,8 +333,8 @@ bool RunLiveSim(std::vector<LiveSimDevice>* sims, const LiveSimOptions& options,
     }
     if (!OpenDevice(&d, error)) return false;
   }
-  BitErrors errors(options.bit_error_rate, options.fault_seed);
-  for (Device& d : devices) d.bits_to_flip = errors.on() ? errors.Gap() : 0;
+  const BitErrors errors(options.bit_error_rate);
+  for (std::size_t i = 0; i < devices.size(); ++i) errors.Start(&devices[i], options.fault_seed, i);
   for (const auto& u : options.unplugs) {
     if (u.device < 0 || static_cast<std::size_t>(u.device) >= devices.size()) {
       *error = fmt::format("unplug: there is no device {} (0 to {})", u.device, devices.size() - 1);

@@ -39,7 +39,9 @@ struct LiveSimOptions {
   double answer_timeout_s = 120;  // wall seconds the table waits for an answer (as the daemon)
   int retries = 2;                // a rejected pose is announced again this often
   // Line faults (docs/RELIABILITY.md). Each bit written to a pty (samples and dialogue replies)
-  // is flipped with this probability, independently (a binary symmetric channel).
+  // is flipped with this probability, independently (a binary symmetric channel). Each device's
+  // line has its own channel, seeded from `fault_seed` and the device's place among the --live
+  // devices: which of its bytes are hit does not depend on the timing of the others'.
   double bit_error_rate = 0;
   std::uint64_t fault_seed = 1;
   // Unplugs: the device's pty goes away (its master is closed and the link removed, as a USB

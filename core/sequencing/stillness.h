@@ -123,6 +123,16 @@ class NoiseMeter {
 
  private:
   Status Finish();
+  // Finish's steps: the triads most samples carry (bit i: triad i); the samples kept (those with
+  // every present triad and no isolated outlier); their accumulation into the attempt's parts
+  // (counting outliers_); one triad's noise and the stillness tests of its parts (false with the
+  // reason); the sample rate (false with the reason).
+  std::uint8_t PresentTriads() const;
+  std::vector<char> KeptSamples(std::uint8_t present) const;
+  void Accumulate(std::uint8_t present, const std::vector<char>& keep, std::int64_t* t_first_ns,
+                  std::int64_t* t_last_ns, std::int64_t* n);
+  bool TriadNoise(int t, double n, NoiseProfile* profile, std::string* why) const;
+  bool MeasureRate(NoiseProfile* profile, std::string* why) const;
   NoiseMeterOptions options_;
   std::vector<StillSample> samples_;
   std::int64_t outliers_ = 0;

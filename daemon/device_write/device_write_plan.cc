@@ -134,33 +134,46 @@ std::optional<drivers::mip::StoredCalibration> StoredCalibrationFromIdentity(
   return out;
 }
 
-DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
-  DeviceWritePlan plan;
-  plan.device = q.device;
-  std::optional<TriadCorrection> given = q.correction;
-  if (q.model) given = CorrectionOf(*q.model);
-  plan.model = given ? given->name : "";
-  plan.serial = q.serial_now;
-  plan.version = q.version;
-  auto refuse = [&](std::string why) { plan.refusals.push_back(std::move(why)); };
+namespace {
 
+// What the steps of a plan share: the request, the correction's affine form and polar rotation,
+// the device's transform before, and what is planned so far.
+struct Planning {
+  Planning(const DeviceWriteRequest& request, TriadCorrection correction, DeviceWritePlan& out)
+      : q(request), model(std::move(correction)), plan(out) {}
+  const DeviceWriteRequest& q;
+  const TriadCorrection model;
+  DeviceWritePlan& plan;
+  AffineCorrection a;
+  Eigen::Matrix3d M_old = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d R_model = Eigen::Matrix3d::Identity(), P_model = Eigen::Matrix3d::Identity();
+  std::vector<StoredWrite> writes;
+  Composition compose;
+  void refuse(std::string why) { plan.refusals.push_back(std::move(why)); }
+};
+
+// The request itself: the protocol, the gate, the serial, what the device stored then and now.
+// False when nothing can be planned (refused).
+bool CheckRequest(Planning& g, const std::optional<TriadCorrection>& given) {
+  const DeviceWriteRequest& q = g.q;
+  DeviceWritePlan& plan = g.plan;
+  auto refuse = [&](std::string why) { g.refuse(std::move(why)); };
   if (q.protocol == drivers::Protocol::kXbus || q.protocol == drivers::Protocol::kXbusLegacy) {
     refuse(
         "an Xsens device: no public Xbus message writes a user magnetometer or inertial "
         "calibration; turncald keeps correcting in its stream");
-    return plan;
+    return false;
   }
   if (q.protocol == drivers::Protocol::kGx2) {
     refuse(
         "a 3DM-GX2 (single-byte protocol): turncal writes calibrations only with MIP's 3DM "
         "commands; turncald keeps correcting in its stream");
-    return plan;
+    return false;
   }
   if (!given || !given->correct) {
     refuse("no calibration");
-    return plan;
+    return false;
   }
-  const TriadCorrection& model = *given;
   if (!q.gate_passed) refuse(fmt::format("{} v{} has not passed its gate", plan.model, q.version));
   if (q.serial_then.empty()) {
     refuse("the calibration does not record the device's serial (a replay?)");
@@ -181,34 +194,119 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
         "the device stores other values than when the calibration was made (written or restored "
         "since): calibrate again");
   }
+  return true;
+}
 
-  AffineCorrection a;
-  std::string error;
-  if (!AffineCorrectionOf(model, q.theta, &a, &error)) {
-    refuse(error);
-    return plan;
+// An accelerometer's or gyroscope's bias (0x37, 0x38); the rest stays in the stream.
+bool PlanBias(Planning& g, SensorKind kind) {
+  const DeviceWriteRequest& q = g.q;
+  const TriadCorrection& model = g.model;
+  DeviceWritePlan& plan = g.plan;
+  const drivers::mip::StoredCalibration& now = q.stored_now;
+  const AffineCorrection& a = g.a;
+  const Eigen::Matrix3d& M_old = g.M_old;
+  const Eigen::Matrix3d& R_model = g.R_model;
+  std::vector<StoredWrite>& writes = g.writes;
+  Composition& compose = g.compose;
+  auto refuse = [&](std::string why) { g.refuse(std::move(why)); };
+  const bool acc = kind == SensorKind::kAccelerometer;
+  const std::optional<Eigen::Vector3d>& old = acc ? now.accel_bias : now.gyro_bias;
+  if (!old) {
+    refuse(fmt::format("the device has no {} bias command (it answered \"unknown command\")",
+                       acc ? "accelerometer" : "gyro"));
+    return false;
   }
+  const double unit = acc ? kStandardGravity_mps2 : 1.0;
+  const Eigen::Vector3d old_value = *old;
+  writes.push_back(Planned(acc ? std::uint8_t{0x37} : std::uint8_t{0x38}, Values(old_value)));
+  compose = [old_value, unit, M_old](const AffineCorrection& x) {
+    const Eigen::Vector3d b = -x.A.inverse() * x.c;
+    return Values(Eigen::Vector3d(old_value + M_old.inverse() * b / unit));
+  };
+  const Eigen::Vector3d b = -a.A.inverse() * a.c;
+  // New output m' = M_new M_old^-1 (m - b): y = A m' without the transform, A R^T with it.
+  plan.stream.A = q.transform ? Eigen::Matrix3d(a.A * R_model.transpose()) : a.A;
+  plan.stream.c.setZero();
+  plan.changes.push_back(fmt::format("every {} sample changes by {} {}",
+                                     acc ? "accelerometer" : "gyro", Vec(-b, 1.0 / unit, 6),
+                                     acc ? "g" : "rad/s"));
+  plan.kept_in_stream.push_back(fmt::format(
+      "the {}'s scale factors and misalignments: MIP has no command for them; turncald keeps "
+      "correcting them in its stream",
+      acc ? "accelerometer" : "gyroscope"));
+  if (!model.also_in_stream.empty()) {
+    plan.kept_in_stream.push_back(model.also_in_stream + ": likewise, in the stream");
+  }
+  return true;
+}
 
-  std::vector<StoredWrite> writes;
-  Composition compose;
-  const SensorKind kind = model.sensor;
-  // The device turns its output by its sensor-to-vehicle transform M after its own calibration.
-  const Eigen::Matrix3d M_old = now.transform.value_or(Eigen::Matrix3d::Identity());
-  if (!(std::abs(M_old.determinant()) > 1e-9)) {
-    refuse("the stored sensor-to-vehicle transform is singular");
-    return plan;
-  }
-  if (q.transform && !now.transform) {
+// The magnetometer's hard and soft iron (0x3A, 0x3B); its rotation stays in the stream unless
+// the transform is written.
+bool PlanIron(Planning& g) {
+  const DeviceWriteRequest& q = g.q;
+  DeviceWritePlan& plan = g.plan;
+  const drivers::mip::StoredCalibration& now = q.stored_now;
+  const AffineCorrection& a = g.a;
+  const Eigen::Matrix3d& M_old = g.M_old;
+  std::vector<StoredWrite>& writes = g.writes;
+  Composition& compose = g.compose;
+  auto refuse = [&](std::string why) { g.refuse(std::move(why)); };
+  if (!now.hard_iron || !now.soft_iron) {
     refuse(
-        "the device has no sensor-to-vehicle transform command (it answered \"unknown command\" "
-        "to 0x33)");
-    return plan;
+        "the device has no hard- and soft-iron commands (it answered \"unknown command\" to "
+        "0x3A or 0x3B)");
+    return false;
   }
-  Eigen::Matrix3d R_model, P_model;
-  if (!Polar(a.A, &R_model, &P_model)) {
+  Eigen::Matrix3d R, P;
+  if (!Polar(a.A, &R, &P)) {
     refuse(fmt::format("{}'s correction is a reflection", plan.model));
-    return plan;
+    return false;
   }
+  const Eigen::Matrix3d S_old = *now.soft_iron;
+  const Eigen::Vector3d h_old = *now.hard_iron;
+  if (!(std::abs(S_old.determinant()) > 1e-9)) {
+    refuse("the stored soft-iron matrix is singular");
+    return false;
+  }
+  writes.push_back(Planned(0x3A, Values(h_old)));
+  writes.push_back(Planned(0x3B, Values(S_old)));
+  // New output m' = M_new S_new (raw - h_new) = M_new M_old^-1 P (m - b) with
+  // h_new = h_old + S_old^-1 M_old^-1 b and S_new = M_old^-1 P M_old S_old.
+  compose = [S_old, h_old, M_old](const AffineCorrection& x) {
+    Eigen::Matrix3d r, p;
+    Polar(x.A, &r, &p);
+    const Eigen::Vector3d b = -x.A.inverse() * x.c;
+    std::vector<double> v = Values(Eigen::Vector3d(h_old + S_old.inverse() * M_old.inverse() * b));
+    const std::vector<double> m = Values(Eigen::Matrix3d(M_old.inverse() * p * M_old * S_old));
+    v.insert(v.end(), m.begin(), m.end());
+    return v;
+  };
+  const Eigen::Vector3d b = -a.A.inverse() * a.c;
+  const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(P).singularValues();
+  const double angle_deg = std::acos(std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / M_PI;
+  plan.stream.A = q.transform ? Eigen::Matrix3d::Identity().eval() : R;
+  plan.stream.c.setZero();
+  plan.changes.push_back(
+      fmt::format("the magnetometer's output: offset {} Gauss at zero field, scale {:+.3f} % to "
+                  "{:+.3f} % along the soft iron's axes",
+                  Vec(-P * b, 1.0, 5), (sv.minCoeff() - 1) * 100, (sv.maxCoeff() - 1) * 100));
+  if (!q.transform) {
+    plan.kept_in_stream.push_back(fmt::format(
+        "the rotation between the magnetometer's axes and the frame {} corrects into ({:.3f} "
+        "deg): writing it would turn the device's output frame (--transform does); turncald "
+        "keeps it in its stream",
+        plan.model, angle_deg));
+  }
+  return true;
+}
+
+// --transform: the sensor-to-vehicle transform (0x33) turned by the correction's rotation.
+void PlanTransform(Planning& g) {
+  DeviceWritePlan& plan = g.plan;
+  const Eigen::Matrix3d& R_model = g.R_model;
+  const Eigen::Matrix3d M_old = g.M_old;
+  std::vector<StoredWrite>& writes = g.writes;
+  Composition& compose = g.compose;
   // With the transform: the device's output turns by R (the rotation of the calibration's
   // correction) on top of what it stores, M_new = R M_old.
   const auto transform_values = [M_old](const AffineCorrection& x) {
@@ -216,104 +314,32 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
     Polar(x.A, &r, &p);
     return Values(Eigen::Matrix3d(r * M_old));
   };
-  if (kind == SensorKind::kAccelerometer || kind == SensorKind::kGyroscope) {
-    const bool acc = kind == SensorKind::kAccelerometer;
-    const std::optional<Eigen::Vector3d>& old = acc ? now.accel_bias : now.gyro_bias;
-    if (!old) {
-      refuse(fmt::format("the device has no {} bias command (it answered \"unknown command\")",
-                         acc ? "accelerometer" : "gyro"));
-      return plan;
-    }
-    const double unit = acc ? kStandardGravity_mps2 : 1.0;
-    const Eigen::Vector3d old_value = *old;
-    writes.push_back(Planned(acc ? std::uint8_t{0x37} : std::uint8_t{0x38}, Values(old_value)));
-    compose = [old_value, unit, M_old](const AffineCorrection& x) {
-      const Eigen::Vector3d b = -x.A.inverse() * x.c;
-      return Values(Eigen::Vector3d(old_value + M_old.inverse() * b / unit));
-    };
-    const Eigen::Vector3d b = -a.A.inverse() * a.c;
-    // New output m' = M_new M_old^-1 (m - b): y = A m' without the transform, A R^T with it.
-    plan.stream.A = q.transform ? Eigen::Matrix3d(a.A * R_model.transpose()) : a.A;
-    plan.stream.c.setZero();
-    plan.changes.push_back(fmt::format("every {} sample changes by {} {}",
-                                       acc ? "accelerometer" : "gyro", Vec(-b, 1.0 / unit, 6),
-                                       acc ? "g" : "rad/s"));
-    plan.kept_in_stream.push_back(fmt::format(
-        "the {}'s scale factors and misalignments: MIP has no command for them; turncald keeps "
-        "correcting them in its stream",
-        acc ? "accelerometer" : "gyroscope"));
-    if (!model.also_in_stream.empty()) {
-      plan.kept_in_stream.push_back(model.also_in_stream + ": likewise, in the stream");
-    }
-  } else {
-    if (!now.hard_iron || !now.soft_iron) {
-      refuse(
-          "the device has no hard- and soft-iron commands (it answered \"unknown command\" to "
-          "0x3A or 0x3B)");
-      return plan;
-    }
-    Eigen::Matrix3d R, P;
-    if (!Polar(a.A, &R, &P)) {
-      refuse(fmt::format("{}'s correction is a reflection", plan.model));
-      return plan;
-    }
-    const Eigen::Matrix3d S_old = *now.soft_iron;
-    const Eigen::Vector3d h_old = *now.hard_iron;
-    if (!(std::abs(S_old.determinant()) > 1e-9)) {
-      refuse("the stored soft-iron matrix is singular");
-      return plan;
-    }
-    writes.push_back(Planned(0x3A, Values(h_old)));
-    writes.push_back(Planned(0x3B, Values(S_old)));
-    // New output m' = M_new S_new (raw - h_new) = M_new M_old^-1 P (m - b) with
-    // h_new = h_old + S_old^-1 M_old^-1 b and S_new = M_old^-1 P M_old S_old.
-    compose = [S_old, h_old, M_old](const AffineCorrection& x) {
-      Eigen::Matrix3d r, p;
-      Polar(x.A, &r, &p);
-      const Eigen::Vector3d b = -x.A.inverse() * x.c;
-      std::vector<double> v =
-          Values(Eigen::Vector3d(h_old + S_old.inverse() * M_old.inverse() * b));
-      const std::vector<double> m = Values(Eigen::Matrix3d(M_old.inverse() * p * M_old * S_old));
-      v.insert(v.end(), m.begin(), m.end());
-      return v;
-    };
-    const Eigen::Vector3d b = -a.A.inverse() * a.c;
-    const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(P).singularValues();
-    const double angle_deg =
-        std::acos(std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / M_PI;
-    plan.stream.A = q.transform ? Eigen::Matrix3d::Identity().eval() : R;
-    plan.stream.c.setZero();
-    plan.changes.push_back(
-        fmt::format("the magnetometer's output: offset {} Gauss at zero field, scale {:+.3f} % to "
-                    "{:+.3f} % along the soft iron's axes",
-                    Vec(-P * b, 1.0, 5), (sv.minCoeff() - 1) * 100, (sv.maxCoeff() - 1) * 100));
-    if (!q.transform) {
-      plan.kept_in_stream.push_back(fmt::format(
-          "the rotation between the magnetometer's axes and the frame {} corrects into ({:.3f} "
-          "deg): writing it would turn the device's output frame (--transform does); turncald "
-          "keeps it in its stream",
-          plan.model, angle_deg));
-    }
-  }
-  if (q.transform) {
-    const double turn_deg =
-        std::acos(std::clamp((R_model.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / M_PI;
-    writes.push_back(Planned(0x33, Values(M_old)));
-    const Composition triad = compose;
-    compose = [triad, transform_values](const AffineCorrection& x) {
-      std::vector<double> v = triad(x);
-      const std::vector<double> m = transform_values(x);
-      v.insert(v.end(), m.begin(), m.end());
-      return v;
-    };
-    plan.changes.push_back(fmt::format(
-        "every output of the device (accelerometer, gyroscope, magnetometer) turns by {:.3f} deg "
-        "(sensor-to-vehicle transform): it outputs in the frame {} corrects into; turncald "
-        "re-expresses the output for the device's other calibrations",
-        turn_deg, plan.model));
-  }
+  const double turn_deg =
+      std::acos(std::clamp((R_model.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / M_PI;
+  writes.push_back(Planned(0x33, Values(M_old)));
+  const Composition triad = compose;
+  compose = [triad, transform_values](const AffineCorrection& x) {
+    std::vector<double> v = triad(x);
+    const std::vector<double> m = transform_values(x);
+    v.insert(v.end(), m.begin(), m.end());
+    return v;
+  };
+  plan.changes.push_back(fmt::format(
+      "every output of the device (accelerometer, gyroscope, magnetometer) turns by {:.3f} deg "
+      "(sensor-to-vehicle transform): it outputs in the frame {} corrects into; turncald "
+      "re-expresses the output for the device's other calibrations",
+      turn_deg, plan.model));
+}
 
-  // The values, rounded to f32, and their sigma through the composition's Jacobian.
+// The values to write, rounded to f32, with their sigma through the composition's Jacobian
+// (central differences of the composition over the calibration's covariance).
+void FillValues(Planning& g) {
+  const DeviceWriteRequest& q = g.q;
+  const TriadCorrection& model = g.model;
+  const AffineCorrection& a = g.a;
+  const Composition& compose = g.compose;
+  std::vector<StoredWrite>& writes = g.writes;
+  auto refuse = [&](std::string why) { g.refuse(std::move(why)); };
   const std::vector<double> values = compose(a);
   std::vector<double> sigma(values.size(), kNaN);
   const int n = static_cast<int>(q.theta.size());
@@ -354,7 +380,50 @@ DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
       w.sigma.push_back(sigma[k]);
     }
   }
-  plan.writes = std::move(writes);
+}
+
+}  // namespace
+
+DeviceWritePlan PlanDeviceWrite(const DeviceWriteRequest& q) {
+  DeviceWritePlan plan;
+  plan.device = q.device;
+  std::optional<TriadCorrection> given = q.correction;
+  if (q.model) given = CorrectionOf(*q.model);
+  plan.model = given ? given->name : "";
+  plan.serial = q.serial_now;
+  plan.version = q.version;
+  Planning g(q, given ? *given : TriadCorrection{}, plan);
+  if (!CheckRequest(g, given)) return plan;
+  std::string error;
+  if (!AffineCorrectionOf(g.model, q.theta, &g.a, &error)) {
+    g.refuse(error);
+    return plan;
+  }
+  const drivers::mip::StoredCalibration& now = q.stored_now;
+  // The device turns its output by its sensor-to-vehicle transform M after its own calibration.
+  g.M_old = now.transform.value_or(Eigen::Matrix3d::Identity());
+  if (!(std::abs(g.M_old.determinant()) > 1e-9)) {
+    g.refuse("the stored sensor-to-vehicle transform is singular");
+    return plan;
+  }
+  if (q.transform && !now.transform) {
+    g.refuse(
+        "the device has no sensor-to-vehicle transform command (it answered \"unknown command\" "
+        "to 0x33)");
+    return plan;
+  }
+  if (!Polar(g.a.A, &g.R_model, &g.P_model)) {
+    g.refuse(fmt::format("{}'s correction is a reflection", plan.model));
+    return plan;
+  }
+  const SensorKind kind = g.model.sensor;
+  const bool planned = kind == SensorKind::kAccelerometer || kind == SensorKind::kGyroscope
+                           ? PlanBias(g, kind)
+                           : PlanIron(g);
+  if (!planned) return plan;
+  if (q.transform) PlanTransform(g);
+  FillValues(g);
+  plan.writes = std::move(g.writes);
   return plan;
 }
 

@@ -440,4 +440,29 @@ void RegistryOutbox::Run() {
   }
 }
 
+RegistryHandle::~RegistryHandle() = default;
+
+const std::shared_ptr<RegistryOutbox>& RegistryHandle::Ensure(const RegistryOptions& r,
+                                                              const std::string& state_dir) {
+  const auto wanted = std::make_tuple(r.conninfo, r.password_file, r.station, r.retry_max_s,
+                                      r.connect_timeout_s, state_dir);
+  if (outbox_ && options_ == wanted) return outbox_;  // a reload that left it as it was
+  if (outbox_) {
+    // (The old station, which held it too, is gone.)
+    std::thread([old = std::move(outbox_)]() mutable { old.reset(); }).detach();
+  }
+  outbox_.reset();
+  if (!r.enabled()) return outbox_;
+  auto outbox = std::make_shared<RegistryOutbox>(state_dir, r);
+  std::string error;
+  if (!outbox->Start(&error)) {
+    spdlog::error("{}", error);
+    return outbox_;
+  }
+  outbox_ = std::move(outbox);
+  options_ = wanted;
+  spdlog::info("registry: station '{}', outbox in {}/outbox", StationName(r.station), state_dir);
+  return outbox_;
+}
+
 }  // namespace turncal::daemon

@@ -28,6 +28,7 @@
 #include <set>
 #include <string>
 #include <thread>
+#include <tuple>
 
 #include "daemon/registry/registry_db.h"
 #include "daemon/registry/registry_options.h"
@@ -92,6 +93,25 @@ class RegistryOutbox {
   std::string last_error_, last_error_time_, last_sent_time_;
   std::unique_ptr<RegistryDb> db_;  // the thread's connection (Cancel from the destructor)
   std::thread thread_;
+};
+
+// A service's outbox across reloads: started for [registry], kept while a reload leaves its
+// options and the state directory as they were, and replaced otherwise -- the old one stopped off
+// the caller's thread (a connection attempt under way may take connect_timeout, longer than the
+// watchdog allows the event loop).
+class RegistryHandle {
+ public:
+  ~RegistryHandle();
+  // The outbox for `options` in `state_dir`; null without [registry], or when it cannot start
+  // (logged: the station works without it, and the calibrations wait in their files for the
+  // next start's reconciliation).
+  const std::shared_ptr<RegistryOutbox>& Ensure(const RegistryOptions& options,
+                                                const std::string& state_dir);
+  const std::shared_ptr<RegistryOutbox>& get() const { return outbox_; }
+
+ private:
+  std::shared_ptr<RegistryOutbox> outbox_;
+  std::tuple<std::string, std::string, std::string, double, int, std::string> options_;
 };
 
 }  // namespace turncal::daemon

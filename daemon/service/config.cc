@@ -8,121 +8,11 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include "daemon/service/config_toml.h"
 #include "daemon/service/socket_server.h"
 
 namespace turncal::daemon {
 namespace {
-
-std::string Where(const toml::node& node, const std::string& source) {
-  const auto& r = node.source();
-  return fmt::format("{}:{}", source, r.begin.line);
-}
-
-// Checks that `table` has only `allowed` keys.
-bool OnlyKeys(const toml::table& table, const std::set<std::string>& allowed,
-              const std::string& context, const std::string& source, std::string* error) {
-  for (const auto& [key, node] : table) {
-    if (!allowed.count(std::string(key.str()))) {
-      std::string list;
-      for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
-      *error = fmt::format("{}: unknown key '{}' in {} (known: {})", Where(node, source), key.str(),
-                           context, list);
-      return false;
-    }
-  }
-  return true;
-}
-
-bool GetNumber(const toml::table& t, const char* key, double* out, const std::string& source,
-               std::string* error) {
-  const toml::node* n = t.get(key);
-  if (!n) return true;
-  if (auto v = n->value<double>()) {
-    if (!std::isfinite(*v)) {
-      *error = fmt::format("{}: '{}' must be finite", Where(*n, source), key);
-      return false;
-    }
-    *out = *v;
-    return true;
-  }
-  *error = fmt::format("{}: '{}' must be a number", Where(*n, source), key);
-  return false;
-}
-
-bool GetString(const toml::table& t, const char* key, std::string* out, const std::string& source,
-               std::string* error) {
-  const toml::node* n = t.get(key);
-  if (!n) return true;
-  if (auto v = n->value<std::string>()) {
-    *out = *v;
-    return true;
-  }
-  *error = fmt::format("{}: '{}' must be a string", Where(*n, source), key);
-  return false;
-}
-
-bool GetVector(const toml::table& t, const char* key, Eigen::Vector3d* out,
-               const std::string& source, std::string* error) {
-  const toml::node* n = t.get(key);
-  if (!n) return true;
-  const toml::array* a = n->as_array();
-  bool ok = a && a->size() == 3;
-  for (std::size_t i = 0; ok && i < 3; ++i) {
-    auto v = (*a)[i].value<double>();
-    ok = v && std::isfinite(*v);
-    if (ok) (*out)[static_cast<Eigen::Index>(i)] = *v;
-  }
-  if (!ok)
-    *error = fmt::format("{}: '{}' must be [x, y, z] (finite numbers)", Where(*n, source), key);
-  return ok;
-}
-
-// A list of finite numbers (possibly empty).
-bool GetNumberList(const toml::table& t, const char* key, std::vector<double>* out,
-                   const std::string& source, std::string* error) {
-  const toml::node* n = t.get(key);
-  if (!n) return true;
-  const toml::array* a = n->as_array();
-  std::vector<double> values;
-  bool ok = a != nullptr;
-  for (std::size_t i = 0; ok && i < a->size(); ++i) {
-    auto v = (*a)[i].value<double>();
-    ok = v && std::isfinite(*v);
-    if (ok) values.push_back(*v);
-  }
-  if (!ok) {
-    *error = fmt::format("{}: '{}' must be a list of finite numbers", Where(*n, source), key);
-    return false;
-  }
-  *out = values;
-  return true;
-}
-
-// A whole number in [0, 1000].
-bool GetInt(const toml::table& t, const char* key, int* out, const std::string& source,
-            std::string* error) {
-  const toml::node* n = t.get(key);
-  if (!n) return true;
-  const auto* i = n->as_integer();
-  if (!i || i->get() < 0 || i->get() > 1000) {
-    *error = fmt::format("{}: '{}' must be a whole number from 0 to 1000", Where(*n, source), key);
-    return false;
-  }
-  *out = static_cast<int>(i->get());
-  return true;
-}
-
-// One number for all three table axes, or [inner, middle, outer].
-bool GetAxes(const toml::table& t, const char* key, Eigen::Vector3d* out, const std::string& source,
-             std::string* error) {
-  const toml::node* n = t.get(key);
-  if (!n) return true;
-  if (n->as_array()) return GetVector(t, key, out, source, error);
-  double v = 0;
-  if (!GetNumber(t, key, &v, source, error)) return false;
-  out->setConstant(v);
-  return true;
-}
 
 bool ParseTable(const toml::table& t, const std::string& source, StationOptions* st,
                 std::string* error) {
@@ -150,28 +40,6 @@ bool ParseTable(const toml::table& t, const std::string& source, StationOptions*
     return false;
   }
   st->plan_objective = plan_for == "time" ? PlanObjective::kTime : PlanObjective::kPoses;
-  return true;
-}
-
-bool GetModels(const toml::table& t, std::vector<std::string>* models, const std::string& source,
-               std::string* error) {
-  const toml::node* n = t.get("models");
-  if (!n) return true;
-  const toml::array* a = n->as_array();
-  if (!a || a->empty()) {
-    *error =
-        fmt::format("{}: 'models' must be a non-empty array of model names", Where(*n, source));
-    return false;
-  }
-  models->clear();
-  for (const auto& m : *a) {
-    auto v = m.value<std::string>();
-    if (!v) {
-      *error = fmt::format("{}: 'models' must hold strings", Where(m, source));
-      return false;
-    }
-    models->push_back(*v);
-  }
   return true;
 }
 
@@ -252,24 +120,255 @@ bool ParseRegistry(const toml::table& t, const std::string& source, RegistryOpti
   return true;
 }
 
-}  // namespace
+// [station]: the models, the pose source, the sensor class, the drift model and the noise prior.
+bool ParseStation(const toml::table* t, const std::string& source, Config* out,
+                  std::string* error) {
+  Config& c = *out;
+  StationOptions& st = c.station;
+  if (!OnlyKeys(
+          *t,
+          {"models", "pose_source", "sensor_class", "drift_model", "identify_drift", "bias_tau_s",
+           "warmup", "warmup_tau_s", "acc_noise_density", "acc_bias_instability", "mag_noise_rms",
+           "mag_bias_instability", "acc_random_walk", "mag_random_walk"},
+          "[station]", source, error)) {
+    return false;
+  }
+  if (!GetString(*t, "sensor_class", &st.sensor_class, source, error)) return false;
+  std::string drift_model = "gauss-markov";
+  if (!GetString(*t, "drift_model", &drift_model, source, error)) return false;
+  if (drift_model != "gauss-markov" && drift_model != "independent") {
+    *error = fmt::format("{}: [station] drift_model must be \"gauss-markov\" or \"independent\"",
+                         source);
+    return false;
+  }
+  st.drift_model = drift_model == "gauss-markov";
+  if (const toml::node* n = t->get("identify_drift")) {
+    const auto* v = n->as_boolean();  // not value<bool>(), which takes 1 for true
+    if (!v) {
+      *error = fmt::format("{}: 'identify_drift' must be true or false", Where(*n, source));
+      return false;
+    }
+    st.identify_drift = v->get();
+  }
+  if (!GetNumber(*t, "bias_tau_s", &st.bias_tau_s, source, error) ||
+      !GetNumber(*t, "warmup", &st.warmup_in_instabilities, source, error) ||
+      !GetNumber(*t, "warmup_tau_s", &st.warmup_tau_s, source, error)) {
+    return false;
+  }
+  if ((t->contains("bias_tau_s") && !(st.bias_tau_s > 0)) ||
+      (t->contains("warmup") && !(st.warmup_in_instabilities >= 0)) ||
+      (t->contains("warmup_tau_s") && !(st.warmup_tau_s > 0))) {
+    *error =
+        fmt::format("{}: [station] bias_tau_s and warmup_tau_s must be > 0, warmup >= 0", source);
+    return false;
+  }
+  // The noise prior measured on this sensor (turncal noise): densities and instabilities > 0,
+  // random walks >= 0.
+  const std::pair<const char*, double*> noise[] = {
+      {"acc_noise_density", &st.acc_noise_density},
+      {"acc_bias_instability", &st.acc_bias_instability},
+      {"mag_noise_rms", &st.mag_noise_rms},
+      {"mag_bias_instability", &st.mag_bias_instability},
+      {"acc_random_walk", &st.acc_random_walk},
+      {"mag_random_walk", &st.mag_random_walk}};
+  for (const auto& [key, value] : noise) {
+    if (!GetNumber(*t, key, value, source, error)) return false;
+    const bool walk = std::string_view(key).find("random_walk") != std::string_view::npos;
+    if (t->contains(key) && !(walk ? *value >= 0 : *value > 0)) {
+      *error = fmt::format("{}: [station] {} must be {} (turncal noise fits it from a long rest)",
+                           source, key, walk ? ">= 0" : "> 0");
+      return false;
+    }
+  }
+  std::string pose_source = "announced";
+  if (!GetString(*t, "pose_source", &pose_source, source, error)) return false;
+  if (!ParsePoseSource(pose_source, &st.pose_source)) {
+    *error = fmt::format("{}: [station] pose_source must be \"announced\" or \"free\"", source);
+    return false;
+  }
+  c.models_set = t->contains("models");
+  if (!GetModels(*t, &st.models, source, error)) return false;
+  return true;
+}
 
-bool ParseConfig(const std::string& text, const std::string& source, Config* out,
+// [sequencer]: stillness, the dwell, the pose check, the moves.
+bool ParseSequencer(const toml::table* t, const std::string& source, Config* out,
+                    std::string* error) {
+  Config& c = *out;
+  StationOptions& st = c.station;
+  if (!OnlyKeys(*t,
+                {"dwell_s", "window_s", "settle_guard_s", "still_timeout_s", "startup_s",
+                 "max_bad_fraction", "max_lost_fraction", "false_alarm", "outlier_k",
+                 "gyr_bias_drift_radps", "pose_check_false_alarm", "moves", "move_block_s",
+                 "move_max_s", "free_max_dwell_s"},
+                "[sequencer]", source, error)) {
+    return false;
+  }
+  SequencerOptions& q = st.sequencer;
+  c.dwell_set = t->contains("dwell_s");
+  if (!GetNumber(*t, "dwell_s", &q.dwell_s, source, error) ||
+      !GetNumber(*t, "window_s", &q.stillness.window_s, source, error) ||
+      !GetNumber(*t, "settle_guard_s", &q.settle_guard_s, source, error) ||
+      !GetNumber(*t, "still_timeout_s", &q.still_timeout_s, source, error) ||
+      !GetNumber(*t, "startup_s", &q.noise_meter.duration_s, source, error) ||
+      !GetNumber(*t, "max_bad_fraction", &q.max_bad_fraction, source, error) ||
+      !GetNumber(*t, "max_lost_fraction", &q.max_lost_fraction, source, error) ||
+      !GetNumber(*t, "false_alarm", &q.stillness.false_alarm, source, error) ||
+      !GetNumber(*t, "outlier_k", &q.stillness.outlier_k, source, error) ||
+      !GetNumber(*t, "gyr_bias_drift_radps", &q.stillness.gyr_bias_drift_radps, source, error) ||
+      !GetNumber(*t, "pose_check_false_alarm", &q.pose_check_false_alarm, source, error) ||
+      !GetNumber(*t, "move_block_s", &q.moves.block_s, source, error) ||
+      !GetNumber(*t, "move_max_s", &q.moves.max_s, source, error) ||
+      !GetNumber(*t, "free_max_dwell_s", &q.free_max_dwell_s, source, error)) {
+    return false;
+  }
+  if (const toml::node* n = t->get("moves")) {
+    const auto* v = n->as_boolean();
+    if (!v) {
+      *error = fmt::format("{}: 'moves' must be true or false", Where(*n, source));
+      return false;
+    }
+    q.moves.enabled = v->get();
+  }
+  return true;
+}
+
+// [free]: the free pose source's coverage and field.
+bool ParseFree(const toml::table* t, const std::string& source, StationOptions* out,
+               std::string* error) {
+  StationOptions& st = *out;
+  if (!OnlyKeys(*t, {"min_coverage_percent", "field"}, "[free]", source, error) ||
+      !GetNumber(*t, "min_coverage_percent", &st.free.min_coverage_percent, source, error)) {
+    return false;
+  }
+  std::string field = "reference";
+  if (!GetString(*t, "field", &field, source, error)) return false;
+  if (field != "reference" && field != "unknown") {
+    *error = fmt::format("{}: [free] field must be \"reference\" or \"unknown\"", source);
+    return false;
+  }
+  st.free.field_known = field == "reference";
+  return true;
+}
+
+// [reference]: gravity, the field and the latitude.
+bool ParseReference(const toml::table* t, const std::string& source, StationOptions* out,
+                    std::string* error) {
+  StationOptions& st = *out;
+  if (!OnlyKeys(*t, {"g_ned", "B_ned", "latitude_deg"}, "[reference]", source, error) ||
+      !GetVector(*t, "g_ned", &st.context.reference.g_ned, source, error) ||
+      !GetVector(*t, "B_ned", &st.context.reference.B_ned, source, error) ||
+      !GetNumber(*t, "latitude_deg", &st.context.reference.latitude_deg, source, error)) {
+    return false;
+  }
+  if (std::string why; !st.context.reference.IsValid(&why)) {
+    *error = fmt::format("{}: [reference]: {}", source, why);
+    return false;
+  }
+  return true;
+}
+
+// One [[device]]: its spec, settings, and its own models and gate tolerances.
+bool ParseDevice(const toml::node& d, const toml::table* t, const std::string& source, Config* out,
                  std::string* error) {
-  toml::table root;
-  try {
-    root = toml::parse(text, source);
-  } catch (const toml::parse_error& e) {
-    *error = fmt::format("{}:{}: {}", source, e.source().begin.line, e.description());
+  Config& c = *out;
+  StationOptions& st = c.station;
+  if (!OnlyKeys(*t, {"name", "protocol", "port", "baud", "rate_hz", "configure", "models", "gate"},
+                "[[device]]", source, error)) {
     return false;
   }
-  Config c;
-  if (!OnlyKeys(root,
-                {"socket", "socket_group", "control_users", "state_dir", "station", "sequencer",
-                 "table", "free", "gate", "reference", "device", "registry"},
-                "the file", source, error)) {
+  DeviceSettings settings;
+  if (!GetNumber(*t, "rate_hz", &settings.rate_hz, source, error)) return false;
+  if (const toml::node* cn = t->get("configure")) {
+    const auto* v = cn->as_boolean();  // value<bool>() would take 1 for true
+    if (!v) {
+      *error = fmt::format("{}: 'configure' must be true or false", Where(*cn, source));
+      return false;
+    }
+    settings.configure = v->get();
+  }
+  if (t->get("rate_hz") && !(settings.rate_hz > 0 && settings.rate_hz <= 4000)) {
+    *error = fmt::format("{}: 'rate_hz' must be in (0, 4000]", Where(d, source));
     return false;
   }
+  std::string name, protocol, port;
+  double baud = 0;
+  if (!GetString(*t, "name", &name, source, error) ||
+      !GetString(*t, "protocol", &protocol, source, error) ||
+      !GetString(*t, "port", &port, source, error) ||
+      !GetNumber(*t, "baud", &baud, source, error)) {
+    return false;
+  }
+  if (!drivers::ParseProtocol(protocol)) {
+    *error = fmt::format("{}: device: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)",
+                         Where(d, source), protocol);
+    return false;
+  }
+  if (const toml::node* bn = t->get("baud")) {
+    // As on the command line (drivers/device_spec.h); never a silent default.
+    if (!(baud >= 300 && baud <= 4000000 && baud == std::floor(baud))) {
+      *error =
+          fmt::format("{}: 'baud' must be a whole number from 300 to 4000000", Where(*bn, source));
+      return false;
+    }
+  } else {
+    baud = drivers::DeviceSpec().baud;
+  }
+  // The baud always given: an '@' in the port stays in the port.
+  const std::string spec =
+      fmt::format("{}={}:{}@{}", name, protocol, port, static_cast<long long>(baud));
+  std::string why;
+  auto parsed = drivers::ParseDeviceSpec(spec, &why);
+  if (!parsed) {
+    *error = fmt::format("{}: device: {}", Where(d, source), why);
+    return false;
+  }
+  for (const auto& other : c.devices) {
+    if (other.name == parsed->name) {
+      *error = fmt::format("{}: device name '{}' is given twice", Where(d, source), name);
+      return false;
+    }
+  }
+  c.devices.push_back(*parsed);
+  c.device_settings[parsed->name] = settings;
+  // The device's own models and gate tolerances (over the station's).
+  DeviceModelOptions own;
+  if (t->get("models")) {
+    std::vector<std::string> models;
+    if (!GetModels(*t, &models, source, error)) return false;
+    own.models = models;
+  }
+  if (const toml::table* g = (*t)["gate"].as_table()) {
+    GateOptions gate = st.gate;  // tolerances so far: the class's or [gate]'s
+    if (!ParseGate(*g, "[device.gate]", source, &gate, error)) return false;
+    own.gate = gate;
+  }
+  if (own.models || own.gate) st.per_device[parsed->name] = own;
+  return true;
+}
+
+// Every [[device]].
+bool ParseDevices(const toml::node* n, const std::string& source, Config* out, std::string* error) {
+  const toml::array* a = n->as_array();
+  if (!a) {
+    *error = fmt::format("{}: devices are [[device]] tables", Where(*n, source));
+    return false;
+  }
+  for (const auto& d : *a) {
+    const toml::table* t = d.as_table();
+    if (!t) {
+      *error = fmt::format("{}: devices are [[device]] tables", Where(d, source));
+      return false;
+    }
+    if (!ParseDevice(d, t, source, out, error)) return false;
+  }
+  return true;
+}
+
+// The top level's keys: the socket, its group, who may control, the state directory.
+bool ParseTopLevel(const toml::table& root, const std::string& source, Config* out,
+                   std::string* error) {
+  Config& c = *out;
   std::string s;
   if (root.get("socket")) {
     if (!GetString(root, "socket", &s, source, error)) return false;
@@ -310,123 +409,41 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
     if (!GetString(root, "state_dir", &s, source, error)) return false;
     c.state_dir = s;
   }
+  return true;
+}
+
+}  // namespace
+
+bool ParseConfig(const std::string& text, const std::string& source, Config* out,
+                 std::string* error) {
+  toml::table root;
+  try {
+    root = toml::parse(text, source);
+  } catch (const toml::parse_error& e) {
+    *error = fmt::format("{}:{}: {}", source, e.source().begin.line, e.description());
+    return false;
+  }
+  Config c;
+  if (!OnlyKeys(root,
+                {"socket", "socket_group", "control_users", "state_dir", "station", "sequencer",
+                 "table", "free", "gate", "reference", "device", "registry"},
+                "the file", source, error) ||
+      !ParseTopLevel(root, source, &c, error)) {
+    return false;
+  }
   StationOptions& st = c.station;
-  if (const toml::table* t = root["station"].as_table()) {
-    if (!OnlyKeys(
-            *t,
-            {"models", "pose_source", "sensor_class", "drift_model", "identify_drift", "bias_tau_s",
-             "warmup", "warmup_tau_s", "acc_noise_density", "acc_bias_instability", "mag_noise_rms",
-             "mag_bias_instability", "acc_random_walk", "mag_random_walk"},
-            "[station]", source, error)) {
-      return false;
-    }
-    if (!GetString(*t, "sensor_class", &st.sensor_class, source, error)) return false;
-    std::string drift_model = "gauss-markov";
-    if (!GetString(*t, "drift_model", &drift_model, source, error)) return false;
-    if (drift_model != "gauss-markov" && drift_model != "independent") {
-      *error = fmt::format("{}: [station] drift_model must be \"gauss-markov\" or \"independent\"",
-                           source);
-      return false;
-    }
-    st.drift_model = drift_model == "gauss-markov";
-    if (const toml::node* n = t->get("identify_drift")) {
-      const auto* v = n->as_boolean();  // not value<bool>(), which takes 1 for true
-      if (!v) {
-        *error = fmt::format("{}: 'identify_drift' must be true or false", Where(*n, source));
-        return false;
-      }
-      st.identify_drift = v->get();
-    }
-    if (!GetNumber(*t, "bias_tau_s", &st.bias_tau_s, source, error) ||
-        !GetNumber(*t, "warmup", &st.warmup_in_instabilities, source, error) ||
-        !GetNumber(*t, "warmup_tau_s", &st.warmup_tau_s, source, error)) {
-      return false;
-    }
-    if ((t->contains("bias_tau_s") && !(st.bias_tau_s > 0)) ||
-        (t->contains("warmup") && !(st.warmup_in_instabilities >= 0)) ||
-        (t->contains("warmup_tau_s") && !(st.warmup_tau_s > 0))) {
-      *error =
-          fmt::format("{}: [station] bias_tau_s and warmup_tau_s must be > 0, warmup >= 0", source);
-      return false;
-    }
-    // The noise prior measured on this sensor (turncal noise): densities and instabilities > 0,
-    // random walks >= 0.
-    const std::pair<const char*, double*> noise[] = {
-        {"acc_noise_density", &st.acc_noise_density},
-        {"acc_bias_instability", &st.acc_bias_instability},
-        {"mag_noise_rms", &st.mag_noise_rms},
-        {"mag_bias_instability", &st.mag_bias_instability},
-        {"acc_random_walk", &st.acc_random_walk},
-        {"mag_random_walk", &st.mag_random_walk}};
-    for (const auto& [key, value] : noise) {
-      if (!GetNumber(*t, key, value, source, error)) return false;
-      const bool walk = std::string_view(key).find("random_walk") != std::string_view::npos;
-      if (t->contains(key) && !(walk ? *value >= 0 : *value > 0)) {
-        *error = fmt::format("{}: [station] {} must be {} (turncal noise fits it from a long rest)",
-                             source, key, walk ? ">= 0" : "> 0");
-        return false;
-      }
-    }
-    std::string pose_source = "announced";
-    if (!GetString(*t, "pose_source", &pose_source, source, error)) return false;
-    if (!ParsePoseSource(pose_source, &st.pose_source)) {
-      *error = fmt::format("{}: [station] pose_source must be \"announced\" or \"free\"", source);
-      return false;
-    }
-    c.models_set = t->contains("models");
-    if (!GetModels(*t, &st.models, source, error)) return false;
+  if (const toml::table* t = root["station"].as_table(); t && !ParseStation(t, source, &c, error)) {
+    return false;
   }
-  if (const toml::table* t = root["sequencer"].as_table()) {
-    if (!OnlyKeys(*t,
-                  {"dwell_s", "window_s", "settle_guard_s", "still_timeout_s", "startup_s",
-                   "max_bad_fraction", "max_lost_fraction", "false_alarm", "outlier_k",
-                   "gyr_bias_drift_radps", "pose_check_false_alarm", "moves", "move_block_s",
-                   "move_max_s", "free_max_dwell_s"},
-                  "[sequencer]", source, error)) {
-      return false;
-    }
-    SequencerOptions& q = st.sequencer;
-    c.dwell_set = t->contains("dwell_s");
-    if (!GetNumber(*t, "dwell_s", &q.dwell_s, source, error) ||
-        !GetNumber(*t, "window_s", &q.stillness.window_s, source, error) ||
-        !GetNumber(*t, "settle_guard_s", &q.settle_guard_s, source, error) ||
-        !GetNumber(*t, "still_timeout_s", &q.still_timeout_s, source, error) ||
-        !GetNumber(*t, "startup_s", &q.noise_meter.duration_s, source, error) ||
-        !GetNumber(*t, "max_bad_fraction", &q.max_bad_fraction, source, error) ||
-        !GetNumber(*t, "max_lost_fraction", &q.max_lost_fraction, source, error) ||
-        !GetNumber(*t, "false_alarm", &q.stillness.false_alarm, source, error) ||
-        !GetNumber(*t, "outlier_k", &q.stillness.outlier_k, source, error) ||
-        !GetNumber(*t, "gyr_bias_drift_radps", &q.stillness.gyr_bias_drift_radps, source, error) ||
-        !GetNumber(*t, "pose_check_false_alarm", &q.pose_check_false_alarm, source, error) ||
-        !GetNumber(*t, "move_block_s", &q.moves.block_s, source, error) ||
-        !GetNumber(*t, "move_max_s", &q.moves.max_s, source, error) ||
-        !GetNumber(*t, "free_max_dwell_s", &q.free_max_dwell_s, source, error)) {
-      return false;
-    }
-    if (const toml::node* n = t->get("moves")) {
-      const auto* v = n->as_boolean();
-      if (!v) {
-        *error = fmt::format("{}: 'moves' must be true or false", Where(*n, source));
-        return false;
-      }
-      q.moves.enabled = v->get();
-    }
+  if (const toml::table* t = root["sequencer"].as_table();
+      t && !ParseSequencer(t, source, &c, error)) {
+    return false;
   }
-  if (const toml::table* t = root["table"].as_table()) {
-    if (!ParseTable(*t, source, &st, error)) return false;
+  if (const toml::table* t = root["table"].as_table(); t && !ParseTable(*t, source, &st, error)) {
+    return false;
   }
-  if (const toml::table* t = root["free"].as_table()) {
-    if (!OnlyKeys(*t, {"min_coverage_percent", "field"}, "[free]", source, error) ||
-        !GetNumber(*t, "min_coverage_percent", &st.free.min_coverage_percent, source, error)) {
-      return false;
-    }
-    std::string field = "reference";
-    if (!GetString(*t, "field", &field, source, error)) return false;
-    if (field != "reference" && field != "unknown") {
-      *error = fmt::format("{}: [free] field must be \"reference\" or \"unknown\"", source);
-      return false;
-    }
-    st.free.field_known = field == "reference";
+  if (const toml::table* t = root["free"].as_table(); t && !ParseFree(t, source, &st, error)) {
+    return false;
   }
   if (st.pose_source == PoseSource::kFree) ApplyPoseSource(PoseSource::kFree, c, &st);
   GateDefaultsForClass(st.sensor_class, &st.gate);
@@ -434,106 +451,16 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
     if (!ParseGate(*t, "[gate]", source, &st.gate, error)) return false;
     st.gate_tolerances_set = true;
   }
-  if (const toml::table* t = root["reference"].as_table()) {
-    if (!OnlyKeys(*t, {"g_ned", "B_ned", "latitude_deg"}, "[reference]", source, error) ||
-        !GetVector(*t, "g_ned", &st.context.reference.g_ned, source, error) ||
-        !GetVector(*t, "B_ned", &st.context.reference.B_ned, source, error) ||
-        !GetNumber(*t, "latitude_deg", &st.context.reference.latitude_deg, source, error)) {
-      return false;
-    }
-    if (std::string why; !st.context.reference.IsValid(&why)) {
-      *error = fmt::format("{}: [reference]: {}", source, why);
-      return false;
-    }
+  if (const toml::table* t = root["reference"].as_table();
+      t && !ParseReference(t, source, &st, error)) {
+    return false;
   }
-  if (const toml::table* t = root["registry"].as_table()) {
-    if (!ParseRegistry(*t, source, &c.registry, error)) return false;
+  if (const toml::table* t = root["registry"].as_table();
+      t && !ParseRegistry(*t, source, &c.registry, error)) {
+    return false;
   }
-  if (const toml::node* n = root.get("device")) {
-    const toml::array* a = n->as_array();
-    if (!a) {
-      *error = fmt::format("{}: devices are [[device]] tables", Where(*n, source));
-      return false;
-    }
-    for (const auto& d : *a) {
-      const toml::table* t = d.as_table();
-      if (!t) {
-        *error = fmt::format("{}: devices are [[device]] tables", Where(d, source));
-        return false;
-      }
-      if (!OnlyKeys(*t,
-                    {"name", "protocol", "port", "baud", "rate_hz", "configure", "models", "gate"},
-                    "[[device]]", source, error)) {
-        return false;
-      }
-      DeviceSettings settings;
-      if (!GetNumber(*t, "rate_hz", &settings.rate_hz, source, error)) return false;
-      if (const toml::node* cn = t->get("configure")) {
-        const auto* v = cn->as_boolean();  // value<bool>() would take 1 for true
-        if (!v) {
-          *error = fmt::format("{}: 'configure' must be true or false", Where(*cn, source));
-          return false;
-        }
-        settings.configure = v->get();
-      }
-      if (t->get("rate_hz") && !(settings.rate_hz > 0 && settings.rate_hz <= 4000)) {
-        *error = fmt::format("{}: 'rate_hz' must be in (0, 4000]", Where(d, source));
-        return false;
-      }
-      std::string name, protocol, port;
-      double baud = 0;
-      if (!GetString(*t, "name", &name, source, error) ||
-          !GetString(*t, "protocol", &protocol, source, error) ||
-          !GetString(*t, "port", &port, source, error) ||
-          !GetNumber(*t, "baud", &baud, source, error)) {
-        return false;
-      }
-      if (!drivers::ParseProtocol(protocol)) {
-        *error = fmt::format("{}: device: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)",
-                             Where(d, source), protocol);
-        return false;
-      }
-      if (const toml::node* bn = t->get("baud")) {
-        // As on the command line (drivers/device_spec.h); never a silent default.
-        if (!(baud >= 300 && baud <= 4000000 && baud == std::floor(baud))) {
-          *error = fmt::format("{}: 'baud' must be a whole number from 300 to 4000000",
-                               Where(*bn, source));
-          return false;
-        }
-      } else {
-        baud = drivers::DeviceSpec().baud;
-      }
-      // The baud always given: an '@' in the port stays in the port.
-      const std::string spec =
-          fmt::format("{}={}:{}@{}", name, protocol, port, static_cast<long long>(baud));
-      std::string why;
-      auto parsed = drivers::ParseDeviceSpec(spec, &why);
-      if (!parsed) {
-        *error = fmt::format("{}: device: {}", Where(d, source), why);
-        return false;
-      }
-      for (const auto& other : c.devices) {
-        if (other.name == parsed->name) {
-          *error = fmt::format("{}: device name '{}' is given twice", Where(d, source), name);
-          return false;
-        }
-      }
-      c.devices.push_back(*parsed);
-      c.device_settings[parsed->name] = settings;
-      // The device's own models and gate tolerances (over the station's).
-      DeviceModelOptions own;
-      if (t->get("models")) {
-        std::vector<std::string> models;
-        if (!GetModels(*t, &models, source, error)) return false;
-        own.models = models;
-      }
-      if (const toml::table* g = (*t)["gate"].as_table()) {
-        GateOptions gate = st.gate;  // tolerances so far: the class's or [gate]'s
-        if (!ParseGate(*g, "[device.gate]", source, &gate, error)) return false;
-        own.gate = gate;
-      }
-      if (own.models || own.gate) st.per_device[parsed->name] = own;
-    }
+  if (const toml::node* n = root.get("device"); n && !ParseDevices(n, source, &c, error)) {
+    return false;
   }
   if (!st.IsValid(error)) {
     *error = source + ": " + *error;

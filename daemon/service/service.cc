@@ -71,9 +71,8 @@ bool Service::StartStation(std::string* error) {
     return false;
   }
   DropStation(drop_reason_);  // closes the journal before a new station opens it
-  StartRegistry();
-  if (registry_) {
-    so.on_calibration_saved = [registry = registry_](const nlohmann::json& calibration) {
+  if (const auto& registry = registry_.Ensure(options_.registry, options_.state_dir)) {
+    so.on_calibration_saved = [registry](const nlohmann::json& calibration) {
       std::string why;
       if (!registry->AddCalibration(calibration, &why)) spdlog::error("{}", why);
     };
@@ -94,32 +93,6 @@ bool Service::StartStation(std::string* error) {
         std::max(next_pose_index_, station_->Status(static_cast<int>(i))["poses"].get<int>());
   }
   return true;
-}
-
-void Service::StartRegistry() {
-  const RegistryOptions& r = options_.registry;
-  const auto wanted = std::make_tuple(r.conninfo, r.password_file, r.station, r.retry_max_s,
-                                      r.connect_timeout_s, options_.state_dir);
-  if (registry_ && registry_options_ == wanted) return;  // a reload that left it as it was
-  if (registry_) {
-    // Stopped off the loop: a connection attempt under way may take connect_timeout, longer
-    // than the watchdog allows the loop. (The old station, which held it too, is gone.)
-    std::thread([old = std::move(registry_)]() mutable { old.reset(); }).detach();
-  }
-  registry_.reset();
-  if (!r.enabled()) return;
-  auto registry = std::make_shared<RegistryOutbox>(options_.state_dir, r);
-  std::string error;
-  if (!registry->Start(&error)) {
-    // The station works without it; the calibrations wait in their files (the next start's
-    // reconciliation sends them).
-    spdlog::error("{}", error);
-    return;
-  }
-  registry_ = std::move(registry);
-  registry_options_ = wanted;
-  spdlog::info("registry: station '{}', outbox in {}/outbox", StationName(r.station),
-               options_.state_dir);
 }
 
 void Service::DropStation(const std::string& why) {

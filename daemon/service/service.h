@@ -53,9 +53,6 @@ class Service {
 
  private:
   bool StartStation(std::string* error);
-  // The registry's outbox for options_.registry (kept across a reload that did not change it).
-  // A failure is logged; the station works without it.
-  void StartRegistry();
   void StartDevices();
   // Drains the solve worker, then destroys the station; clients still waiting for a pose get a
   // POSE_REJECTED saying `why` (nothing when empty).
@@ -72,8 +69,6 @@ class Service {
   nlohmann::json DevicesJson() const;
   void HandlePose(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request,
                   const nlohmann::json& id);
-  void HandleWatch(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request,
-                   const nlohmann::json& id);
   void HandleReset(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request,
                    const nlohmann::json& id);
   void HandlePublish(const std::shared_ptr<ClientSession>& client, const nlohmann::json& request,
@@ -104,8 +99,7 @@ class Service {
   std::unique_ptr<drivers::CaptureWriter> recorder_;
   // The registry's outbox (daemon/registry/registry_outbox.h); null without [registry]. Shared with
   // the station's persistence, which adds to it from the solve worker.
-  std::shared_ptr<RegistryOutbox> registry_;
-  std::tuple<std::string, std::string, std::string, double, int, std::string> registry_options_;
+  RegistryHandle registry_;
   std::int64_t started_ns_ = 0;
   std::int64_t last_flush_ns_ = 0;
   std::int64_t ready_deadline_ns_ = 0;

@@ -42,7 +42,7 @@ nlohmann::json Service::StatusJson() const {
             {"max", worker_ ? worker_->longest_ms() : 0.0},
             {"queued", worker_ ? worker_->queued() : 0}}},
           // The registry's outbox: entries waiting, sent, the last error (null: no registry).
-          {"registry", registry_ ? registry_->Status() : nlohmann::json()},
+          {"registry", registry_.get() ? registry_.get()->Status() : nlohmann::json()},
           {"summary", status_line_},
           {"devices", devices}};
 }
@@ -104,7 +104,7 @@ void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
   } else if (cmd == "pose" || cmd == "rate") {
     HandlePose(client, request, id);
   } else if (cmd == "watch") {
-    HandleWatch(client, request, id);
+    reply(client->Watch(request));
   } else if (cmd == "reset") {
     HandleReset(client, request, id);
   } else if (cmd == "publish") {
@@ -184,29 +184,6 @@ void Service::HandlePose(const std::shared_ptr<ClientSession>& client,
       {"class", "POSE_ACCEPTED"}, {"index", a.index}, {"devices", names}, {"skipped", skipped}};
   if (!id.is_null()) accepted["id"] = id;
   client->Reply(accepted);
-}
-
-void Service::HandleWatch(const std::shared_ptr<ClientSession>& client,
-                          const nlohmann::json& request, const nlohmann::json& id) {
-  nlohmann::json reply;
-  std::optional<WatchSpec> spec;
-  std::string error;
-  if (!protocol::ParseWatchRequest(request, &spec, &error)) {
-    reply = protocol::ErrorMessage(error);
-  } else if (!spec) {
-    client->watch.reset();
-    reply = {{"class", "WATCH"}, {"enable", false}};
-  } else {
-    const WatchSpec& w = *spec;
-    client->watch = w;
-    client->last_sample_ns.clear();
-    reply = {{"class", "WATCH"},   {"enable", true},
-             {"events", w.events}, {"corrected", w.corrected},
-             {"raw", w.raw},       {"uncertainty", w.uncertainty},
-             {"device", w.device}, {"max_rate_hz", w.max_rate_hz}};
-  }
-  if (!id.is_null()) reply["id"] = id;
-  client->Reply(reply);
 }
 
 void Service::HandleReset(const std::shared_ptr<ClientSession>& client,
@@ -309,14 +286,14 @@ void Service::OnDeviceIdentity(std::size_t index, const nlohmann::json& identity
 }
 
 void Service::QueueDeviceWrite(const std::string& device, const nlohmann::json& entry) {
-  if (!registry_) return;
+  if (!registry_.get()) return;
   nlohmann::json identity = {{"serial", entry.value("serial", "")}};
   if (const LiveDevice* d = DeviceNamed(device)) {
     const nlohmann::json live = d->identity();
     if (live.is_object()) identity = live;
   }
   std::string error;
-  if (!registry_->AddDeviceWrite(entry, identity, entry.value("history", ""), &error)) {
+  if (!registry_.get()->AddDeviceWrite(entry, identity, entry.value("history", ""), &error)) {
     spdlog::error("{}: {}", device, error);
   }
 }

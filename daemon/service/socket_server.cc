@@ -312,4 +312,21 @@ void SocketServer::Publish(const nlohmann::json& event) {
   }
 }
 
+nlohmann::json ClientSession::Watch(const nlohmann::json& request) {
+  std::optional<WatchSpec> spec;
+  std::string error;
+  if (!protocol::ParseWatchRequest(request, &spec, &error)) return protocol::ErrorMessage(error);
+  if (!spec) {
+    watch.reset();
+    return {{"class", "WATCH"}, {"enable", false}};
+  }
+  const WatchSpec& w = *spec;
+  watch = w;
+  last_sample_ns.clear();
+  return {{"class", "WATCH"},   {"enable", true},
+          {"events", w.events}, {"corrected", w.corrected},
+          {"raw", w.raw},       {"uncertainty", w.uncertainty},
+          {"device", w.device}, {"max_rate_hz", w.max_rate_hz}};
+}
+
 }  // namespace turncal::daemon

@@ -100,6 +100,8 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
   std::uint64_t dropped_total() const { return dropped_total_; }
   std::size_t queued_bytes() const { return pending_.size(); }
 
+  // A watch request: what this client is streamed from now on (its WATCH reply, or an ERROR).
+  nlohmann::json Watch(const nlohmann::json& request);
   std::optional<WatchSpec> watch;
   // The last sample time sent per device (rate limit), host ns.
   std::unordered_map<std::string, std::int64_t> last_sample_ns;
