@@ -106,19 +106,26 @@ TEST_F(MipStorage, WrittenValuesReadBackBitForBitAndCorrectTheOutput) {
   s.gyr_radps = Eigen::Vector3d(0.01, 0.02, 0.03);
   const Sample raw = s;
   device->ApplyStored(&s);
-  Eigen::Matrix3d S;
+  // The values as the device holds them: the floats it reads back. (Rounding the constants here
+  // with static_cast<float> instead came out unrounded in two of three elements when GCC 12.2
+  // compiled this test at -O3: 0.0123 instead of 0.012299999594688416.)
+  const std::vector<float> bias = Floats(Send(device.get(), mip::ReadStored(0x37)).data);
+  const std::vector<float> transform = Floats(t.data);
+  ASSERT_EQ(bias.size(), 3u);
+  Eigen::Matrix3d S, M;
   Eigen::Vector3d hi, ab;
-  for (int i = 0; i < 9; ++i) S(i / 3, i % 3) = static_cast<float>(kSoftIron[i]);
-  for (int i = 0; i < 3; ++i) {
-    hi[i] = static_cast<float>(kHardIron[i]);
-    ab[i] = static_cast<float>(kAccelBias[i]);
+  for (int i = 0; i < 9; ++i) {
+    S(i / 3, i % 3) = soft[static_cast<std::size_t>(i)];
+    M(i / 3, i % 3) = transform[static_cast<std::size_t>(i)];
   }
-  Eigen::Matrix3d M;
-  for (int i = 0; i < 9; ++i) M(i / 3, i % 3) = dcm[static_cast<std::size_t>(i)];
+  for (int i = 0; i < 3; ++i) {
+    hi[i] = hard[static_cast<std::size_t>(i)];
+    ab[i] = bias[static_cast<std::size_t>(i)];
+  }
   // Equal up to the rounding of two 3x3 products and a difference in double (the emulator may
-  // order the operations otherwise, and -O3 contracts them into fused multiply-adds): each
-  // stage's error is at most gamma_3 = 3u/(1-3u) of |M| |S| |v| (Higham, Accuracy and Stability,
-  // 3.5); 16 u bounds the sum of both orders' with room.
+  // order the operations otherwise): each stage's error is at most gamma_3 = 3u/(1-3u) of
+  // |M| |S| |v| (Higham, Accuracy and Stability, 3.5); 16 u bounds the sum of both orders' with
+  // room.
   const double u = std::numeric_limits<double>::epsilon();
   const Eigen::Vector3d mag_in = *raw.mag - hi;
   const Eigen::Vector3d acc_in = *raw.acc_mps2 - ab * kStandardGravity_mps2;

@@ -1,0 +1,267 @@
+// NoiseMeter (core/sequencing/stillness.h): the sensor's noise measured at start-up, with the
+// stillness tests of the measurement itself.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/sequencing/stillness.h"
+#include "core/sequencing/stillness_stats.h"
+
+namespace turncal {
+
+using namespace stillness_stats;  // NOLINT(build/namespaces): the shared constants and quantiles
+
+bool NoiseMeterOptions::IsValid(std::string* error) const {
+  if (!(duration_s > 0) || duration_s > 60 || sub_windows < 2 ||
+      !(false_alarm > 0 && false_alarm < 1) || !(gyr_bias_limit_radps > 0) || !(outlier_k >= 3) ||
+      !(max_outlier_fraction >= 0 && max_outlier_fraction < 0.5)) {
+    if (error) {
+      *error =
+          "noise measurement: duration in (0, 60] s, at least 2 parts, false alarm in (0, 1), "
+          "outlier k >= 3, outlier fraction in [0, 0.5)";
+    }
+    return false;
+  }
+  return true;
+}
+
+NoiseMeter::NoiseMeter(const NoiseMeterOptions& options) : options_(options) { Restart(); }
+
+void NoiseMeter::Restart() {
+  samples_.clear();
+  outliers_ = 0;
+  parts_.assign(static_cast<std::size_t>(options_.sub_windows), Part{});
+  failure_.clear();
+}
+
+NoiseMeter::Status NoiseMeter::Add(const StillSample& s) {
+  if (!samples_.empty() && (static_cast<double>(s.t_host_ns - samples_.front().t_host_ns) * 1e-9 >=
+                                options_.duration_s ||
+                            samples_.size() >= kMaxMeterSamples)) {
+    return Finish();
+  }
+  samples_.push_back(s);
+  return Status::kCollecting;
+}
+
+namespace {
+bool Reason(std::string* why, const std::string& what) {
+  *why = what;
+  return false;
+}
+}  // namespace
+
+std::uint8_t NoiseMeter::PresentTriads() const {
+  std::uint8_t present = 0;
+  for (int t = 0; t < 3; ++t) {
+    std::size_t with = 0;
+    for (const auto& s : samples_) with += s.has(t) ? 1 : 0;
+    if (2 * with > samples_.size()) present |= static_cast<std::uint8_t>(1u << t);
+  }
+  return present;
+}
+
+std::vector<char> NoiseMeter::KeptSamples(std::uint8_t present) const {
+  std::vector<char> keep(samples_.size(), 1);
+  for (std::size_t i = 0; i < samples_.size(); ++i) {
+    if ((samples_[i].present & present) != present) keep[i] = 0;
+  }
+  // Isolated outliers: beyond outlier_k robust sigmas (1.4826 MAD) of the attempt's median.
+  std::vector<double> values;
+  values.reserve(samples_.size());
+  for (int t = 0; t < 3; ++t) {
+    if (!(present & (1u << t))) continue;
+    for (int a = 0; a < 3; ++a) {
+      values.clear();
+      for (std::size_t i = 0; i < samples_.size(); ++i) {
+        if (samples_[i].has(t)) values.push_back(samples_[i].v[t][a]);
+      }
+      auto mid = values.begin() + static_cast<long>(values.size() / 2);
+      std::nth_element(values.begin(), mid, values.end());
+      const double med = *mid;
+      for (auto& v : values) v = std::abs(v - med);
+      std::nth_element(values.begin(), mid, values.end());
+      const double robust = std::max(kMadToSigma * *mid, kFloat32Resolution * std::abs(med));
+      for (std::size_t i = 0; i < samples_.size(); ++i) {
+        if (!keep[i]) continue;
+        const double x = samples_[i].v[t][a];
+        if (!std::isfinite(x) || std::abs(x - med) > options_.outlier_k * robust) keep[i] = 0;
+      }
+    }
+  }
+  return keep;
+}
+
+void NoiseMeter::Accumulate(std::uint8_t present, const std::vector<char>& keep,
+                            std::int64_t* t_first_ns, std::int64_t* t_last_ns, std::int64_t* n) {
+  for (std::size_t i = 0; i < samples_.size(); ++i) {
+    const StillSample& s = samples_[i];
+    if (!keep[i]) {
+      ++outliers_;
+      continue;
+    }
+    if (*n == 0) *t_first_ns = s.t_host_ns;
+    *t_last_ns = s.t_host_ns;
+    ++*n;
+    const double since = static_cast<double>(s.t_host_ns - samples_.front().t_host_ns) * 1e-9;
+    const auto k = std::min<std::size_t>(
+        parts_.size() - 1,
+        static_cast<std::size_t>(std::max(0.0, since / options_.duration_s) * parts_.size()));
+    Part& p = parts_[k];
+    ++p.n;
+    for (int t = 0; t < 3; ++t) {
+      if (!(present & (1u << t))) continue;
+      const Eigen::Vector3d d = s.v[t] - p.mean[t];
+      p.mean[t] += d / static_cast<double>(p.n);
+      p.m2[t] += d.cwiseProduct(s.v[t] - p.mean[t]);
+    }
+  }
+}
+
+bool NoiseMeter::TriadNoise(int t, double nd, NoiseProfile* profile, std::string* why) const {
+  const int k = static_cast<int>(parts_.size());
+  const double dof = nd - k;
+  Eigen::Vector3d pooled = Eigen::Vector3d::Zero(), grand = Eigen::Vector3d::Zero();
+  for (const auto& p : parts_) {
+    pooled += p.m2[t];
+    grand += p.mean[t] * static_cast<double>(p.n);
+  }
+  pooled /= dof;
+  grand /= nd;
+  Eigen::Vector3d sigma = pooled.cwiseSqrt();
+  const double floor = kFloat32Resolution * std::max(grand.norm(), 1e-30);
+  for (int a = 0; a < 3; ++a) sigma[a] = std::max(sigma[a], floor);
+  // Stillness of the attempt: each part's variance against the pooled one (F test), and the
+  // parts' means against each other (chi^2 with k - 1 dof).
+  for (int a = 0; a < 3; ++a) {
+    const double var = sigma[a] * sigma[a];
+    double means_chi2 = 0;
+    for (const auto& p : parts_) {
+      const double pv = p.m2[t][a] / static_cast<double>(p.n - 1);
+      const double hi = VarianceRatioLimit(options_.false_alarm / (2.0 * k * 9),
+                                           static_cast<double>(p.n - 1), dof);
+      if (pv / var > hi) {
+        return Reason(
+            why,
+            fmt::format(
+                "not still while measuring the noise: {} {} variance of one part is {:.2f} times "
+                "the pooled one (limit {:.2f})",
+                TriadName(t), "xyz"[a], pv / var, hi));
+      }
+      const double d = p.mean[t][a] - grand[a];
+      means_chi2 += d * d * static_cast<double>(p.n) / var;
+    }
+    const double chi_lim = boost::math::quantile(
+        boost::math::complement(boost::math::chi_squared(k - 1), options_.false_alarm / 9.0));
+    if (means_chi2 > chi_lim) {
+      return Reason(
+          why,
+          fmt::format("not still while measuring the noise: the {} {} mean changed between parts "
+                      "(chi^2 {:.1f} > {:.1f} on {} dof)",
+                      TriadName(t), "xyz"[a], means_chi2, chi_lim, k - 1));
+    }
+  }
+  profile->sigma[t] = sigma;
+  if (t == kTriadGyr) {
+    profile->gyr_bias_radps = grand;
+    if (grand.norm() > options_.gyr_bias_limit_radps) {
+      return Reason(
+          why,
+          fmt::format(
+              "not still while measuring the noise: the gyro reads {:.3g} rad/s ({:.2f} deg/s), "
+              "more than a bias ({:.3g} rad/s allowed)",
+              grand.norm(), grand.norm() * 180 / M_PI, options_.gyr_bias_limit_radps));
+    }
+    profile->gyr_bias_sigma_radps = sigma.maxCoeff() / std::sqrt(nd);
+  }
+  return true;
+}
+
+bool NoiseMeter::MeasureRate(NoiseProfile* profile, std::string* why) const {
+  const auto total = static_cast<double>(samples_.size());
+  // The rate over every sample of the attempt (outliers were received too); host receive times
+  // come in bursts, and a device clock need not keep the host's pace (the simulator's at
+  // --live-speed 10), so the device clock's median spacing is preferred when most samples have
+  // it: robust to lost samples, which only lengthen a few spacings, and to the odd sample
+  // without a time stamp, a frame whose time field a bit error took out under a weak checksum.
+  // (Requiring every sample's stamp, one such frame in the attempt timed the whole session by
+  // host receive times: at 10x a 3 s dwell became 30 device seconds, 6 times the table's hold,
+  // whose replayed samples then counted 3 times over in every record; faults_ber-1e-3.)
+  const double span_all =
+      static_cast<double>(samples_.back().t_host_ns - samples_.front().t_host_ns) * 1e-9;
+  if (!(span_all > 0))
+    return Reason(why, "the samples of the noise measurement share one timestamp");
+  profile->rate_hz = (total - 1) / span_all;
+  std::vector<double> spacing;
+  std::size_t timed = samples_.front().t_device_s ? 1 : 0;
+  for (std::size_t i = 1; i < samples_.size(); ++i) {
+    if (samples_[i].t_device_s) ++timed;
+    if (samples_[i].t_device_s && samples_[i - 1].t_device_s) {
+      spacing.push_back(*samples_[i].t_device_s - *samples_[i - 1].t_device_s);
+    }
+  }
+  if (2 * timed > samples_.size() && !spacing.empty()) {
+    auto mid = spacing.begin() + static_cast<long>(spacing.size() / 2);
+    std::nth_element(spacing.begin(), mid, spacing.end());
+    if (*mid > 0) {
+      profile->device_period_s = *mid;
+      profile->rate_hz = 1.0 / *mid;
+    }
+  }
+  return true;
+}
+
+NoiseMeter::Status NoiseMeter::Finish() {
+  auto reject = [&](const std::string& why) {
+    failure_ = why;
+    return Status::kRejected;
+  };
+  // The triads the device sends: those in most samples. A sample without one of them (a frame
+  // that passed its checksum corrupted, e.g. an Xbus item id flipped under the 8-bit checksum)
+  // is left out below, instead of taking the triad out of the session's profile.
+  std::uint8_t present = PresentTriads();
+  if (!options_.use_mag) present &= static_cast<std::uint8_t>(~(1u << kTriadMag));
+  // A magnetometer alone (a compass module, MIP 0x80/0x06 only) is still when its field is: it
+  // cannot see a turn about the field's direction, which leaves its reading as it was anyway.
+  if (!(present & (1u << kTriadAcc)) && !(present & (1u << kTriadGyr)) &&
+      !(present & (1u << kTriadMag))) {
+    return reject(options_.use_mag ? "the samples carry no triad"
+                                   : "the samples carry neither accelerometer nor gyro");
+  }
+  const std::vector<char> keep = KeptSamples(present);
+  std::int64_t t_first_ns = 0, t_last_ns = 0, n = 0;
+  Accumulate(present, keep, &t_first_ns, &t_last_ns, &n);
+  const auto total = static_cast<double>(samples_.size());
+  if (static_cast<double>(outliers_) > options_.max_outlier_fraction * total) {
+    return reject(
+        fmt::format("not still while measuring the noise: {} of {} samples far from the median",
+                    outliers_, samples_.size()));
+  }
+  const double span = static_cast<double>(t_last_ns - t_first_ns) * 1e-9;
+  const int k = static_cast<int>(parts_.size());
+  for (const auto& p : parts_) {
+    if (p.n < 3) {
+      return reject(fmt::format(
+          "too few samples to measure the noise ({} in {:.2f} s, a part had {})", n, span, p.n));
+    }
+  }
+  NoiseProfile prof;
+  const auto nd = static_cast<double>(n);
+  const double dof = nd - k;
+  for (int t = 0; t < 3; ++t) {
+    if (!(present & (1u << t))) continue;
+    std::string why;
+    if (!TriadNoise(t, nd, &prof, &why)) return reject(why);
+  }
+  if (std::string why; !MeasureRate(&prof, &why)) return reject(why);
+  prof.sigma_dof = dof;
+  prof.source =
+      fmt::format("measured over {:.2f} s ({} samples, {} outliers left out)", span, n, outliers_);
+  std::string error;
+  if (!prof.IsValid(&error)) return reject(error);
+  profile_ = prof;
+  return Status::kMeasured;
+}
+
+}  // namespace turncal
