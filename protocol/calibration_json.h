@@ -51,6 +51,41 @@ bool ParseTimeWindow(const nlohmann::json& j, TimeWindow* out);
 // Every gated parameter's tolerance (GatedParameters, ToleranceFor).
 nlohmann::json TolerancesJson(const MeasurementModel& model, const GateOptions& gate);
 
+// An estimate's parameters, {NAME:{"value","sigma"}} in the model's order (sigma null when
+// undetermined; empty while the solve is refused), and the drift's identified strength with the
+// scale the solve used ("used": 1 while the poses do not reject the prior).
+nlohmann::json ParamsJson(const Estimate& e);
+nlohmann::json DriftScaleJson(const Estimate& e);
+
+// What a pose model's activation writes (daemon/station/model_pipeline.h): the document the
+// parser below reads. `poses` and `records` are the device's, the first `count` of them the
+// estimate saw; the document keeps those that hold the model's triad, each record with that triad
+// only (and a gyroscope's moves), so that it can be re-evaluated without the journal.
+struct PoseCalibrationInput {
+  std::string device;
+  int version = 0;
+  const MeasurementModel* model = nullptr;  // required
+  const Estimate* estimate = nullptr;       // required
+  int rank = 0;
+  GateResult gate;
+  GateOptions gate_options;  // the tolerances gated against
+  CalibratorOptions calibrator;
+  std::string sensor_class;
+  ModelContext context;
+  const std::vector<TablePose>* poses = nullptr;     // required
+  const std::vector<PoseRecord>* records = nullptr;  // required
+  std::size_t count = 0;
+  nlohmann::json identity;  // the device dialogue's (null in replays)
+};
+// The document (schema 1), with "software" set; the caller adds "time".
+nlohmann::json PoseCalibrationJson(const PoseCalibrationInput& input);
+
+// The values a station applies to live samples (and a device write stores) from a document:
+// the parameters in `model`'s order and the covariance (empty when the document has none, or it
+// is not the model's size or holds a non-number). False when a parameter is missing.
+bool ReadCalibrationValues(const MeasurementModel& model, const nlohmann::json& calibration,
+                           Eigen::VectorXd* theta, Eigen::MatrixXd* covariance);
+
 // One calibration document, parsed and checked against its model.
 struct CalibrationDocument {
   std::string device;

@@ -18,6 +18,7 @@
 #include "daemon/station/model_pipeline.h"
 #include "drivers/mip/mip_stored.h"
 #include "drivers/transport/transport.h"
+#include "protocol/calibration_json.h"
 #include "protocol/free_json.h"
 
 namespace turncal::daemon {
@@ -76,7 +77,7 @@ bool CorrectionOfDocument(const nlohmann::json& calibration, const std::string& 
     return false;
   }
   q->model = model;
-  if (!CalibrationValues(*model, calibration, &q->theta, &q->covariance)) {
+  if (!protocol::ReadCalibrationValues(*model, calibration, &q->theta, &q->covariance)) {
     *error = "the active calibration's document lacks a parameter of " + model_name;
     return false;
   }

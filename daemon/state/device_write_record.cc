@@ -13,12 +13,6 @@ namespace turncal::daemon {
 
 namespace fs = std::filesystem;
 
-namespace {
-
-fs::path WritesDir(const std::string& state_dir) { return StateDir(state_dir).DeviceWritesDir(); }
-
-}  // namespace
-
 bool SameStoredVector(const std::optional<Eigen::Vector3d>& a,
                       const std::optional<Eigen::Vector3d>& b) {
   return a.has_value() == b.has_value() && (!a || *a == *b);
@@ -111,7 +105,7 @@ bool ReadDeviceWriteRecord(const std::string& state_dir, const std::string& devi
 bool WriteDeviceWriteRecord(const std::string& state_dir, const DeviceWriteRecord& record,
                             std::string* error) {
   std::error_code ec;
-  fs::create_directories(WritesDir(state_dir), ec);
+  fs::create_directories(StateDir(state_dir).DeviceWritesDir(), ec);
   return WriteFileAtomically(StateDir(state_dir).DeviceWriteRecord(record.device).string(),
                              ToJson(record).dump(1) + "\n", error);
 }
@@ -119,8 +113,9 @@ bool WriteDeviceWriteRecord(const std::string& state_dir, const DeviceWriteRecor
 bool WriteDeviceWriteHistory(const std::string& state_dir, const std::string& device,
                              const nlohmann::json& entry, std::string* path, std::string* error) {
   std::error_code ec;
-  fs::create_directories(WritesDir(state_dir), ec);
-  *path = UniqueStamped(WritesDir(state_dir), device + ".", UtcStamp(), ".json").string();
+  fs::create_directories(StateDir(state_dir).DeviceWritesDir(), ec);
+  *path = UniqueStamped(StateDir(state_dir).DeviceWritesDir(), device + ".", UtcStamp(), ".json")
+              .string();
   return WriteFileAtomically(*path, entry.dump(1) + "\n", error);
 }
 
@@ -129,7 +124,7 @@ std::vector<nlohmann::json> ReadDeviceWriteHistory(const std::string& state_dir,
   std::vector<std::string> paths;
   std::error_code ec;
   const std::string prefix = device + ".";
-  for (const auto& entry : fs::directory_iterator(WritesDir(state_dir), ec)) {
+  for (const auto& entry : fs::directory_iterator(StateDir(state_dir).DeviceWritesDir(), ec)) {
     const std::string name = entry.path().filename().string();
     // DEVICE.UTCTIME.json and DEVICE.UTCTIME-N.json; not DEVICE.json (the record).
     if (name.rfind(prefix, 0) == 0 && name != device + ".json" && name.size() > prefix.size() &&

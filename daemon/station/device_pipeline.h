@@ -1,6 +1,6 @@
 #pragma once
-// One device in the station: its sequencer (stillness, poses, noise profile), its models
-// (daemon/station/model_pipeline.h), the poses and records its calibrations are made from, and what
+// One device in the station: its sequencer (stillness, poses, noise profile), its calibrations
+// (daemon/station/calibration.h), the poses and records its calibrations are made from, and what
 // the device said about itself. The station (daemon/station/station.h) feeds it samples and
 // announcements and wires its events to the models, persistence and subscribers.
 
@@ -14,7 +14,7 @@
 #include "core/analysis/publish_gate.h"
 #include "core/planning/pose_planner.h"
 #include "core/sequencing/sequencer.h"
-#include "daemon/station/free_pipeline.h"
+#include "daemon/station/calibration.h"
 #include "daemon/station/model_pipeline.h"
 
 namespace turncal::daemon {
@@ -22,9 +22,8 @@ namespace turncal::daemon {
 struct DevicePipeline {
   std::string name;
   std::unique_ptr<Sequencer> sequencer;
-  std::vector<ModelPipeline> models;  // empty with the free pose source
-  // The free pose source's models (daemon/station/free_pipeline.h); null otherwise.
-  std::unique_ptr<FreeDevice> free;
+  // Its calibrations (daemon/station/calibration.h): the pose models, or the free pose source's.
+  std::unique_ptr<CalibrationSet> calibrations;
   std::vector<TablePose> poses_used;
   std::vector<PoseRecord> records_used;  // the same poses' records (a calibration's evidence)
   int poses = 0;
@@ -47,15 +46,10 @@ struct DevicePipeline {
   // 1 %, or the triad had none).
   bool RecordIdentifiedDrift(const ModelPipeline& m);
 
-  // What the next-pose planner needs of each model: its poses, weights and the device's noise.
-  std::vector<PlanningTarget> PlanningTargets(double dwell_s) const;
   // The rest the moves captured so far spanned besides the table's motion and settling at
   // `motion`'s rates (the mean, at least 0), for the planner's moves; `fallback` without one.
   double MoveRestSeconds(const TableMotion& motion, double fallback) const;
 
-  // The calibration document of model `m`'s current estimate (schema 1, docs/protocol.md).
-  nlohmann::json CalibrationJson(const ModelPipeline& m, const std::string& sensor_class,
-                                 const ModelContext& context) const;
   // The device's entry in `status` and in RESULT.
   nlohmann::json StatusJson() const;
   nlohmann::json ResultJson() const;

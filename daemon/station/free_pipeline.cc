@@ -8,6 +8,7 @@
 #include "core/sequencing/stillness.h"
 #include "daemon/station/model_pipeline.h"
 #include "daemon/station/station.h"
+#include "drivers/transport/transport.h"
 #include "protocol/calibration_json.h"
 #include "protocol/free_json.h"
 
@@ -72,7 +73,7 @@ void FreeModelState::Apply(int version, const std::string& model, const Eigen::V
   if (!m || theta.size() != m->num_parameters()) return;
   std::shared_ptr<const FreeModel> up =
       upstream_model.empty() ? nullptr : MakeFreeModel(upstream_model, context, &error);
-  applied_version = version;
+  applied_version_ = version;
   applied_model = m;
   applied_theta = theta;
   applied_covariance = covariance.rows() == theta.size() ? covariance : Eigen::MatrixXd();
@@ -89,11 +90,77 @@ bool FreeModelState::ApplyStored(const nlohmann::json& stored, std::string* erro
   if (!protocol::ParseFreeCalibration(stored, &doc, error)) return false;
   Apply(doc.version, doc.model, doc.theta, doc.covariance, doc.upstream_model, doc.upstream_theta,
         doc.bias_window, doc.context);
-  if (applied_version != doc.version) {
+  if (applied_version_ != doc.version) {
     *error = "the stored calibration's model cannot be made";
     return false;
   }
+  active_version_ = applied_version_;
   return true;
+}
+
+void FreeModelState::ApplyResult(const FreeContext& context) {
+  const FreeEstimate& fe = result.estimate;
+  Apply(active_version_, result.model, fe.estimate.theta, fe.estimate.covariance,
+        upstream ? upstream->model : std::string(),
+        upstream ? upstream->estimate.estimate.theta : Eigen::VectorXd(), fe.bias_window_host,
+        context);
+}
+
+bool FreeModelState::Correct(const Sample& sample, double t_s, Eigen::Vector3d* value,
+                             std::optional<Eigen::Vector3d>* sigma, const char** frame) const {
+  if (applied_version_ <= 0 || !applied_model) return false;
+  const int t = triad();
+  const Eigen::Vector3d& raw = *RawTriad(sample, t);
+  *value = Correct(raw, sample.acc_mps2 ? &*sample.acc_mps2 : nullptr, t_s, sigma);
+  *frame = FreeOutputFrame(applied_model->name());
+  return true;
+}
+
+bool FreeModelState::HasEstimate(std::string* error) const {
+  *error = result.estimate.estimate.error;
+  return result.estimate.estimate.ok;
+}
+
+Activation FreeModelState::Activate(const DevicePipeline& d, const ActivationContext& context,
+                                    double t_s) {
+  ++active_version_;
+  protocol::FreeCalibrationInput in;
+  in.device = d.name;
+  in.version = active_version_;
+  in.result = &result;
+  in.upstream = upstream ? &*upstream : nullptr;
+  in.advice = advice;
+  in.context = owner->context();
+  in.options = owner->options();
+  in.sensor_class = context.sensor_class;
+  in.intervals.assign(d.records_used.begin(),
+                      d.records_used.begin() + static_cast<std::ptrdiff_t>(std::min(
+                                                   estimate_intervals, d.records_used.size())));
+  in.identity = d.identity;
+  Activation a;
+  a.document = protocol::FreeCalibrationJson(in);
+  a.document["requested"] = requested;
+  a.document["time"] = drivers::UtcNowIso8601();
+  a.event = {{"class", "CALIBRATION_ACTIVE"},
+             {"t", t_s},
+             {"device", d.name},
+             {"model", requested},
+             {"fitted", result.model},
+             {"version", active_version_},
+             {"poses", result.estimate.intervals},
+             {"intervals", result.estimate.intervals},
+             {"moves", MovesUsed(result.estimate)}};
+  const Estimate& e = result.estimate.estimate;
+  a.apply = [this, version = active_version_, model = result.model, theta = e.theta,
+             covariance = e.covariance, window = result.estimate.bias_window_host,
+             upstream_model = upstream ? upstream->model : std::string(),
+             upstream_theta = upstream ? upstream->estimate.estimate.theta : Eigen::VectorXd(),
+             context = owner->context()] {
+    if (version > applied_version_) {
+      Apply(version, model, theta, covariance, upstream_model, upstream_theta, window, context);
+    }
+  };
+  return a;
 }
 
 Eigen::Vector3d FreeModelState::Correct(const Eigen::Vector3d& raw, const Eigen::Vector3d* acc_raw,
@@ -157,8 +224,8 @@ nlohmann::json FreeModelState::ResultJson() const {
   j["poses"] = result.estimate.intervals;
   j["moves"] = MovesUsed(result.estimate);
   j["upstream"] = upstream ? nlohmann::json(upstream->model) : nlohmann::json();
-  j["active_version"] = active_version;
-  j["applied_version"] = applied_version;
+  j["active_version"] = active_version_;
+  j["applied_version"] = applied_version_;
   return j;
 }
 
@@ -178,116 +245,8 @@ nlohmann::json FreeModelState::StatusJson() const {
           {"gate", gate},
           {"fit_check", ToString(fe.estimate.fit.verdict)},
           {"advice", advice ? nlohmann::json(advice->text) : nlohmann::json()},
-          {"active_version", active_version},
-          {"applied_version", applied_version}};
-}
-
-FreeModelState* FreeDevice::Find(const std::string& requested) {
-  for (auto& m : models) {
-    if (m->requested == requested) return m.get();
-  }
-  return nullptr;
-}
-
-FreeModelState& FreeDevice::Get(const std::string& requested) {
-  if (FreeModelState* m = Find(requested)) return *m;
-  auto m = std::make_unique<FreeModelState>();
-  m->requested = requested;
-  std::string error;
-  if (auto model = MakeFreeModel(requested, context, &error)) m->sensor = model->sensor();
-  models.push_back(std::move(m));
-  return *models.back();
-}
-
-std::vector<FreeModelState*> FreeDevice::Take(const FreeUpdate& update) {
-  results = update.results;
-  advice = update.advice;
-  results_intervals = update.intervals;
-  std::vector<FreeModelState*> updated;
-  for (const auto& name : update.models) {
-    // The last result asked for under this name (an upstream fitted for another model has its
-    // own name; a magellipsoid that fell back to a sphere keeps the name asked for).
-    int found = -1;
-    for (std::size_t i = 0; i < update.results.size(); ++i) {
-      if (update.results[i].requested == name) found = static_cast<int>(i);
-    }
-    if (found < 0) continue;
-    FreeModelState& m = Get(name);
-    m.result = update.results[static_cast<std::size_t>(found)];
-    m.advice = static_cast<std::size_t>(found) < update.advice.size()
-                   ? update.advice[static_cast<std::size_t>(found)]
-                   : std::nullopt;
-    m.estimate_intervals = update.intervals;
-    m.upstream.reset();
-    std::string error;
-    auto model = MakeFreeModel(m.result.model, context, &error);
-    const std::string up = model ? model->upstream() : std::string();
-    for (const auto& r : update.results) {
-      if (!up.empty() && r.model == up && r.estimate.estimate.ok) m.upstream = r;
-    }
-    updated.push_back(&m);
-  }
-  return updated;
-}
-
-void FreeDevice::NoteSkipped(const std::string& reason) {
-  ++skipped;
-  skip_reasons.push_back(reason);
-  if (skip_reasons.size() > kMaxSkipReasons) skip_reasons.erase(skip_reasons.begin());
-}
-
-nlohmann::json FreeDevice::ResultJson(std::size_t intervals) const {
-  nlohmann::json models_json = nlohmann::json::object();
-  for (const auto& m : models) models_json[m->requested] = m->ResultJson();
-  return {{"pose_source", "free"},
-          {"intervals", intervals},
-          {"skipped", skipped},
-          {"skip_reasons", skip_reasons},
-          {"context", protocol::ToJson(context)},
-          {"models", models_json}};
-}
-
-nlohmann::json FreeDevice::StatusJson(std::size_t intervals) const {
-  nlohmann::json models_json = nlohmann::json::object();
-  for (const auto& m : models) models_json[m->requested] = m->StatusJson();
-  return {{"pose_source", "free"},
-          {"intervals", intervals},
-          {"skipped", skipped},
-          {"last_skip", skip_reasons.empty() ? "" : skip_reasons.back()},
-          {"models", models_json}};
-}
-
-nlohmann::json FreeDevice::NextPoseJson(const std::string& device) const {
-  nlohmann::json advice_json = nlohmann::json::array();
-  bool all_pass = !models.empty();
-  for (const auto& m : models) {
-    const bool pass = m->result.estimate.estimate.ok && m->result.estimate.gate_passed;
-    all_pass = all_pass && pass;
-    nlohmann::json a = {{"model", m->requested},
-                        {"fitted", m->result.model},
-                        {"gate_pass", pass},
-                        {"gate_reasons", m->result.estimate.gate_reasons},
-                        {"coverage", m->result.estimate.coverage.fraction()}};
-    if (m->advice) {
-      a["text"] = m->advice->text;
-      a["sigma_ratio"] = m->advice->sigma_ratio;
-    } else {
-      a["text"] = nullptr;
-    }
-    advice_json.push_back(a);
-  }
-  if (models.empty()) {
-    return {{"class", "NEXT_POSE"},
-            {"ok", false},
-            {"device", device},
-            {"pose_source", "free"},
-            {"error",
-             "free mode: no static interval has been fitted yet; hold the device still in a "
-             "first orientation"}};
-  }
-  return {{"class", "NEXT_POSE"},  {"ok", true},
-          {"device", device},      {"pose_source", "free"},
-          {"advice", advice_json}, {"gates_pass", all_pass}};
+          {"active_version", active_version_},
+          {"applied_version", applied_version_}};
 }
 
 }  // namespace turncal::daemon

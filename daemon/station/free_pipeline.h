@@ -18,6 +18,7 @@
 #include "core/analysis/publish_gate.h"
 #include "core/estimation/free_calibrator.h"
 #include "core/estimation/sensor_class.h"
+#include "daemon/station/calibration.h"
 
 namespace turncal::daemon {
 
@@ -52,32 +53,34 @@ struct FreeUpdate {
            const FreeContext& context, const FreeCalibratorOptions& options);
 };
 
-// One free model of a device.
-struct FreeModelState {
-  std::string requested;  // as configured or chosen ("magellipsoid")
+class FreeCalibrations;
+
+// One free model of a device: a Calibration (daemon/station/calibration.h).
+struct FreeModelState : Calibration {
+  const FreeCalibrations* owner = nullptr;  // the device's set: its context and gate
+  std::string requested;                    // as configured or chosen ("magellipsoid")
   SensorKind sensor = SensorKind::kAccelerometer;
   FreeModelResult result;                   // the latest fit; result.model is what was fitted
   std::optional<FreeModelResult> upstream;  // the estimate it built on (gyro9's accel9)
   std::optional<OrientationAdvice> advice;
   std::size_t estimate_intervals = 0;  // the device's intervals `result` saw
-  int active_version = 0;              // 0: no active calibration
+  int active_version_ = 0;             // 0: no active calibration
 
   // The calibration live samples are corrected with (version 0: none): the active one, or the
   // one stored in the state directory when the station started.
-  int applied_version = 0;
+  int applied_version_ = 0;
   std::shared_ptr<const FreeModel> applied_model, applied_upstream_model;
   Eigen::VectorXd applied_theta, applied_upstream_theta;
   Eigen::MatrixXd applied_covariance;             // empty when unknown
   std::optional<TimeWindow> applied_bias_window;  // host clock
   BiasDrift applied_drift;
 
-  int triad() const;  // kTriadAcc, kTriadGyr or kTriadMag
   void Apply(int version, const std::string& model, const Eigen::VectorXd& theta,
              const Eigen::MatrixXd& covariance, const std::string& upstream_model,
              const Eigen::VectorXd& upstream_theta, const std::optional<TimeWindow>& bias_window,
              const FreeContext& context);
-  // Applies a calibration document read from the state directory (protocol/free_json.h).
-  bool ApplyStored(const nlohmann::json& stored, std::string* error);
+  // The latest fit applied again as the active version (a resumed session's).
+  void ApplyResult(const FreeContext& context);
   // One raw sample of the model's triad corrected (gyro9g's g-sensitivity from the raw
   // accelerometer `acc_raw` through the upstream's correction; without it, none is taken off),
   // and with `sigma` its 1 sigma from the covariance plus the bias's wander since the calibration
@@ -86,37 +89,81 @@ struct FreeModelState {
                           std::optional<Eigen::Vector3d>* sigma) const;
   // Every gated parameter's sigma against its tolerance (ESTIMATE's precision).
   nlohmann::json PrecisionJson(const GateOptions& gate) const;
-  nlohmann::json ResultJson() const;
-  nlohmann::json StatusJson() const;
+
+  // Calibration:
+  const std::string& name() const override { return requested; }
+  int triad() const override;  // kTriadAcc, kTriadGyr or kTriadMag
+  int active_version() const override { return active_version_; }
+  int applied_version() const override { return applied_version_; }
+  bool Correct(const Sample& sample, double t_s, Eigen::Vector3d* value,
+               std::optional<Eigen::Vector3d>* sigma, const char** frame) const override;
+  // A document written by a free model's activation (protocol/free_json.h).
+  bool ApplyStored(const nlohmann::json& stored, std::string* error) override;
+  bool HasEstimate(std::string* error) const override;
+  bool GatePassed() const override { return result.estimate.gate_passed; }
+  std::vector<std::string> GateReasons() const override { return result.estimate.gate_reasons; }
+  Activation Activate(const DevicePipeline& device, const ActivationContext& context,
+                      double t_s) override;
+  nlohmann::json ResultJson() const override;
+  nlohmann::json StatusJson() const override;
 };
 
-struct FreeDevice {
-  std::vector<std::string> configured;  // empty: what the data carry
-  FreeContext context;
-  FreeCalibratorOptions options;
-  // Stable addresses: queued completions hold them while models are added.
-  std::vector<std::unique_ptr<FreeModelState>> models;
-  // The latest update's results (upstreams included) and advice, for the report.
-  std::vector<FreeModelResult> results;
-  std::vector<std::optional<OrientationAdvice>> advice;
-  std::size_t results_intervals = 0;
-  // Still segments the sequencer skipped (too short, not still enough), the latest reasons kept.
-  std::int64_t skipped = 0;
-  std::vector<std::string> skip_reasons;
-  static constexpr std::size_t kMaxSkipReasons = 50;
-  // A resumed journal's intervals are fitted once, at the end of the resume.
-  bool refit_due = false;
+// A device's free models (the free pose source): a CalibrationSet (daemon/station/calibration.h)
+// whose models are fitted together after every static interval (daemon/station/
+// free_calibrations.cc).
+class FreeCalibrations : public CalibrationSet {
+ public:
+  // `configured` empty: the models the data carry (DefaultFreeModels).
+  FreeCalibrations(std::vector<std::string> configured, const StationOptions& options,
+                   const SensorClass& sensor, const GateOptions& gate);
 
-  FreeModelState* Find(const std::string& requested);
+  const FreeContext& context() const { return context_; }
+  const FreeCalibratorOptions& options() const { return options_; }
+
+  // CalibrationSet:
+  std::size_t size() const override { return models_.size(); }
+  Calibration& at(std::size_t i) override { return *models_[i]; }
+  const Calibration& at(std::size_t i) const override { return *models_[i]; }
+  std::vector<std::string> StoredNames() const override;  // with models from the data, any
+  Calibration& Restore(const std::string& name) override { return Get(name); }
+  bool NeedsMoves() const override;
+  void Start(Sequencer& sequencer) override;  // free mode: it announces the first interval
+  void OnRecord(std::size_t device, DevicePipeline& d, const PoseRecord& record, double t_s,
+                bool resuming, CalibrationHost& host) override;
+  void OnResumed(DevicePipeline& d, CalibrationHost& host) override;
+  void OnSequencerEvent(const SequencerEvent& event) override;  // counts skipped segments
+  // The orientation to add per model, and the gates.
+  nlohmann::json NextPose(const DevicePipeline& d, const StationOptions& options) const override;
+  const char* pose_source() const override { return "free"; }
+  // {"pose_source":"free","intervals","skipped","last_skip"} and {"pose_source":"free",
+  // "intervals","skipped","skip_reasons","context"}.
+  nlohmann::json SourceStatusJson(const DevicePipeline& d) const override;
+  nlohmann::json SourceResultJson(const DevicePipeline& d) const override;
+
+ private:
+  FreeModelState* FindModel(const std::string& requested);
   FreeModelState& Get(const std::string& requested);  // created when new
+  // Fits every model again to all of the device's intervals, on the host's worker.
+  void QueueFit(DevicePipeline& d, double t_s, bool resuming, CalibrationHost& host);
   // Takes an update: each model's result, upstream and advice. Returns the models it updated.
   std::vector<FreeModelState*> Take(const FreeUpdate& update);
-  void NoteSkipped(const std::string& reason);
-  // {"pose_source":"free","intervals","skipped","skip_reasons","models":{REQUESTED: ...}}
-  nlohmann::json ResultJson(std::size_t intervals) const;
-  nlohmann::json StatusJson(std::size_t intervals) const;
-  // NEXT_POSE for a free device: the orientation to add per model, and the gates.
-  nlohmann::json NextPoseJson(const std::string& device) const;
+  void ApplyUpdate(DevicePipeline& d, const FreeUpdate& job, double t_s, bool resuming,
+                   CalibrationHost& host);
+  void PublishEstimate(const DevicePipeline& d, const FreeModelState& m, double t_s,
+                       CalibrationHost& host) const;
+
+  std::vector<std::string> configured_;  // empty: what the data carry
+  FreeContext context_;
+  FreeCalibratorOptions options_;
+  // Stable addresses: queued completions hold them while models are added.
+  std::vector<std::unique_ptr<FreeModelState>> models_;
+  // Still segments the sequencer skipped (too short, not still enough), the latest reasons kept.
+  std::int64_t skipped_ = 0;
+  std::vector<std::string> skip_reasons_;
+  static constexpr std::size_t kMaxSkipReasons = 50;
+  // A resumed journal's intervals are fitted once, at the end of the resume.
+  bool refit_due_ = false;
+  bool needs_moves_ = false;
 };
 
 }  // namespace turncal::daemon

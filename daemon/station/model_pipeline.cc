@@ -4,32 +4,11 @@
 #include <cmath>
 
 #include "daemon/station/station.h"
+#include "drivers/transport/transport.h"
 #include "protocol/calibration_json.h"
 #include "protocol/observability_json.h"
 
 namespace turncal::daemon {
-
-nlohmann::json DriftScaleJson(const Estimate& e) {
-  nlohmann::json j = protocol::ToJson(e.drift_scale);
-  j["used"] = e.drift_scale_used;
-  return j;
-}
-
-nlohmann::json ParamsJson(const Estimate& e) {
-  nlohmann::json params = nlohmann::json::object();
-  // A refused solve (too few poses) names its parameters but has no values yet.
-  if (e.theta.size() != static_cast<Eigen::Index>(e.parameters.size()) ||
-      e.sigma.size() != e.theta.size()) {
-    return params;
-  }
-  for (std::size_t i = 0; i < e.parameters.size(); ++i) {
-    const auto k = static_cast<Eigen::Index>(i);
-    params[e.parameters[i].name] = {
-        {"value", e.theta[k]},
-        {"sigma", std::isfinite(e.sigma[k]) ? nlohmann::json(e.sigma[k]) : nlohmann::json()}};
-  }
-  return params;
-}
 
 ModelPipeline ModelPipeline::Make(const std::string& name, const StationOptions& options,
                                   const SensorClass& sensor) {
@@ -49,7 +28,7 @@ ModelPipeline ModelPipeline::Make(const std::string& name, const StationOptions&
 void ModelPipeline::Apply(int version, const Eigen::VectorXd& theta,
                           const Eigen::MatrixXd& covariance,
                           const std::optional<TimeWindow>& bias_window, const BiasDrift& drift) {
-  applied_version = version;
+  applied_version_ = version;
   applied_theta = theta;
   applied_covariance = covariance;
   applied_bias_window = bias_window;
@@ -65,42 +44,16 @@ void ModelPipeline::Apply(int version, const Eigen::VectorXd& theta,
   applied_affine = exact.allFinite() && (exact - affine).norm() <= 1e-12 * (1.0 + exact.norm());
 }
 
-bool CalibrationValues(const MeasurementModel& model, const nlohmann::json& stored,
-                       Eigen::VectorXd* theta, Eigen::MatrixXd* covariance) {
-  const auto& params = model.parameters();
-  Eigen::VectorXd t(static_cast<Eigen::Index>(params.size()));
-  bool ok = stored.is_object() && stored.contains("params") && stored["params"].is_object();
-  for (std::size_t i = 0; ok && i < params.size(); ++i) {
-    const auto it = stored["params"].find(params[i].name);
-    ok = it != stored["params"].end() && it->is_object() && (*it)["value"].is_number();
-    if (ok) t[static_cast<Eigen::Index>(i)] = (*it)["value"].get<double>();
+bool ModelPipeline::ApplyStored(const nlohmann::json& stored, std::string* error) {
+  if (!stored.contains("version") || !stored["version"].is_number_integer()) {
+    error->clear();
+    return false;
   }
-  if (!ok) return false;
-  *theta = t;
-  covariance->resize(0, 0);
-  const auto& cov = stored.value("covariance", nlohmann::json());
-  if (cov.is_array() && cov.size() == params.size()) {
-    Eigen::MatrixXd c(t.size(), t.size());
-    bool good = true;
-    for (std::size_t r = 0; good && r < params.size(); ++r) {
-      good = cov[r].is_array() && cov[r].size() == params.size();
-      for (std::size_t k = 0; good && k < params.size(); ++k) {
-        good = cov[r][k].is_number();
-        if (good) {
-          c(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(k)) = cov[r][k].get<double>();
-        }
-      }
-    }
-    if (good) *covariance = c;
-  }
-  return true;
-}
-
-bool ModelPipeline::ApplyStored(const nlohmann::json& stored) {
+  active_version_ = stored["version"].get<int>();
   Eigen::VectorXd theta;
   Eigen::MatrixXd covariance;
-  if (!stored.contains("version") || !stored["version"].is_number_integer() ||
-      !CalibrationValues(*model, stored, &theta, &covariance)) {
+  if (!protocol::ReadCalibrationValues(*model, stored, &theta, &covariance)) {
+    error->clear();
     return false;
   }
   std::optional<TimeWindow> window;
@@ -116,6 +69,48 @@ bool ModelPipeline::ApplyStored(const nlohmann::json& stored) {
   Apply(stored["version"].get<int>(), theta, Eigen::MatrixXd(), window, drift);
   if (covariance.size() > 0) applied_covariance = covariance;
   return true;
+}
+
+bool ModelPipeline::HasEstimate(std::string* error) const {
+  *error = estimate.error;
+  return estimate.ok;
+}
+
+Activation ModelPipeline::Activate(const DevicePipeline& d, const ActivationContext& context,
+                                   double t_s) {
+  ++active_version_;
+  active = estimate;
+  protocol::PoseCalibrationInput in;
+  in.device = d.name;
+  in.version = active_version_;
+  in.model = model.get();
+  in.estimate = &estimate;
+  in.rank = rank;
+  in.gate = gate;
+  in.gate_options = d.gate;
+  in.calibrator = calibrator->options();
+  in.sensor_class = context.sensor_class;
+  in.context = context.context;
+  in.poses = &d.poses_used;
+  in.records = &d.records_used;
+  in.count = estimate_poses;
+  in.identity = d.identity;
+  Activation a;
+  a.document = protocol::PoseCalibrationJson(in);
+  a.document["time"] = drivers::UtcNowIso8601();
+  a.event = {{"class", "CALIBRATION_ACTIVE"},
+             {"t", t_s},
+             {"device", d.name},
+             {"model", model->name()},
+             {"version", active_version_},
+             {"poses", estimate.poses},
+             {"moves", estimate.moves}};
+  a.apply = [this, version = active_version_, theta = estimate.theta,
+             covariance = estimate.covariance, window = estimate.bias_window,
+             drift = estimate.drift] {
+    if (version > applied_version_) Apply(version, theta, covariance, window, drift);
+  };
+  return a;
 }
 
 void ModelPipeline::AddAndSolve(const PoseRecord& record, const GateOptions& gate_options,
@@ -225,6 +220,20 @@ Eigen::Vector3d ModelPipeline::Correct(const Eigen::Vector3d& raw_in, double t_s
   return value;
 }
 
+bool ModelPipeline::Correct(const Sample& sample, double t_s, Eigen::Vector3d* value,
+                            std::optional<Eigen::Vector3d>* sigma, const char** frame) const {
+  if (applied_version_ <= 0) return false;
+  const int t = triad();
+  const Eigen::Vector3d& raw = *RawTriad(sample, t);
+  std::optional<Eigen::Vector3d> f_q;
+  if (t == kTriadGyr && sample.acc_mps2) {
+    f_q = model->context().mounting.transpose() * *sample.acc_mps2;
+  }
+  *value = Correct(raw, t_s, sigma, f_q ? &*f_q : nullptr);
+  *frame = ToString(model->corrected_frame());
+  return true;
+}
+
 nlohmann::json ModelPipeline::PrecisionJson(const GateOptions& gate_options) const {
   nlohmann::json precision = nlohmann::json::object();
   if (estimate.ok && estimate.sigma.size() == model->num_parameters()) {
@@ -250,10 +259,10 @@ nlohmann::json ModelPipeline::StatusJson() const {
           {"noise_model", co.drift.enabled()
                               ? protocol::ToJson(estimate.ok ? estimate.drift : co.drift)
                               : nlohmann::json{{"pose_offset_sigma", co.pose_offset_sigma}}},
-          {"drift_scale",
-           estimate.ok && co.identify_drift ? DriftScaleJson(estimate) : nlohmann::json()},
-          {"active_version", active_version},
-          {"applied_version", applied_version}};
+          {"drift_scale", estimate.ok && co.identify_drift ? protocol::DriftScaleJson(estimate)
+                                                           : nlohmann::json()},
+          {"active_version", active_version_},
+          {"applied_version", applied_version_}};
 }
 
 nlohmann::json ModelPipeline::ResultJson() const {
@@ -261,19 +270,19 @@ nlohmann::json ModelPipeline::ResultJson() const {
   return {{"ok", e.ok},
           {"poses", e.poses},
           {"moves", e.moves},
-          {"params", ParamsJson(e)},
+          {"params", protocol::ParamsJson(e)},
           {"rank", rank},
           {"chi2", e.chi2},
           {"dof", e.dof},
           {"p_value", e.p_value},
           {"fit_check", protocol::ToJson(e.fit, model->sensor())},
-          {"drift_scale",
-           e.ok && calibrator->options().identify_drift ? DriftScaleJson(e) : nlohmann::json()},
+          {"drift_scale", e.ok && calibrator->options().identify_drift ? protocol::DriftScaleJson(e)
+                                                                       : nlohmann::json()},
           {"bias_window", e.bias_window ? protocol::ToJson(*e.bias_window) : nlohmann::json()},
           {"gauge", e.gauge},
           {"warnings", e.warnings},
           {"gate", ToJson(gate)},
-          {"active_version", active_version}};
+          {"active_version", active_version_}};
 }
 
 }  // namespace turncal::daemon

@@ -17,27 +17,17 @@
 #include "core/estimation/sensor_class.h"
 #include "core/modeling/measurement_model.h"
 #include "core/sequencing/sample.h"
+#include "daemon/station/calibration.h"
 
 namespace turncal::daemon {
 
 struct StationOptions;
-
-// {NAME:{"value","sigma"}} in the model's order; sigma null when undetermined.
-nlohmann::json ParamsJson(const Estimate& e);
-// The drift's identified strength, with the scale the solve used ("used": 1 while the poses do
-// not reject the prior).
-nlohmann::json DriftScaleJson(const Estimate& e);
 
 // The 1 sigma per axis of a correction `corrected(theta)` from theta's `covariance`: J C J^T, J by
 // central differences (steps of 1e-6 of each parameter's scale).
 Eigen::Vector3d PropagatedSigma(
     const std::function<Eigen::Vector3d(const Eigen::VectorXd&)>& corrected,
     const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance);
-
-// A calibration document's parameter values in `model`'s order, and its covariance (empty when
-// the document has none or it is not the model's size). False when a parameter is missing.
-bool CalibrationValues(const MeasurementModel& model, const nlohmann::json& calibration,
-                       Eigen::VectorXd* theta, Eigen::MatrixXd* covariance);
 
 // What one pose's update computes (on the solve worker when there is one).
 struct ModelUpdate {
@@ -52,7 +42,8 @@ struct ModelUpdate {
   std::string last_move_refusal;
 };
 
-struct ModelPipeline {
+// One pose model of a device: a Calibration (daemon/station/calibration.h).
+struct ModelPipeline : Calibration {
   std::unique_ptr<MeasurementModel> model;
   std::unique_ptr<Calibrator> calibrator;
   Estimate estimate;
@@ -63,11 +54,11 @@ struct ModelPipeline {
   int rank = 0;
   int moves_refused = 0;  // as of the latest update (ModelUpdate)
   std::string last_move_refusal;
-  int active_version = 0;  // 0: no active calibration
+  int active_version_ = 0;  // 0: no active calibration
   Estimate active;
   // The calibration live samples are corrected with: the active one, or the one stored in the
   // state directory when the station started (version 0 / empty: none).
-  int applied_version = 0;
+  int applied_version_ = 0;
   Eigen::VectorXd applied_theta;
   Eigen::MatrixXd applied_covariance;  // empty when unknown
   // With a drift model: when the applied bias held, and how the bias wanders since (the
@@ -87,15 +78,11 @@ struct ModelPipeline {
   static ModelPipeline Make(const std::string& name, const StationOptions& options,
                             const SensorClass& sensor);
 
-  // The triad the model calibrates (kTriadAcc, kTriadGyr or kTriadMag).
-  int triad() const;
-  // The record's statistics of that triad (nullptr when it has none).
+  // The record's statistics of the model's triad (nullptr when it has none).
   const TriadStats* TriadOf(const PoseRecord& record) const;
   // Applies a calibration to live samples.
   void Apply(int version, const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance,
              const std::optional<TimeWindow>& bias_window, const BiasDrift& drift);
-  // Applies a calibration document read from the state directory; false when it is unreadable.
-  bool ApplyStored(const nlohmann::json& stored);
   // Adds the pose and solves, analyses and gates (under the calibrator's lock).
   void AddAndSolve(const PoseRecord& record, const GateOptions& gate, ModelUpdate* job);
   // The applied calibration's correction of one raw triad sample, and with `sigma` its 1 sigma
@@ -108,9 +95,27 @@ struct ModelPipeline {
 
   // Every gated parameter's sigma against its tolerance (ESTIMATE's precision).
   nlohmann::json PrecisionJson(const GateOptions& gate) const;
-  // The model's entry in `status` and in RESULT.
-  nlohmann::json StatusJson() const;
-  nlohmann::json ResultJson() const;
+
+  // Calibration:
+  const std::string& name() const override { return model->name(); }
+  int triad() const override;
+  int active_version() const override { return active_version_; }
+  int applied_version() const override { return applied_version_; }
+  // A gyroscope's g-sensitivity sees the specific force in the table frame: the sample's raw
+  // accelerometer turned back by the nominal mounting (its own errors, ~1e-3, are far below
+  // what B_g needs).
+  bool Correct(const Sample& sample, double t_s, Eigen::Vector3d* value,
+               std::optional<Eigen::Vector3d>* sigma, const char** frame) const override;
+  // The version is taken even when the values are unreadable: versions go on from it.
+  bool ApplyStored(const nlohmann::json& stored, std::string* error) override;
+  bool HasEstimate(std::string* error) const override;
+  bool GatePassed() const override { return gate.pass; }
+  std::vector<std::string> GateReasons() const override { return gate.reasons; }
+  Activation Activate(const DevicePipeline& device, const ActivationContext& context,
+                      double t_s) override;
+  nlohmann::json StatusJson() const override;
+  nlohmann::json ResultJson() const override;
+  const MeasurementModel* writable_model() const override { return model.get(); }
 };
 
 }  // namespace turncal::daemon

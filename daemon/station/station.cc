@@ -13,7 +13,6 @@
 #include "daemon/state/persistence.h"
 #include "drivers/transport/transport.h"
 #include "protocol/calibration_json.h"
-#include "protocol/free_json.h"
 #include "protocol/observability_json.h"
 #include "protocol/sequencer_json.h"
 #include "turncal/version.h"
@@ -44,37 +43,14 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
       if (it->second.models) models = *it->second.models;
       if (it->second.gate) d->gate = *it->second.gate;
     }
-    bool gyro = false;
-    if (free_mode()) {
-      d->free = std::make_unique<FreeDevice>();
-      d->free->configured = models;
-      d->free->context = FreeContextFor(options_, sensor_);
-      d->free->options = FreeOptionsFor(options_, d->gate);
-      // What the data carry may include a gyroscope: its moves are then its evidence.
-      gyro = models.empty();
-      std::string error;
-      for (const auto& name : models) {
-        auto model = MakeFreeModel(name, d->free->context, &error);
-        gyro = gyro || (model && model->Needs(SensorKind::kGyroscope));
-        d->free->Get(name);
-      }
-    } else {
-      for (const auto& name : models) {
-        d->models.push_back(ModelPipeline::Make(name, options_, sensor_));
-        const auto& model = d->models.back().model;
-        gyro = gyro || (model && model->sensor() == SensorKind::kGyroscope);
-      }
-    }
+    d->calibrations = MakeCalibrationSet(models, options_, sensor_, d->gate);
     // The moves between poses are a gyroscope model's evidence: tracked only for one.
-    so.moves.enabled = so.moves.enabled && gyro;
+    so.moves.enabled = so.moves.enabled && d->calibrations->NeedsMoves();
     d->sequencer = std::make_unique<Sequencer>(
         so, [this, i](const SequencerEvent& e) { OnSequencerEvent(i, e); });
     devices_.push_back(std::move(d));
-    // After the device is in place: SetFree announces the first interval it waits for.
-    if (devices_.back()->free) {
-      std::string error;
-      devices_.back()->sequencer->SetFree(&error);  // a new sequencer is idle, unscheduled
-    }
+    // After the device is in place (a free set announces the first interval it waits for).
+    devices_.back()->calibrations->Start(*devices_.back()->sequencer);
   }
   if (!options_.state_dir.empty()) {
     LoadApplied();
@@ -86,35 +62,16 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
 // a restarted daemon corrects with what it published before.
 void Station::LoadApplied() {
   for (auto& d : devices_) {
-    if (d->free) {
-      // Every free model stored for the device (with models from the data, any of them).
-      const std::vector<std::string> names =
-          d->free->configured.empty() ? FreeModelNames() : d->free->configured;
-      for (const auto& name : names) {
-        nlohmann::json stored;
-        if (!ReadActiveCalibration(options_.state_dir, d->name, name, &stored)) continue;
-        std::string error;
-        FreeModelState& m = d->free->Get(name);
-        if (!m.ApplyStored(stored, &error)) {
-          Publish(
-              {{"class", "ERROR"},
-               {"device", d->name},
-               {"model", name},
-               {"message", "the stored calibration is unreadable and is not applied: " + error}});
-          continue;
-        }
-        m.active_version = m.applied_version;
-      }
-      continue;
-    }
-    for (ModelState& m : d->models) {
+    for (const auto& name : d->calibrations->StoredNames()) {
       nlohmann::json stored;
-      if (!ReadActiveCalibration(options_.state_dir, d->name, m.model->name(), &stored)) continue;
-      if (!m.ApplyStored(stored)) {
+      if (!ReadActiveCalibration(options_.state_dir, d->name, name, &stored)) continue;
+      std::string error;
+      if (!d->calibrations->Restore(name).ApplyStored(stored, &error)) {
         Publish({{"class", "ERROR"},
                  {"device", d->name},
-                 {"model", m.model->name()},
-                 {"message", "the stored calibration is unreadable and is not applied"}});
+                 {"model", name},
+                 {"message", "the stored calibration is unreadable and is not applied" +
+                                 (error.empty() ? std::string() : ": " + error)}});
       }
     }
   }
@@ -135,10 +92,8 @@ const MeasurementModel* Station::ModelOf(const std::string& device,
                                          const std::string& model) const {
   const int i = DeviceIndex(device);
   if (i < 0) return nullptr;
-  for (const ModelState& m : devices_[static_cast<std::size_t>(i)]->models) {
-    if (m.model->name() == model) return m.model.get();
-  }
-  return nullptr;
+  const Calibration* c = devices_[static_cast<std::size_t>(i)]->calibrations->Find(model);
+  return c ? c->writable_model() : nullptr;
 }
 
 void Station::SetDeviceIdentity(int device, nlohmann::json identity) {
@@ -162,15 +117,6 @@ void Station::Resume() {
   if (!PoseJournal::Load(options_.state_dir, &entries, &skipped, &error)) {
     Publish({{"class", "ERROR"}, {"message", error}});
   }
-  for (auto& d : devices_) {
-    for (ModelState& m : d->models) {
-      nlohmann::json stored;
-      if (ReadActiveCalibration(options_.state_dir, d->name, m.model->name(), &stored) &&
-          stored.contains("version") && stored["version"].is_number_integer()) {
-        m.active_version = stored["version"].get<int>();
-      }
-    }
-  }
   resuming_ = true;
   std::vector<int> resumed(devices_.size(), 0);
   for (const auto& e : entries) {
@@ -180,14 +126,7 @@ void Station::Resume() {
       ++resumed[i];
     }
   }
-  // A free device's resumed intervals are fitted once, all together.
-  for (std::size_t i = 0; i < devices_.size(); ++i) {
-    DeviceState& d = *devices_[i];
-    if (d.free && d.free->refit_due) {
-      d.free->refit_due = false;
-      QueueFreeFit(i, d.records_used.empty() ? 0.0 : d.records_used.back().t_end_s);
-    }
-  }
+  for (auto& d : devices_) d->calibrations->OnResumed(*d, *this);
   resuming_ = false;
   for (std::size_t i = 0; i < devices_.size(); ++i) {
     Publish({{"class", "SESSION_RESUMED"},
@@ -253,13 +192,9 @@ void Station::WriteReport(std::size_t device, std::int64_t now_ns, bool now) {
   d.report_due = false;
   d.report_written_ns = now_ns;
   std::vector<std::string> models;
-  for (const auto& m : d.models) {
-    if (m.active_version > 0) models.push_back(m.model->name());
-  }
-  if (d.free) {
-    for (const auto& m : d.free->models) {
-      if (m->active_version > 0) models.push_back(m->requested);
-    }
+  for (std::size_t i = 0; i < d.calibrations->size(); ++i) {
+    const Calibration& c = d.calibrations->at(i);
+    if (c.active_version() > 0) models.push_back(c.name());
   }
   auto error = std::make_shared<std::string>();
   Defer([dir = options_.state_dir, name = d.name, models,
@@ -335,9 +270,7 @@ void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) 
     }
     if (sink_) sink_(j);
   }
-  if (e.kind == SequencerEventKind::kSegmentSkipped && devices_[device]->free) {
-    devices_[device]->free->NoteSkipped(fmt::format("at {:.2f} s: {}", e.t_s, e.reason));
-  }
+  devices_[device]->calibrations->OnSequencerEvent(e);
   if (e.kind == SequencerEventKind::kNoiseMeasured && !options_.state_dir.empty() &&
       devices_[device]->sequencer->noise()) {
     auto error = std::make_shared<std::string>();
@@ -377,120 +310,36 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   ++d.poses;
   d.poses_used.push_back(record.pose);
   d.records_used.push_back(record);
-  if (d.free) {
-    if (resuming_) {
-      d.free->refit_due = true;  // once, at the end of the resume
-    } else {
-      QueueFreeFit(device, t_s);
-    }
-    return;
-  }
-  for (std::size_t mi = 0; mi < d.models.size(); ++mi) {
-    ModelState& m = d.models[mi];
-    if (!m.TriadOf(record)) continue;  // e.g. a rate segment holds the gyro only
-    auto job = std::make_shared<ModelUpdate>();
-    job->device_poses = d.records_used.size();
-    // The calibrator is only touched under its lock (the worker solves; NextPose reads).
-    auto work = [&m, record, job, gate = d.gate] { m.AddAndSolve(record, gate, job.get()); };
-    // The station may be replaced (reset, reload) before `done` runs: Defer guards it.
-    Defer(std::move(work), [this, device, mi, t_s, job, resuming = resuming_] {
-      Apply(device, mi, t_s, *job, resuming);
-    });
-  }
+  d.calibrations->OnRecord(device, d, record, t_s, resuming_, *this);
 }
 
-// The drift a calibrator identified goes to the device's noise profile: the sequencer's
-// stillness tests allow for it, and noise/DEVICE.json keeps it (rewritten when the scale moves by
-// more than 1 %, or the triad had none).
-void Station::RecordIdentifiedDrift(std::size_t device, const ModelState& m) {
-  DeviceState& d = *devices_[device];
-  const bool moved = d.RecordIdentifiedDrift(m);
+void Station::SaveNoiseProfile(DeviceState& d) {
   const NoiseProfile* noise = d.sequencer->noise();
-  if (!moved || options_.state_dir.empty() || noise == nullptr) return;
+  if (options_.state_dir.empty() || noise == nullptr) return;
   auto error = std::make_shared<std::string>();
   Defer([dir = options_.state_dir, name = d.name, profile = *noise,
          error] { WriteNoiseProfile(dir, name, profile, error.get()); },
         [this, name = d.name, error] { NoteWrite(name, *error); });
 }
 
-void Station::Apply(std::size_t device, std::size_t model, double t_s, const ModelUpdate& job,
-                    bool resuming) {
-  DeviceState& d = *devices_[device];
-  ModelState& m = d.models[model];
-  if (!job.added) {
-    if (sink_) {
-      sink_({{"class", "ERROR"},
-             {"device", d.name},
-             {"model", m.model->name()},
-             {"message", "pose not used: " + job.error}});
-    }
-    return;
-  }
-  m.moves_refused = job.moves_refused;
-  m.last_move_refusal = job.last_move_refusal;
-  m.estimate = job.estimate;
-  m.estimate_poses = job.device_poses;
-  if (m.estimate.ok && m.calibrator->options().identify_drift) RecordIdentifiedDrift(device, m);
-  m.rank = job.rank;
-  m.gate = job.gate;
-  if (sink_ && !resuming) {
-    // Every gated parameter's sigma against its tolerance (the watch view's bars).
-    const nlohmann::json precision = m.PrecisionJson(d.gate);
-    sink_({{"class", "ESTIMATE"},
-           {"t", t_s},
-           {"device", d.name},
-           {"model", m.model->name()},
-           {"poses", m.estimate.poses},
-           {"moves", m.estimate.moves},
-           {"summary", m.estimate.BriefReport()},
-           {"precision", precision},
-           {"gate", ToJson(m.gate)}});
-  }
-  if (m.gate.pass && !resuming) {
-    Activate(d, m, t_s, nullptr);
-  } else if (m.gate.pass) {
-    m.active = m.estimate;
-    m.Apply(m.active_version, m.estimate.theta, m.estimate.covariance, m.estimate.bias_window,
-            m.estimate.drift);
-  }
-}
-
-void Station::Activate(DeviceState& d, ModelState& m, double t_s,
+void Station::Activate(DeviceState& d, Calibration& c, double t_s,
                        const nlohmann::json& override_who) {
-  ++m.active_version;
-  m.active = m.estimate;
-  nlohmann::json calibration = d.CalibrationJson(m, options_.sensor_class, options_.context);
-  if (!override_who.is_null()) calibration["override"] = override_who;
-  nlohmann::json event = {{"class", "CALIBRATION_ACTIVE"},
-                          {"t", t_s},
-                          {"device", d.name},
-                          {"model", m.model->name()},
-                          {"version", m.active_version},
-                          {"poses", m.estimate.poses},
-                          {"moves", m.estimate.moves}};
-  if (!override_who.is_null()) event["override"] = override_who;
-  PersistCalibration(
-      d, m.model->name(), std::move(calibration), std::move(event),
-      [&m, version = m.active_version, theta = m.estimate.theta, covariance = m.estimate.covariance,
-       window = m.estimate.bias_window, drift = m.estimate.drift] {
-        if (version > m.applied_version) m.Apply(version, theta, covariance, window, drift);
-      });
-}
-
-void Station::PersistCalibration(DeviceState& d, const std::string& model,
-                                 nlohmann::json calibration, nlohmann::json event,
-                                 std::function<void()> apply) {
+  Activation a = c.Activate(d, ActivationContext{options_.sensor_class, options_.context}, t_s);
+  if (!override_who.is_null()) {
+    a.document["override"] = override_who;
+    a.event["override"] = override_who;
+  }
   // Persisted (atomically, fsynced: off the loop), then applied and announced.
   auto write_error = std::make_shared<std::string>();
   Defer(
-      [dir = options_.state_dir, device = d.name, model, calibration = std::move(calibration),
-       write_error, saved = options_.on_calibration_saved] {
+      [dir = options_.state_dir, device = d.name, model = c.name(),
+       calibration = std::move(a.document), write_error, saved = options_.on_calibration_saved] {
         if (dir.empty()) return;
         if (WriteActiveCalibration(dir, device, model, calibration, write_error.get()) && saved) {
           saved(calibration);
         }
       },
-      [this, &d, event = std::move(event), write_error, apply = std::move(apply)] {
+      [this, &d, event = std::move(a.event), write_error, apply = std::move(a.apply)] {
         if (!options_.state_dir.empty()) NoteWrite(d.name, *write_error);
         apply();
         if (write_error->empty()) d.report_due = true;  // TickDevice/OnTick write it

@@ -25,9 +25,9 @@
 #include "core/estimation/sensor_class.h"
 #include "core/planning/pose_planner.h"
 #include "core/sequencing/sequencer.h"
+#include "daemon/station/calibration.h"
 #include "daemon/station/capture_replay.h"
 #include "daemon/station/device_pipeline.h"
-#include "daemon/station/free_pipeline.h"
 #include "daemon/station/model_pipeline.h"
 #include "protocol/sample_line.h"
 
@@ -121,7 +121,7 @@ struct StationOptions {
   SensorClass ResolvedSensorClass() const;
 };
 
-class Station : public ReplayTarget {
+class Station : public ReplayTarget, private CalibrationHost {
  public:
   // Every event, as the socket will publish it ({"class":...}).
   using EventSink = std::function<void(const nlohmann::json&)>;
@@ -206,25 +206,15 @@ class Station : public ReplayTarget {
   void HandleSequencerEvent(std::size_t device, const SequencerEvent& event);
   void WriteReport(std::size_t device, std::int64_t now_ns, bool now);
   void Update(std::size_t device, const PoseRecord& record, double t_s);
-  // The free pose source (daemon/station/free_pipeline.h): every free model of the device fitted
-  // again to all of its intervals, then gated and activated.
-  void QueueFreeFit(std::size_t device, double t_s);
-  void ApplyFree(std::size_t device, const FreeUpdate& job, double t_s, bool resuming);
-  void ActivateFree(DeviceState& d, FreeModelState& m, double t_s,
-                    const nlohmann::json& override_who);
-  // Writes a calibration document (calibrations/DEVICE.MODEL.json, off the loop), then runs
-  // `apply` and publishes `event` with "saved" (the write's outcome).
-  void PersistCalibration(DeviceState& d, const std::string& model, nlohmann::json calibration,
-                          nlohmann::json event, std::function<void()> apply);
-  bool free_mode() const { return options_.pose_source == PoseSource::kFree; }
-  // `work` on the executor (inline without one), then `done` unless the station is gone.
-  void Defer(std::function<void()> work, std::function<void()> done);
-  void RecordIdentifiedDrift(std::size_t device, const ModelState& m);
-  void Apply(std::size_t device, std::size_t model, double t_s, const ModelUpdate& job,
-             bool resuming);
+  // CalibrationHost (daemon/station/calibration.h): what the devices' calibration sets work
+  // through. Activate writes the calibration's document (calibrations/DEVICE.MODEL.json, off the
+  // loop), then applies it and publishes CALIBRATION_ACTIVE with "saved" (the write's outcome).
+  void Defer(std::function<void()> work, std::function<void()> done) override;
+  void Publish(const nlohmann::json& event) override;
+  void Activate(DeviceState& d, Calibration& c, double t_s,
+                const nlohmann::json& override_who) override;
+  void SaveNoiseProfile(DeviceState& d) override;
   void Resume();
-  void Publish(const nlohmann::json& event);
-  void Activate(DeviceState& d, ModelState& m, double t_s, const nlohmann::json& override_who);
   void LoadApplied();
   // Counts a state-directory write's outcome; publishes ERROR when it failed.
   void NoteWrite(const std::string& device, const std::string& error);

@@ -1,0 +1,221 @@
+// A device's free models as the station's calibration set (daemon/station/free_pipeline.h,
+// issue 22): after each static interval every model is fitted again on the solve worker to all of
+// the device's intervals, gated, and a model whose gate passes becomes active.
+
+#include <fmt/format.h>
+
+#include <algorithm>
+
+#include "core/sequencing/sequencer.h"
+#include "daemon/station/device_pipeline.h"
+#include "daemon/station/free_pipeline.h"
+#include "daemon/station/station.h"
+#include "protocol/free_json.h"
+
+namespace turncal::daemon {
+
+FreeCalibrations::FreeCalibrations(std::vector<std::string> configured,
+                                   const StationOptions& options, const SensorClass& sensor,
+                                   const GateOptions& gate)
+    : configured_(std::move(configured)),
+      context_(FreeContextFor(options, sensor)),
+      options_(FreeOptionsFor(options, gate)) {
+  // What the data carry may include a gyroscope: its moves are then its evidence.
+  needs_moves_ = configured_.empty();
+  std::string error;
+  for (const auto& name : configured_) {
+    auto model = MakeFreeModel(name, context_, &error);
+    needs_moves_ = needs_moves_ || (model && model->Needs(SensorKind::kGyroscope));
+    Get(name);
+  }
+}
+
+std::vector<std::string> FreeCalibrations::StoredNames() const {
+  return configured_.empty() ? FreeModelNames() : configured_;
+}
+
+bool FreeCalibrations::NeedsMoves() const { return needs_moves_; }
+
+void FreeCalibrations::Start(Sequencer& sequencer) {
+  std::string error;
+  sequencer.SetFree(&error);  // a new sequencer is idle, unscheduled
+}
+
+FreeModelState* FreeCalibrations::FindModel(const std::string& requested) {
+  for (auto& m : models_) {
+    if (m->requested == requested) return m.get();
+  }
+  return nullptr;
+}
+
+FreeModelState& FreeCalibrations::Get(const std::string& requested) {
+  if (FreeModelState* m = FindModel(requested)) return *m;
+  auto m = std::make_unique<FreeModelState>();
+  m->owner = this;
+  m->requested = requested;
+  std::string error;
+  if (auto model = MakeFreeModel(requested, context_, &error)) m->sensor = model->sensor();
+  models_.push_back(std::move(m));
+  return *models_.back();
+}
+
+void FreeCalibrations::OnRecord(std::size_t /*device*/, DevicePipeline& d,
+                                const PoseRecord& /*record*/, double t_s, bool resuming,
+                                CalibrationHost& host) {
+  if (resuming) {
+    refit_due_ = true;  // once, at the end of the resume
+  } else {
+    QueueFit(d, t_s, false, host);
+  }
+}
+
+void FreeCalibrations::OnResumed(DevicePipeline& d, CalibrationHost& host) {
+  // A resumed journal's intervals are fitted once, all together.
+  if (!refit_due_) return;
+  refit_due_ = false;
+  QueueFit(d, d.records_used.empty() ? 0.0 : d.records_used.back().t_end_s, true, host);
+}
+
+void FreeCalibrations::OnSequencerEvent(const SequencerEvent& e) {
+  if (e.kind != SequencerEventKind::kSegmentSkipped) return;
+  ++skipped_;
+  skip_reasons_.push_back(fmt::format("at {:.2f} s: {}", e.t_s, e.reason));
+  if (skip_reasons_.size() > kMaxSkipReasons) skip_reasons_.erase(skip_reasons_.begin());
+}
+
+void FreeCalibrations::QueueFit(DevicePipeline& d, double t_s, bool resuming,
+                                CalibrationHost& host) {
+  auto job = std::make_shared<FreeUpdate>();
+  // The worker fits copies: the loop goes on capturing meanwhile.
+  host.Defer([job, configured = configured_, intervals = d.records_used, context = context_,
+              options = options_] { job->Run(configured, intervals, context, options); },
+             [this, &d, job, t_s, resuming, &host] { ApplyUpdate(d, *job, t_s, resuming, host); });
+}
+
+std::vector<FreeModelState*> FreeCalibrations::Take(const FreeUpdate& update) {
+  std::vector<FreeModelState*> updated;
+  for (const auto& name : update.models) {
+    // The last result asked for under this name (an upstream fitted for another model has its
+    // own name; a magellipsoid that fell back to a sphere keeps the name asked for).
+    int found = -1;
+    for (std::size_t i = 0; i < update.results.size(); ++i) {
+      if (update.results[i].requested == name) found = static_cast<int>(i);
+    }
+    if (found < 0) continue;
+    FreeModelState& m = Get(name);
+    m.result = update.results[static_cast<std::size_t>(found)];
+    m.advice = static_cast<std::size_t>(found) < update.advice.size()
+                   ? update.advice[static_cast<std::size_t>(found)]
+                   : std::nullopt;
+    m.estimate_intervals = update.intervals;
+    m.upstream.reset();
+    std::string error;
+    auto model = MakeFreeModel(m.result.model, context_, &error);
+    const std::string up = model ? model->upstream() : std::string();
+    for (const auto& r : update.results) {
+      if (!up.empty() && r.model == up && r.estimate.estimate.ok) m.upstream = r;
+    }
+    updated.push_back(&m);
+  }
+  return updated;
+}
+
+void FreeCalibrations::ApplyUpdate(DevicePipeline& d, const FreeUpdate& job, double t_s,
+                                   bool resuming, CalibrationHost& host) {
+  if (!job.error.empty()) {
+    host.Publish(
+        {{"class", "ERROR"}, {"device", d.name}, {"message", "free models: " + job.error}});
+    return;
+  }
+  for (FreeModelState* m : Take(job)) {
+    const bool pass = m->result.estimate.estimate.ok && m->result.estimate.gate_passed;
+    if (!resuming) PublishEstimate(d, *m, t_s, host);
+    if (pass && !resuming) {
+      host.Activate(d, *m, t_s, nullptr);
+    } else if (pass && m->active_version() > 0) {
+      // Resumed: the estimate the stored version was made from, applied again.
+      m->ApplyResult(context_);
+    }
+  }
+}
+
+void FreeCalibrations::PublishEstimate(const DevicePipeline& d, const FreeModelState& m, double t_s,
+                                       CalibrationHost& host) const {
+  const FreeEstimate& fe = m.result.estimate;
+  const Estimate& e = fe.estimate;
+  nlohmann::json gate = {
+      {"pass", e.ok && fe.gate_passed},
+      {"reasons", e.ok ? fe.gate_reasons : std::vector<std::string>{"no estimate: " + e.error}}};
+  std::string summary =
+      e.ok ? fmt::format("{}: {} intervals, rank {} of {}, chi2/dof {:.2f}, coverage {:.1f} %",
+                         m.result.model, fe.intervals, e.rank, e.parameters.size(),
+                         e.dof > 0 ? e.chi2 / e.dof : 0.0, 100 * fe.coverage.fraction())
+           : fmt::format("{}: no estimate: {}", m.result.model, e.error);
+  nlohmann::json event = {{"class", "ESTIMATE"},
+                          {"t", t_s},
+                          {"device", d.name},
+                          {"model", m.requested},
+                          {"fitted", m.result.model},
+                          {"pose_source", "free"},
+                          {"poses", fe.intervals},
+                          {"intervals", fe.intervals},
+                          {"moves", MovesUsed(fe)},
+                          {"summary", summary},
+                          {"precision", m.PrecisionJson(d.gate)},
+                          {"gate", gate}};
+  if (!m.result.note.empty()) event["note"] = m.result.note;
+  if (m.advice) event["advice"] = m.advice->text;
+  host.Publish(event);
+}
+
+nlohmann::json FreeCalibrations::SourceResultJson(const DevicePipeline& d) const {
+  return {{"pose_source", "free"},
+          {"intervals", d.records_used.size()},
+          {"skipped", skipped_},
+          {"skip_reasons", skip_reasons_},
+          {"context", protocol::ToJson(context_)}};
+}
+
+nlohmann::json FreeCalibrations::SourceStatusJson(const DevicePipeline& d) const {
+  return {{"pose_source", "free"},
+          {"intervals", d.records_used.size()},
+          {"skipped", skipped_},
+          {"last_skip", skip_reasons_.empty() ? "" : skip_reasons_.back()}};
+}
+
+nlohmann::json FreeCalibrations::NextPose(const DevicePipeline& /*d*/,
+                                          const StationOptions& /*options*/) const {
+  if (models_.empty()) {
+    return {{"class", "NEXT_POSE"},
+            {"ok", false},
+            {"pose_source", "free"},
+            {"error",
+             "free mode: no static interval has been fitted yet; hold the device still in a "
+             "first orientation"}};
+  }
+  nlohmann::json advice_json = nlohmann::json::array();
+  bool all_pass = true;
+  for (const auto& m : models_) {
+    const bool pass = m->result.estimate.estimate.ok && m->result.estimate.gate_passed;
+    all_pass = all_pass && pass;
+    nlohmann::json a = {{"model", m->requested},
+                        {"fitted", m->result.model},
+                        {"gate_pass", pass},
+                        {"gate_reasons", m->result.estimate.gate_reasons},
+                        {"coverage", m->result.estimate.coverage.fraction()}};
+    if (m->advice) {
+      a["text"] = m->advice->text;
+      a["sigma_ratio"] = m->advice->sigma_ratio;
+    } else {
+      a["text"] = nullptr;
+    }
+    advice_json.push_back(a);
+  }
+  return {{"class", "NEXT_POSE"},
+          {"ok", true},
+          {"pose_source", "free"},
+          {"advice", advice_json},
+          {"gates_pass", all_pass}};
+}
+
+}  // namespace turncal::daemon
