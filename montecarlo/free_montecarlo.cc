@@ -80,12 +80,8 @@ class FreeMonteCarlo {
 
   // Every run, `jobs` at a time, in a scratch folder removed at the end.
   std::vector<FreeRun> RunAll() {
-    dir_ = ScratchDir("turncal-free-montecarlo");
-    std::filesystem::create_directories(dir_);
-    std::vector<FreeRun> runs = RunInParallel<FreeRun>(
-        o_.runs, o_.jobs, [this](int run, FreeRun* out) { RunOne(run, out); });
-    std::filesystem::remove_all(dir_);
-    return runs;
+    return RunInScratchDir<FreeRun>("turncal-free-montecarlo", o_.runs, o_.jobs, &dir_,
+                                    [this](int run, FreeRun* out) { RunOne(run, out); });
   }
 
   // One tumble: simulated, written, replayed through the free station, its estimate scored

@@ -34,4 +34,16 @@ inline std::filesystem::path ScratchDir(const std::string& name) {
          (name + "-" + std::to_string(static_cast<long>(::getpid())));
 }
 
+// RunInParallel's runs with a scratch folder (ScratchDir(name), `*dir`) made before them and
+// removed with what they left in it after them.
+template <typename Run, typename OneRun>
+std::vector<Run> RunInScratchDir(const std::string& name, int count, int jobs,
+                                 std::filesystem::path* dir, OneRun run) {
+  *dir = ScratchDir(name);
+  std::filesystem::create_directories(*dir);
+  std::vector<Run> runs = RunInParallel<Run>(count, jobs, run);
+  std::filesystem::remove_all(*dir);
+  return runs;
+}
+
 }  // namespace turncal::montecarlo

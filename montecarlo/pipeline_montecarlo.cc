@@ -180,12 +180,8 @@ class PipelineMonteCarlo {
 
   // Every run, `jobs` at a time, in a scratch folder removed at the end.
   std::vector<PipelineRun> RunAll() {
-    dir_ = ScratchDir("turncal-montecarlo");
-    std::filesystem::create_directories(dir_);
-    std::vector<PipelineRun> runs = RunInParallel<PipelineRun>(
-        o_.runs, o_.jobs, [this](int run, PipelineRun* out) { RunOne(run, out); });
-    std::filesystem::remove_all(dir_);
-    return runs;
+    return RunInScratchDir<PipelineRun>("turncal-montecarlo", o_.runs, o_.jobs, &dir_,
+                                        [this](int run, PipelineRun* out) { RunOne(run, out); });
   }
 
   // One session: simulated, written, replayed through the station, its estimate scored against

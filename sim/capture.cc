@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <span>
@@ -155,178 +156,245 @@ std::unique_ptr<MeasurementModel> CheckedModel(const std::string& name, SensorKi
   return model;
 }
 
-}  // namespace
+// The session's models, checked: an accelerometer, a magnetometer and, if named, a gyroscope
+// (which rate segments among the poses need).
+struct SimModels {
+  std::unique_ptr<MeasurementModel> accel, mag, gyro;
+};
 
-bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::string* error) {
-  const drivers::Protocol protocol = options.protocol;
-  const char* protocol_name = drivers::ToString(protocol);
-  auto accel = CheckedModel(options.accel_model, SensorKind::kAccelerometer, error);
-  if (!accel) return false;
-  auto mag = CheckedModel(options.mag_model, SensorKind::kMagnetometer, error);
-  if (!mag) return false;
-  std::unique_ptr<MeasurementModel> gyro;
+bool CheckModels(const SimCaptureOptions& options, SimModels* models, std::string* error) {
+  models->accel = CheckedModel(options.accel_model, SensorKind::kAccelerometer, error);
+  if (!models->accel) return false;
+  models->mag = CheckedModel(options.mag_model, SensorKind::kMagnetometer, error);
+  if (!models->mag) return false;
   if (!options.gyro_model.empty()) {
-    gyro = CheckedModel(options.gyro_model, SensorKind::kGyroscope, error);
-    if (!gyro) return false;
+    models->gyro = CheckedModel(options.gyro_model, SensorKind::kGyroscope, error);
+    if (!models->gyro) return false;
   }
   for (const auto& p : options.poses) {
-    if (p.is_rate() && !gyro) {
+    if (p.is_rate() && !models->gyro) {
       *error = "rate segments need a gyroscope model (--model gyro12 or gyro21)";
       return false;
     }
   }
+  return true;
+}
 
-  const ProtocolDefaults d = Defaults(protocol);
-  SessionSimOptions o = options.session;
-  if (!(o.rate_hz > 0)) o.rate_hz = d.rate_hz;
-  if (!o.IsValid(error)) return false;
-  const int baud = options.baud > 0 ? options.baud : d.baud;
-  // The link budget (SENSORS.md): rate x frame size must fit in baud / bits-per-byte.
+// The link budget (SENSORS.md): rate x frame size must fit in baud / bits-per-byte.
+bool CheckLinkBudget(drivers::Protocol protocol, double rate_hz, int baud, std::string* error) {
   Sample probe;
   probe.t_device_s = 1.0;
   probe.counter = 1;
   probe.acc_mps2 = probe.gyr_radps = probe.mag = Eigen::Vector3d::Zero();
   probe.temp_c = 25.0;
   const double frame_bytes = static_cast<double>(EncodeSimSample(protocol, probe).size());
-  const double capacity = static_cast<double>(baud) / d.bits_per_byte;
-  if (frame_bytes * o.rate_hz > capacity) {
+  const double capacity = static_cast<double>(baud) / Defaults(protocol).bits_per_byte;
+  if (frame_bytes * rate_hz > capacity) {
     *error = fmt::format(
         "{} frames of {} bytes at {} Hz need {:.0f} bytes/s, more than {} baud carries ({:.0f} "
         "bytes/s): lower --rate or raise --baud",
-        protocol_name, frame_bytes, o.rate_hz, frame_bytes * o.rate_hz, baud, capacity);
+        drivers::ToString(protocol), frame_bytes, rate_hz, frame_bytes * rate_hz, baud, capacity);
     return false;
   }
+  return true;
+}
 
-  SimCapture& c = *out;
-  c = SimCapture{};
-  c.session = SimulateSession(*accel, *mag, options.poses, o, gyro.get());
-  c.session_options = o;
-  c.baud = baud;
-  c.accel_model = options.accel_model;
-  c.mag_model = options.mag_model;
-  c.gyro_model = options.gyro_model;
-  const SimulatedSession& session = c.session;
-
+// The capture's header: one device, "simulated", and a note of how it was made.
+drivers::CaptureHeader HeaderFor(const SimCaptureOptions& options, const SessionSimOptions& o,
+                                 int baud) {
+  const drivers::Protocol protocol = options.protocol;
+  drivers::CaptureHeader header;
   drivers::CaptureDevice device{"imu", protocol, baud, std::nullopt, std::nullopt};
   if (protocol == drivers::Protocol::kXbusLegacy) {
     device.output_mode = kLegacyLayout.output_mode;
     device.output_settings = kLegacyLayout.output_settings;
   }
-  c.header.devices.push_back(device);
-  c.header.created = "simulated";
-  c.header.note = fmt::format(
+  header.devices.push_back(device);
+  header.created = "simulated";
+  header.note = fmt::format(
       "turncal sim --protocol {} --model {} --model {}{} --class {} --seed {} --rate {} --dwell {} "
       "(acc noise {} m/s^2/sqrt(Hz), acc bias instability {} m/s^2, gyr noise {} rad/s/sqrt(Hz), "
       "mag noise {} G, mag bias instability {} G, quantisation {}{})",
-      protocol_name, options.accel_model, options.mag_model,
+      drivers::ToString(protocol), options.accel_model, options.mag_model,
       options.gyro_model.empty() ? "" : " --model " + options.gyro_model, o.sensor.name, o.seed,
       o.rate_hz, o.dwell_s, o.sensor.acc_noise_density, o.sensor.acc_bias_instability,
       o.sensor.gyr_noise_density, o.sensor.mag_noise_rms, o.sensor.mag_bias_instability,
       o.sensor.acc_quantum > 0 ? "16-bit" : "none", options.faults ? ", faults" : "");
+  return header;
+}
 
-  std::vector<drivers::CaptureRecord>& records = c.records;
-  auto append = [&](drivers::RecordType type, std::int64_t at,
-                    std::span<const std::uint8_t> payload) {
-    records.push_back(
-        {type, 0, static_cast<std::uint64_t>(at), Bytes(payload.begin(), payload.end())});
-  };
-  std::int64_t t_ns = 0;
-  for (const auto& [sent, reply] : StartUp(protocol, o.seed, o.rate_hz, 1000.0)) {
-    append(drivers::RecordType::kSent, t_ns, sent);
-    t_ns += 2'000'000;
-    append(drivers::RecordType::kReceived, t_ns, reply);
-    t_ns += 2'000'000;
+// The records of a simulated capture after its header: the start-up dialogue, the device's
+// bytes in bursts of burst_ms, each pose's announcement after the bytes received before it, and
+// the end; with faults, bit flips and dropped bytes in the frames, one saturated sample and pose
+// 1 announced early (c->faults says which).
+class CaptureRecorder {
+ public:
+  CaptureRecorder(const SimCaptureOptions& options, SimCapture* c)
+      : options_(options),
+        c_(*c),
+        session_(c->session),
+        o_(c->session_options),
+        burst_ns_(static_cast<std::int64_t>(options.burst_ms * 1e6)),
+        fault_rng_(o_.seed ^ 0x5eedfa17ull) {}
+
+  void Record() {
+    RecordStartUp();
+    PlanFaults();
+    for (std::size_t k = 0; k < session_.samples.size(); ++k) RecordSample(k);
+    const auto end_ns =
+        c_.offset_ns + static_cast<std::int64_t>(std::llround(session_.duration_s * 1e9));
+    FlushBurst(end_ns);
+    EmitEventsUntil(end_ns);
+    const std::string end_event = R"({"event":"end"})";
+    Append(drivers::RecordType::kEvent, end_ns, Bytes(end_event.begin(), end_event.end()));
   }
-  const std::int64_t offset_ns = t_ns;
-  c.offset_ns = offset_ns;
+
+ private:
+  void Append(drivers::RecordType type, std::int64_t at, std::span<const std::uint8_t> payload) {
+    c_.records.push_back(
+        {type, 0, static_cast<std::uint64_t>(at), Bytes(payload.begin(), payload.end())});
+  }
+
+  // What the host sends and the device answers, 2 ms apart; the session starts after it.
+  void RecordStartUp() {
+    std::int64_t t_ns = 0;
+    for (const auto& [sent, reply] : StartUp(options_.protocol, o_.seed, o_.rate_hz, 1000.0)) {
+      Append(drivers::RecordType::kSent, t_ns, sent);
+      t_ns += 2'000'000;
+      Append(drivers::RecordType::kReceived, t_ns, reply);
+      t_ns += 2'000'000;
+    }
+    c_.offset_ns = t_ns;
+  }
 
   // Faults on request: a bit flip about every 500th frame, a dropped byte about every 700th, one
   // saturated sample, and pose 1 announced while the table is still moving into it.
-  SimFaultReport& faults = c.faults;
-  std::mt19937_64 fault_rng(o.seed ^ 0x5eedfa17ull);
-  std::uniform_int_distribution<int> one_in(0, 999999);
-  if (options.faults) {
-    faults.saturated_index = session.samples.size() / 3;
-    if (session.events.size() > 1) {
+  void PlanFaults() {
+    if (!options_.faults) return;
+    SimFaultReport& faults = c_.faults;
+    faults.saturated_index = session_.samples.size() / 3;
+    if (session_.events.size() > 1) {
       faults.early_pose_index = 1;
       // Not before the previous announcement, so the events stay in order.
-      faults.early_s = std::min(o.settle_s + kSimEarlyBeforeMoveEnd_s,
-                                session.events[1].t_s - session.events[0].t_s);
+      faults.early_s = std::min(o_.settle_s + kSimEarlyBeforeMoveEnd_s,
+                                session_.events[1].t_s - session_.events[0].t_s);
     }
   }
-  // An event's announcement time in the capture.
-  auto event_ns = [&](const SessionPoseEvent& e) {
-    const double early = e.index == faults.early_pose_index ? faults.early_s : 0.0;
-    return offset_ns + static_cast<std::int64_t>(std::llround((e.t_s - early) * 1e9));
-  };
 
-  Bytes burst;
-  std::int64_t burst_start = -1;
-  const auto burst_ns = static_cast<std::int64_t>(options.burst_ms * 1e6);
-  std::size_t next_event = 0;
-  auto flush = [&](std::int64_t at) {
-    if (!burst.empty()) {
-      append(drivers::RecordType::kReceived, at, burst);
-      burst.clear();
+  // How early an event is announced (the early pose's early_s; 0 for the others).
+  double EarlyS(const SessionPoseEvent& e) const {
+    return e.index == c_.faults.early_pose_index ? c_.faults.early_s : 0.0;
+  }
+
+  // An event's announcement time in the capture.
+  std::int64_t EventNs(const SessionPoseEvent& e) const {
+    return c_.offset_ns + static_cast<std::int64_t>(std::llround((e.t_s - EarlyS(e)) * 1e9));
+  }
+
+  void FlushBurst(std::int64_t at) {
+    if (!burst_.empty()) {
+      Append(drivers::RecordType::kReceived, at, burst_);
+      burst_.clear();
     }
-    burst_start = -1;
-  };
+    burst_start_ = -1;
+  }
+
+  // The event a pose's (or rate segment's) announcement records.
+  std::string EventText(const SessionPoseEvent& e) const {
+    if (e.pose.is_rate()) {
+      nlohmann::json j = protocol::ToJson(e.pose);
+      j["event"] = "rate";
+      j["index"] = e.index;
+      j["dwell_s"] = o_.dwell_s;
+      j["hold_s"] = e.dwell_end_s - e.t_s + 2.0;
+      return j.dump();
+    }
+    return nlohmann::json{{"event", "pose"},
+                          {"index", e.index},
+                          {"phi_deg", e.pose.phi_rad * kDegPerRad},
+                          {"gamma_deg", e.pose.gamma_rad * kDegPerRad},
+                          {"psi_deg", e.pose.psi_rad * kDegPerRad},
+                          {"hold_s", o_.dwell_s + EarlyS(e)}}
+        .dump();
+  }
+
   // The events announced by `at`, each after the bytes received before it.
-  auto emit_events_until = [&](std::int64_t at) {
-    while (next_event < session.events.size() && event_ns(session.events[next_event]) <= at) {
-      const auto& e = session.events[next_event++];
-      const std::int64_t te = event_ns(e);
-      const double early = e.index == faults.early_pose_index ? faults.early_s : 0.0;
-      flush(te);
-      std::string event;
-      if (e.pose.is_rate()) {
-        nlohmann::json j = protocol::ToJson(e.pose);
-        j["event"] = "rate";
-        j["index"] = e.index;
-        j["dwell_s"] = o.dwell_s;
-        j["hold_s"] = e.dwell_end_s - e.t_s + 2.0;
-        event = j.dump();
-      } else {
-        event = nlohmann::json{{"event", "pose"},
-                               {"index", e.index},
-                               {"phi_deg", e.pose.phi_rad * kDegPerRad},
-                               {"gamma_deg", e.pose.gamma_rad * kDegPerRad},
-                               {"psi_deg", e.pose.psi_rad * kDegPerRad},
-                               {"hold_s", o.dwell_s + early}}
-                    .dump();
-      }
-      append(drivers::RecordType::kEvent, te, Bytes(event.begin(), event.end()));
+  void EmitEventsUntil(std::int64_t at) {
+    while (next_event_ < session_.events.size() && EventNs(session_.events[next_event_]) <= at) {
+      const auto& e = session_.events[next_event_++];
+      const std::int64_t te = EventNs(e);
+      FlushBurst(te);
+      const std::string event = EventText(e);
+      Append(drivers::RecordType::kEvent, te, Bytes(event.begin(), event.end()));
     }
-  };
-  for (std::size_t k = 0; k < session.samples.size(); ++k) {
-    Sample s = session.samples[k];
-    const std::int64_t at = offset_ns + s.t_host_ns;
-    emit_events_until(at);
-    if (burst_start >= 0 && at - burst_start >= burst_ns) flush(at);
-    if (burst_start < 0) burst_start = at;
-    if (options.faults && k == faults.saturated_index) {
+  }
+
+  // Sample k's frame into the burst, after the events due before it.
+  void RecordSample(std::size_t k) {
+    Sample s = session_.samples[k];
+    const std::int64_t at = c_.offset_ns + s.t_host_ns;
+    EmitEventsUntil(at);
+    if (burst_start_ >= 0 && at - burst_start_ >= burst_ns_) FlushBurst(at);
+    if (burst_start_ < 0) burst_start_ = at;
+    if (options_.faults && k == c_.faults.saturated_index) {
       // A saturated sample: the accelerometer clips at its range on x.
       s.acc_mps2->x() = 16 * kStandardGravity_mps2;
       s.flags |= kAccSaturated;
     }
-    Bytes frame = EncodeSimSample(protocol, s);
-    if (options.faults && one_in(fault_rng) < 2000) {
-      const auto byte = static_cast<std::size_t>(one_in(fault_rng)) % frame.size();
-      frame[byte] ^= static_cast<std::uint8_t>(1u << (one_in(fault_rng) % 8));
-      ++faults.bit_flips;
-    }
-    if (options.faults && one_in(fault_rng) < 1430) {
-      frame.erase(frame.begin() +
-                  static_cast<long>(static_cast<std::size_t>(one_in(fault_rng)) % frame.size()));
-      ++faults.dropped_bytes;
-    }
-    burst.insert(burst.end(), frame.begin(), frame.end());
+    Bytes frame = EncodeSimSample(options_.protocol, s);
+    if (options_.faults) DamageFrame(&frame);
+    burst_.insert(burst_.end(), frame.begin(), frame.end());
   }
-  const auto end_ns = offset_ns + static_cast<std::int64_t>(std::llround(session.duration_s * 1e9));
-  flush(end_ns);
-  emit_events_until(end_ns);
-  const std::string end_event = R"({"event":"end"})";
-  append(drivers::RecordType::kEvent, end_ns, Bytes(end_event.begin(), end_event.end()));
+
+  // With faults: a flipped bit in about one frame in 500, a dropped byte in about one in 700.
+  void DamageFrame(Bytes* frame) {
+    if (one_in_(fault_rng_) < 2000) {
+      const auto byte = static_cast<std::size_t>(one_in_(fault_rng_)) % frame->size();
+      (*frame)[byte] ^= static_cast<std::uint8_t>(1u << (one_in_(fault_rng_) % 8));
+      ++c_.faults.bit_flips;
+    }
+    if (one_in_(fault_rng_) < 1430) {
+      frame->erase(
+          frame->begin() +
+          static_cast<long>(static_cast<std::size_t>(one_in_(fault_rng_)) % frame->size()));
+      ++c_.faults.dropped_bytes;
+    }
+  }
+
+  const SimCaptureOptions& options_;
+  SimCapture& c_;
+  const SimulatedSession& session_;
+  const SessionSimOptions& o_;
+  const std::int64_t burst_ns_;
+  std::mt19937_64 fault_rng_;
+  std::uniform_int_distribution<int> one_in_{0, 999999};
+  Bytes burst_;
+  std::int64_t burst_start_ = -1;
+  std::size_t next_event_ = 0;
+};
+
+}  // namespace
+
+bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::string* error) {
+  SimModels models;
+  if (!CheckModels(options, &models, error)) return false;
+  const ProtocolDefaults d = Defaults(options.protocol);
+  SessionSimOptions o = options.session;
+  if (!(o.rate_hz > 0)) o.rate_hz = d.rate_hz;
+  if (!o.IsValid(error)) return false;
+  const int baud = options.baud > 0 ? options.baud : d.baud;
+  if (!CheckLinkBudget(options.protocol, o.rate_hz, baud, error)) return false;
+
+  SimCapture& c = *out;
+  c = SimCapture{};
+  c.session = SimulateSession(*models.accel, *models.mag, options.poses, o, models.gyro.get());
+  c.session_options = o;
+  c.baud = baud;
+  c.accel_model = options.accel_model;
+  c.mag_model = options.mag_model;
+  c.gyro_model = options.gyro_model;
+  c.header = HeaderFor(options, o, baud);
+  CaptureRecorder(options, &c).Record();
   return true;
 }
 

@@ -9,6 +9,7 @@
 
 #include "montecarlo/free_montecarlo.h"
 #include "tools/help_text.h"
+#include "tools/z_score_table.h"
 
 namespace turncal::tools {
 namespace {
@@ -41,16 +42,6 @@ std::string ReasonsText(const montecarlo::FreeMonteCarloSummary& s) {
 
 void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                    const montecarlo::FreeMonteCarloSummary& s) {
-  const Eigen::VectorXd mean = s.z.Mean(), std_z = s.z.Std();
-  nlohmann::json rows = nlohmann::json::array();
-  for (std::size_t i = 0; i < s.parameters.size(); ++i) {
-    const auto k = static_cast<Eigen::Index>(i);
-    rows.push_back({{"name", s.parameters[i]},
-                    {"mean_z", mean[k]},
-                    {"std_z", std_z[k]},
-                    {"beyond_3_sigma", s.z.BeyondThree()[k]},
-                    {"honest", s.z.Honest(static_cast<int>(i))}});
-  }
   fmt::print("{}\n", nlohmann::json{{"model", o.model},
                                     {"class", o.sensor_class},
                                     {"protocol", o.protocol},
@@ -67,23 +58,14 @@ void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                                     {"ks_d", s.ks.d},
                                     {"ks_p", s.ks.p},
                                     {"p_value_deciles", s.p_value_deciles},
-                                    {"params", rows}}
+                                    {"params", ZScoreRows(s.parameters, s.z, true)}}
                          .dump());
 }
 
 void PrintFreeText(const montecarlo::FreeMonteCarloOptions& o,
                    const montecarlo::FreeMonteCarloSummary& s) {
-  const Eigen::VectorXd mean = s.z.Mean(), std_z = s.z.Std();
   int bad = 0;
-  std::string table =
-      "| param | mean z | std z | beyond 3 sigma | verdict |\n|---|---|---|---|---|\n";
-  for (std::size_t i = 0; i < s.parameters.size(); ++i) {
-    const auto k = static_cast<Eigen::Index>(i);
-    const bool honest = s.z.Honest(static_cast<int>(i));
-    bad += !honest;
-    table += fmt::format("| {} | {:+.3f} | {:.3f} | {} | {} |\n", s.parameters[i], mean[k],
-                         std_z[k], s.z.BeyondThree()[k], honest ? "ok" : "NOT HONEST");
-  }
+  const std::string table = ZScoreTable(s.parameters, s.z, true, &bad);
   fmt::print(
       "free {} ({} class, {}, drift {}{}), {} tumbles of {} orientations (up within {:.0f} deg "
       "of "

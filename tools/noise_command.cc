@@ -197,65 +197,79 @@ constexpr Manual kNoiseManual = {
     "cannot be read or a command-line mistake",
     "docs/ACCURACY.md (the noise model), SENSORS.md"};
 
-int Run(const NoiseArgs& args) {
+// A capture's device (--device, or the first) as a series; `source` its name. 0, or the code to
+// return.
+int ReadCaptureSeries(const NoiseArgs& args, Series* series, std::string* source) {
   std::string error;
+  drivers::CaptureReader reader;
+  if (!reader.Open(args.file, &error)) {
+    fmt::print(stderr, "turncal noise: {}\n", error);
+    return 2;
+  }
+  int device = 0;
+  if (!args.device.empty()) {
+    device = -1;
+    for (std::size_t i = 0; i < reader.header().devices.size(); ++i)
+      if (reader.header().devices[i].name == args.device) device = static_cast<int>(i);
+    if (device < 0) {
+      fmt::print(stderr, "turncal noise: the capture has no device '{}'\n", args.device);
+      return 2;
+    }
+  }
+  *source = reader.header().devices.empty()
+                ? ""
+                : reader.header().devices[static_cast<std::size_t>(device)].name;
+  Collector collector(device);
+  daemon::ReplayStats stats;
+  if (!daemon::ReplayInto(&reader, &collector, false, {}, &stats, &error)) {
+    fmt::print(stderr, "turncal noise: {}\n", error);
+    return 2;
+  }
+  *series = std::move(collector.series);
+  return 0;
+}
+
+// A raw device stream in --protocol as a series. 0, or the code to return.
+int DecodeRawSeries(const NoiseArgs& args, Series* series) {
+  std::string error;
+  const auto protocol = drivers::ParseProtocol(args.protocol);
+  if (!protocol) {
+    fmt::print(stderr, "turncal noise: unknown protocol '{}'\n", args.protocol);
+    return 2;
+  }
+  Collector collector(0);
+  auto decoder = drivers::MakeDecoder(*protocol, drivers::DecoderOptions{}, &collector, &error);
+  if (!decoder) {
+    fmt::print(stderr, "turncal noise: {}\n", error);
+    return 2;
+  }
+  std::ifstream in(args.file, std::ios::binary);
+  drivers::DecodeStream(in, decoder.get());
+  *series = std::move(collector.series);
+  return 0;
+}
+
+// The file as a series, whichever kind it is (a capture, a raw stream, text columns); `skipped`
+// the text lines passed over, `source` the capture's device. 0, or the code to return.
+int ReadSeries(const NoiseArgs& args, Series* series, int* skipped, std::string* source) {
   const std::optional<bool> is_capture = drivers::FileLooksLikeCapture(args.file);
   if (!is_capture) {
     fmt::print(stderr, "turncal noise: cannot open '{}'\n", args.file);
     return 2;
   }
-  const bool capture = *is_capture;
-  Series series;
-  int skipped = 0;
-  std::string source;
-  if (capture) {
-    drivers::CaptureReader reader;
-    if (!reader.Open(args.file, &error)) {
-      fmt::print(stderr, "turncal noise: {}\n", error);
-      return 2;
-    }
-    int device = 0;
-    if (!args.device.empty()) {
-      device = -1;
-      for (std::size_t i = 0; i < reader.header().devices.size(); ++i)
-        if (reader.header().devices[i].name == args.device) device = static_cast<int>(i);
-      if (device < 0) {
-        fmt::print(stderr, "turncal noise: the capture has no device '{}'\n", args.device);
-        return 2;
-      }
-    }
-    source = reader.header().devices.empty()
-                 ? ""
-                 : reader.header().devices[static_cast<std::size_t>(device)].name;
-    Collector collector(device);
-    daemon::ReplayStats stats;
-    if (!daemon::ReplayInto(&reader, &collector, false, {}, &stats, &error)) {
-      fmt::print(stderr, "turncal noise: {}\n", error);
-      return 2;
-    }
-    series = std::move(collector.series);
-  } else if (!args.protocol.empty()) {
-    const auto protocol = drivers::ParseProtocol(args.protocol);
-    if (!protocol) {
-      fmt::print(stderr, "turncal noise: unknown protocol '{}'\n", args.protocol);
-      return 2;
-    }
-    Collector collector(0);
-    auto decoder = drivers::MakeDecoder(*protocol, drivers::DecoderOptions{}, &collector, &error);
-    if (!decoder) {
-      fmt::print(stderr, "turncal noise: {}\n", error);
-      return 2;
-    }
-    std::ifstream in(args.file, std::ios::binary);
-    drivers::DecodeStream(in, decoder.get());
-    series = std::move(collector.series);
-  } else {
-    if (!ReadText(args, &series, &skipped, &error)) {
-      fmt::print(stderr, "turncal noise: {}\n", error);
-      return 2;
-    }
+  if (*is_capture) return ReadCaptureSeries(args, series, source);
+  if (!args.protocol.empty()) return DecodeRawSeries(args, series);
+  std::string error;
+  if (!ReadText(args, series, skipped, &error)) {
+    fmt::print(stderr, "turncal noise: {}\n", error);
+    return 2;
   }
+  return 0;
+}
 
+// The Allan deviation and noise fit of every axis of every triad with at least 16 intervals in
+// [from, to] (the median interval as the sample period).
+std::vector<AxisResult> AnalyseTriads(const NoiseArgs& args, const Series& series) {
   std::vector<AxisResult> results;
   const std::pair<const char*,
                   std::pair<const std::vector<Eigen::Vector3d>*, const std::vector<double>*>>
@@ -292,39 +306,36 @@ int Run(const NoiseArgs& args) {
       results.push_back(std::move(r));
     }
   }
-  if (results.empty()) {
-    fmt::print(stderr, "turncal noise: '{}' has no triad with enough samples in the window\n",
-               args.file);
-    return 1;
+  return results;
+}
+
+void PrintNoiseJson(const NoiseArgs& args, const std::string& source,
+                    const std::vector<AxisResult>& results) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& r : results) {
+    nlohmann::json points = nlohmann::json::array();
+    for (const auto& p : r.points) points.push_back({p.tau_s, p.adev});
+    out.push_back({{"triad", r.triad},
+                   {"axis", std::string(1, "xyz"[r.axis])},
+                   {"unit", Unit(r.triad)},
+                   {"samples", r.samples},
+                   {"rate_hz", r.rate_hz},
+                   {"white_density", r.fit.white_density},
+                   {"gauss_markov_sigma", r.fit.gm_sigma},
+                   {"gauss_markov_tau_s", r.fit.gm_tau_s},
+                   {"random_walk", r.fit.random_walk},
+                   {"bias_instability", r.fit.bias_instability},
+                   {"bias_instability_tau_s", r.fit.bias_instability_tau_s},
+                   {"longest_tau_s", r.fit.longest_tau_s},
+                   {"rms_log_error", r.fit.rms_log_error},
+                   {"allan", points}});
   }
-  if (!args.svg.empty() && !daemon::WriteFileAtomically(args.svg, Svg(results), &error)) {
-    fmt::print(stderr, "turncal noise: {}\n", error);
-    return 1;
-  }
-  if (args.json) {
-    nlohmann::json out = nlohmann::json::array();
-    for (const auto& r : results) {
-      nlohmann::json points = nlohmann::json::array();
-      for (const auto& p : r.points) points.push_back({p.tau_s, p.adev});
-      out.push_back({{"triad", r.triad},
-                     {"axis", std::string(1, "xyz"[r.axis])},
-                     {"unit", Unit(r.triad)},
-                     {"samples", r.samples},
-                     {"rate_hz", r.rate_hz},
-                     {"white_density", r.fit.white_density},
-                     {"gauss_markov_sigma", r.fit.gm_sigma},
-                     {"gauss_markov_tau_s", r.fit.gm_tau_s},
-                     {"random_walk", r.fit.random_walk},
-                     {"bias_instability", r.fit.bias_instability},
-                     {"bias_instability_tau_s", r.fit.bias_instability_tau_s},
-                     {"longest_tau_s", r.fit.longest_tau_s},
-                     {"rms_log_error", r.fit.rms_log_error},
-                     {"allan", points}});
-    }
-    fmt::print("{}\n",
-               nlohmann::json{{"source", args.file}, {"device", source}, {"axes", out}}.dump());
-    return 0;
-  }
+  fmt::print("{}\n",
+             nlohmann::json{{"source", args.file}, {"device", source}, {"axes", out}}.dump());
+}
+
+void PrintNoiseText(const NoiseArgs& args, const std::string& source, int skipped,
+                    const std::vector<AxisResult>& results) {
   fmt::print("{}{}: {} samples at {:.4g} Hz ({:.1f} s){}\n", args.file,
              source.empty() ? "" : " (" + source + ")", results.front().samples,
              results.front().rate_hz,
@@ -346,6 +357,29 @@ int Run(const NoiseArgs& args) {
       "cluster time ({:.3g} s) is an extrapolation: record a longer rest.\n",
       results.front().fit.longest_tau_s);
   if (!args.svg.empty()) fmt::print("plot: {}\n", args.svg);
+}
+
+int Run(const NoiseArgs& args) {
+  Series series;
+  int skipped = 0;
+  std::string source;
+  if (const int code = ReadSeries(args, &series, &skipped, &source); code != 0) return code;
+  const std::vector<AxisResult> results = AnalyseTriads(args, series);
+  if (results.empty()) {
+    fmt::print(stderr, "turncal noise: '{}' has no triad with enough samples in the window\n",
+               args.file);
+    return 1;
+  }
+  std::string error;
+  if (!args.svg.empty() && !daemon::WriteFileAtomically(args.svg, Svg(results), &error)) {
+    fmt::print(stderr, "turncal noise: {}\n", error);
+    return 1;
+  }
+  if (args.json) {
+    PrintNoiseJson(args, source, results);
+  } else {
+    PrintNoiseText(args, source, skipped, results);
+  }
   return 0;
 }
 

@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
+#include "tools/z_score_table.h"
+
 namespace turncal::tools {
 namespace {
 
@@ -37,15 +39,6 @@ bool WriteRuns(const std::string& path, const montecarlo::PipelineMonteCarloSumm
 
 void PrintPipelineJson(const montecarlo::PipelineMonteCarloOptions& o,
                        const montecarlo::PipelineMonteCarloSummary& s) {
-  const Eigen::VectorXd mean = s.z.Mean(), std_z = s.z.Std();
-  nlohmann::json rows = nlohmann::json::array();
-  for (std::size_t i = 0; i < s.parameters.size(); ++i) {
-    const auto k = static_cast<Eigen::Index>(i);
-    rows.push_back({{"name", s.parameters[i]},
-                    {"mean_z", mean[k]},
-                    {"std_z", std_z[k]},
-                    {"honest", s.z.Honest(static_cast<int>(i))}});
-  }
   fmt::print("{}\n", nlohmann::json{{"model", o.model},
                                     {"class", o.sensor_class},
                                     {"protocol", o.protocol},
@@ -72,7 +65,7 @@ void PrintPipelineJson(const montecarlo::PipelineMonteCarloOptions& o,
                                     {"seconds_to_gate", s.seconds_to_gate},
                                     {"chi2_ks_d", s.ks.d},
                                     {"chi2_ks_p", s.ks.p},
-                                    {"params", rows}}
+                                    {"params", ZScoreRows(s.parameters, s.z, false)}}
                          .dump());
 }
 
@@ -97,16 +90,8 @@ std::string DriftText(const montecarlo::PipelineMonteCarloOptions& o) {
 
 void PrintPipelineText(const montecarlo::PipelineMonteCarloOptions& o,
                        const montecarlo::PipelineMonteCarloSummary& s) {
-  const Eigen::VectorXd mean = s.z.Mean(), std_z = s.z.Std();
   int bad = 0;
-  std::string z_table = "| param | mean z | std z | verdict |\n|---|---|---|---|\n";
-  for (std::size_t i = 0; i < s.parameters.size(); ++i) {
-    const auto k = static_cast<Eigen::Index>(i);
-    const bool honest = s.z.Honest(static_cast<int>(i));
-    bad += !honest;
-    z_table += fmt::format("| {} | {:+.3f} | {:.3f} | {} |\n", s.parameters[i], mean[k], std_z[k],
-                           honest ? "ok" : "NOT HONEST");
-  }
+  const std::string z_table = ZScoreTable(s.parameters, s.z, false, &bad);
   fmt::print(
       "Monte Carlo through the pipeline: {} runs of {} ({} class, {}, plan {}{}{}; {:.0f} "
       "poses and {:.0f} s of session on average), seed {}; {} solved; {:.1f} s wall, {} "

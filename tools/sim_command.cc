@@ -29,50 +29,11 @@
 #include "sim/live.h"
 #include "sim/session_sim.h"
 #include "tools/help_text.h"
+#include "tools/sim_options.h"
 
 namespace turncal::tools {
 
 namespace {
-
-struct SimCommandArgs {
-  std::vector<std::string> protocols;
-  std::string protocol;  // the first of protocols
-  std::vector<std::string> models = {"accel13", "mag13"};
-  std::string poses_file;
-  std::uint64_t seed = 1;
-  double dwell_s = 5.0;
-  std::vector<double> lever_arm_m;  // x, y, z in the table's inner frame
-  double gyr_nonlinearity_ppm_per_dps = 0.0;
-  double rate_hz = 0.0;  // 0: the protocol's default
-  int baud = 0;          // 0: the protocol's default
-  std::string sensor_class = "industrial";
-  std::string truth_out;
-  std::string output;
-  double burst_ms = 16.0;
-  bool faults = false;
-  // Overrides of the class's noise (negative: the class's value).
-  double acc_noise = -1, acc_bias_instability = -1, gyr_noise = -1, mag_noise = -1,
-         mag_bias_instability = -1;
-  double bias_tau_s = -1, acc_random_walk = 0, mag_random_walk = 0, acc_warmup = 0, mag_warmup = 0,
-         gyr_warmup = 0, warmup_tau_s = 60;
-  bool no_quantisation = false;
-  bool no_rate_segments = false;  // a table without a rate mode
-  double table_rate_dps = 0;      // 0: every move takes 3 s (SessionSimOptions::move_s)
-  double table_accel_dps2 = TableMotion{}.accel_dps2[0];
-  std::vector<std::string> lives;  // ptys (or writable ttys/files) to stream to at real time
-  std::string live;                // the first of lives
-  double live_speed = 1.0;
-  double hold_end_s = 0;
-  std::vector<std::string> lose_replies;  // DESC:FUNCTION
-  std::vector<std::string> serials;       // --serial, one per --live device
-  std::string controller;                 // turncald's socket: play the controller (sim/live.h)
-  double answer_timeout_s = 120;
-  int retries = 2;
-  double bit_error_rate = 0;
-  std::vector<std::string> unplugs;  // POSE:mid|between[:DEVICE]
-  double unplug_s = 2.0;
-  std::string device_state;
-};
 
 // "POSE:mid", "POSE:between", optionally ":DEVICE" (index among the --live devices).
 bool ParseUnplug(const std::string& text, sim::LiveSimOptions::Unplug* u, std::string* error) {
@@ -249,10 +210,11 @@ constexpr Manual kSimManual = {
     "write failed; 2 a command-line mistake",
     "docs/SIMULATOR.md"};
 
-int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
-  std::vector<sim::LiveSimDevice> devices;
+// One simulated device per --live, each with its protocol and seed (the first's + i), and each
+// one's truth; 0, or the code to return.
+int BuildLiveDevices(const SimCommandArgs& args, const sim::SimCaptureOptions& options,
+                     std::vector<sim::LiveSimDevice>* devices, nlohmann::json* truths) {
   std::string error;
-  nlohmann::json truths = nlohmann::json::array();
   for (std::size_t i = 0; i < args.lives.size(); ++i) {
     const std::string& name = args.protocols[std::min(i, args.protocols.size() - 1)];
     const auto protocol = drivers::ParseProtocol(name);
@@ -275,34 +237,29 @@ int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
     a.seed = o.session.seed;
     nlohmann::json t = TruthFor(d.capture, o.poses, a);
     t["live"] = d.path;
-    truths.push_back(t);
-    devices.push_back(std::move(d));
+    truths->push_back(t);
+    devices->push_back(std::move(d));
   }
-  if (!args.truth_out.empty()) {
-    // Written before the session starts, so a test can read it while the session runs.
-    nlohmann::json truth = truths[0];
-    truth["devices"] = truths;
-    if (!daemon::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
-      fmt::print(stderr, "turncal sim: {}\n", error);
-      return 1;
-    }
-  }
-  sim::LiveSimOptions live;
-  live.speed = args.live_speed;
-  live.controller = args.controller;
-  live.answer_timeout_s = args.answer_timeout_s;
-  live.retries = args.retries;
-  live.bit_error_rate = args.bit_error_rate;
-  live.fault_seed = args.seed * 7919 + 17;
-  live.unplug_s = args.unplug_s;
-  live.device_state_dir = args.device_state;
-  live.hold_end_s = args.hold_end_s;
-  live.serials = args.serials;
-  if (!live.device_state_dir.empty()) {
+  return 0;
+}
+
+// The live session's options from the command line; 0, or the code to return.
+int LiveOptionsFor(const SimCommandArgs& args, sim::LiveSimOptions* live) {
+  live->speed = args.live_speed;
+  live->controller = args.controller;
+  live->answer_timeout_s = args.answer_timeout_s;
+  live->retries = args.retries;
+  live->bit_error_rate = args.bit_error_rate;
+  live->fault_seed = args.seed * 7919 + 17;
+  live->unplug_s = args.unplug_s;
+  live->device_state_dir = args.device_state;
+  live->hold_end_s = args.hold_end_s;
+  live->serials = args.serials;
+  if (!live->device_state_dir.empty()) {
     std::error_code ec;
-    std::filesystem::create_directories(live.device_state_dir, ec);
+    std::filesystem::create_directories(live->device_state_dir, ec);
     if (ec) {
-      fmt::print(stderr, "turncal sim: cannot create '{}': {}\n", live.device_state_dir,
+      fmt::print(stderr, "turncal sim: cannot create '{}': {}\n", live->device_state_dir,
                  ec.message());
       return 1;
     }
@@ -318,22 +275,25 @@ int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
                  text);
       return 2;
     }
-    live.lose_replies.push_back(
+    live->lose_replies.push_back(
         {static_cast<std::uint8_t>(descriptor), static_cast<std::uint8_t>(function)});
   }
+  std::string error;
   for (const auto& text : args.unplugs) {
     sim::LiveSimOptions::Unplug u;
     if (!ParseUnplug(text, &u, &error)) {
       fmt::print(stderr, "turncal sim: {}\n", error);
       return 2;
     }
-    live.unplugs.push_back(u);
+    live->unplugs.push_back(u);
   }
-  sim::LiveSimReport report;
-  if (!sim::RunLiveSim(&devices, live, &report, &error)) {
-    fmt::print(stderr, "turncal sim: {}\n", error);
-    return 1;
-  }
+  return 0;
+}
+
+// The live session's outcome: a line on standard error, and the same as a JSON line on standard
+// output with the line faults' figures.
+void PrintLiveSummary(const SimCommandArgs& args, const std::vector<sim::LiveSimDevice>& devices,
+                      const sim::LiveSimReport& report) {
   std::string frames;
   for (std::size_t i = 0; i < devices.size(); ++i) {
     frames += fmt::format("{}{}: {} frames sent, {} withheld (idle/config), {} dropped (unread)",
@@ -366,18 +326,37 @@ int RunController(const SimCommandArgs& args, sim::SimCaptureOptions options) {
   }
   fmt::print("{}\n", summary.dump());
   std::fflush(stdout);
+}
+
+int RunController(const SimCommandArgs& args, const sim::SimCaptureOptions& options) {
+  std::vector<sim::LiveSimDevice> devices;
+  nlohmann::json truths = nlohmann::json::array();
+  if (const int code = BuildLiveDevices(args, options, &devices, &truths); code != 0) return code;
+  std::string error;
+  if (!args.truth_out.empty()) {
+    // Written before the session starts, so a test can read it while the session runs.
+    nlohmann::json truth = truths[0];
+    truth["devices"] = truths;
+    if (!daemon::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
+      fmt::print(stderr, "turncal sim: {}\n", error);
+      return 1;
+    }
+  }
+  sim::LiveSimOptions live;
+  if (const int code = LiveOptionsFor(args, &live); code != 0) return code;
+  sim::LiveSimReport report;
+  if (!sim::RunLiveSim(&devices, live, &report, &error)) {
+    fmt::print(stderr, "turncal sim: {}\n", error);
+    return 1;
+  }
+  PrintLiveSummary(args, devices, report);
   return report.captured == report.poses ? 0 : 1;
 }
 
-int RunSim(const SimCommandArgs& args) {
-  const auto protocol = drivers::ParseProtocol(args.protocol);
-  if (!protocol) {
-    fmt::print(stderr, "turncal sim: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)\n",
-               args.protocol);
-    return 2;
-  }
-  sim::SimCaptureOptions options;
-  options.protocol = *protocol;
+// The models (each to its sensor's slot) and the poses (the file's, or the default ones, with
+// the default rate segments for a gyro model unless the poses hold their own); 0, or the code
+// to return.
+int ReadModelsAndPoses(const SimCommandArgs& args, sim::SimCaptureOptions* options) {
   std::string error;
   for (const auto& m : args.models) {
     auto model = MakeModel(m, ModelContext{}, &error);
@@ -389,28 +368,34 @@ int RunSim(const SimCommandArgs& args) {
       fmt::print(stderr, "turncal sim: mag-physical is for the observability demonstration only\n");
       return 2;
     }
-    (model->sensor() == SensorKind::kAccelerometer ? options.accel_model
-     : model->sensor() == SensorKind::kGyroscope   ? options.gyro_model
-                                                   : options.mag_model) = m;
+    (model->sensor() == SensorKind::kAccelerometer ? options->accel_model
+     : model->sensor() == SensorKind::kGyroscope   ? options->gyro_model
+                                                   : options->mag_model) = m;
   }
 
   if (!args.poses_file.empty()) {
     std::ifstream in(args.poses_file, std::ios::binary);
     std::stringstream text;
     text << in.rdbuf();
-    if (!in || !ParsePoses(text.str(), &options.poses, &error)) {
+    if (!in || !ParsePoses(text.str(), &options->poses, &error)) {
       fmt::print(stderr, "turncal sim: {}: {}\n", args.poses_file, in ? error : "cannot open");
       return 2;
     }
   }
-  const bool has_rates = std::any_of(options.poses.begin(), options.poses.end(),
+  const bool has_rates = std::any_of(options->poses.begin(), options->poses.end(),
                                      [](const TablePose& p) { return p.is_rate(); });
-  if (!options.gyro_model.empty() && !has_rates && !args.no_rate_segments) {
+  if (!options->gyro_model.empty() && !has_rates && !args.no_rate_segments) {
     // What a gyro model needs besides the static poses: rate segments, one after each of the
     // first poses (DefaultRateSegments), unless the poses hold their own.
-    options.poses = WithRateSegments(options.poses, DefaultRateSegments());
+    options->poses = WithRateSegments(options->poses, DefaultRateSegments());
   }
-  SessionSimOptions& o = options.session;
+  return 0;
+}
+
+// The session's sensor class with the command line's overrides, its drift, table, times and
+// seed; the capture's link and faults.
+void SetSessionOptions(const SimCommandArgs& args, sim::SimCaptureOptions* options) {
+  SessionSimOptions& o = options->session;
   SensorClassByName(args.sensor_class, &o.sensor);
   if (args.acc_noise >= 0) o.sensor.acc_noise_density = args.acc_noise;
   if (args.acc_bias_instability >= 0) o.sensor.acc_bias_instability = args.acc_bias_instability;
@@ -441,35 +426,14 @@ int RunSim(const SimCommandArgs& args) {
   // ppm per deg/s -> relative per rad/s.
   o.gyr_scale_nonlinearity = args.gyr_nonlinearity_ppm_per_dps * 1e-6 * kDegPerRad;
   o.seed = args.seed;
-  options.baud = args.baud;
-  options.faults = args.faults;
-  options.burst_ms = args.burst_ms;
+  options->baud = args.baud;
+  options->faults = args.faults;
+  options->burst_ms = args.burst_ms;
+}
 
-  if (!args.controller.empty()) return RunController(args, options);
-  sim::SimCapture capture;
-  if (!sim::BuildSimCapture(options, &capture, &error)) {
-    fmt::print(stderr, "turncal sim: {}\n", error);
-    return 2;
-  }
-  const SimulatedSession& session = capture.session;
-  const std::vector<drivers::CaptureRecord>& records = capture.records;
-
-  if (!args.output.empty() && !sim::WriteSimCapture(capture, args.output, &error)) {
-    fmt::print(stderr, "turncal sim: {}\n", error);
-    return 1;
-  }
-  if (!args.live.empty() && !StreamLive(args.live, records, args.live_speed, &error)) {
-    fmt::print(stderr, "turncal sim: {}\n", error);
-    return 1;
-  }
-
-  if (!args.truth_out.empty()) {
-    const nlohmann::json truth = TruthFor(capture, options.poses, args);
-    if (!daemon::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
-      fmt::print(stderr, "turncal sim: {}\n", error);
-      return 1;
-    }
-  }
+// What was written, on standard error: the faults injected and the session's size.
+void PrintCaptureSummary(const SimCommandArgs& args, const sim::SimCaptureOptions& options,
+                         const sim::SimCapture& capture) {
   if (args.faults) {
     const sim::SimFaultReport& f = capture.faults;
     const std::string early =
@@ -483,9 +447,50 @@ int RunSim(const SimCommandArgs& args) {
                f.bit_flips, f.dropped_bytes, f.saturated_index, early);
   }
   fmt::print(stderr, "turncal sim: {} poses, {} samples at {} Hz, {:.1f} s, {} records -> {}\n",
-             options.poses.size(), session.samples.size(), capture.session_options.rate_hz,
-             session.duration_s, records.size(), args.output);
+             options.poses.size(), capture.session.samples.size(), capture.session_options.rate_hz,
+             capture.session.duration_s, capture.records.size(), args.output);
+}
+
+// The capture to -o and/or streamed to --live, and the truth file.
+int WriteCapture(const SimCommandArgs& args, const sim::SimCaptureOptions& options) {
+  std::string error;
+  sim::SimCapture capture;
+  if (!sim::BuildSimCapture(options, &capture, &error)) {
+    fmt::print(stderr, "turncal sim: {}\n", error);
+    return 2;
+  }
+  if (!args.output.empty() && !sim::WriteSimCapture(capture, args.output, &error)) {
+    fmt::print(stderr, "turncal sim: {}\n", error);
+    return 1;
+  }
+  if (!args.live.empty() && !StreamLive(args.live, capture.records, args.live_speed, &error)) {
+    fmt::print(stderr, "turncal sim: {}\n", error);
+    return 1;
+  }
+  if (!args.truth_out.empty()) {
+    const nlohmann::json truth = TruthFor(capture, options.poses, args);
+    if (!daemon::WriteFileAtomically(args.truth_out, truth.dump(2) + "\n", &error)) {
+      fmt::print(stderr, "turncal sim: {}\n", error);
+      return 1;
+    }
+  }
+  PrintCaptureSummary(args, options, capture);
   return 0;
+}
+
+int RunSim(const SimCommandArgs& args) {
+  const auto protocol = drivers::ParseProtocol(args.protocol);
+  if (!protocol) {
+    fmt::print(stderr, "turncal sim: unknown protocol '{}' (mip, gx2, xbus, xbus-legacy)\n",
+               args.protocol);
+    return 2;
+  }
+  sim::SimCaptureOptions options;
+  options.protocol = *protocol;
+  if (const int code = ReadModelsAndPoses(args, &options); code != 0) return code;
+  SetSessionOptions(args, &options);
+  if (!args.controller.empty()) return RunController(args, options);
+  return WriteCapture(args, options);
 }
 
 }  // namespace
@@ -495,178 +500,9 @@ void AddSimCommand(CLI::App* app) {
   auto* cmd = app->add_subcommand(
       "sim", "simulate a complete turntable session as a .tcap capture with a truth file");
   SetManual(cmd, kSimManual);
-  cmd->add_option("--protocol", args->protocols,
-                  "mip | gx2 | xbus | xbus-legacy (with --controller, one per --live, in order)")
-      ->required();
-  cmd->add_option("--model", args->models,
-                  "accelerometer, magnetometer and/or gyroscope model (accel12|accel13, "
-                  "mag13|mag22, gyro12|gyro21); default accel13 and mag13 and no gyro model (the "
-                  "gyro then reads the table's rate plus a bias). With a gyro model the session "
-                  "holds rate segments: the --poses file's (CSV phi,gamma,psi,AXIS,RATE) or the "
-                  "default ones after the first static poses")
-      ->capture_default_str();
-  cmd->add_option("--poses", args->poses_file,
-                  "pose plan: JSON or CSV of phi, gamma, psi in degrees (default: 26 cube "
-                  "directions + 10 intermediate)");
-  cmd->add_option("--seed", args->seed, "random seed (same seed: byte-identical output)")
-      ->capture_default_str();
-  cmd->add_option("--lever-arm", args->lever_arm_m,
-                  "the IMU's offset from the table's centre, X Y Z in the table's inner frame, m "
-                  "(default none): in motion the accelerometer sees its centripetal and "
-                  "tangential acceleration")
-      ->expected(3);
-  cmd->add_option("--gyr-nonlinearity", args->gyr_nonlinearity_ppm_per_dps,
-                  "with a gyro model: its scale grows with the rate by this many ppm per deg/s "
-                  "(default 0: linear; the report's rate linearity shows it)");
-  cmd->add_option("--dwell", args->dwell_s, "seconds at rest per pose after settling")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd->add_option("--rate", args->rate_hz,
-                  "output rate in Hz (default: mip 500, gx2/xbus/xbus-legacy 100)");
-  cmd->add_option("--baud", args->baud, "link baud rate (default: mip 921600, others 115200)");
-  cmd->add_option("--class", args->sensor_class, "industrial | consumer (SENSORS.md)")
-      ->check(CLI::IsMember({"industrial", "consumer"}))
-      ->capture_default_str();
-  cmd->add_option("--truth-out", args->truth_out, "JSON file of the true parameters");
-  cmd->add_option("-o,--output", args->output, "the capture to write (.tcap)");
-  cmd->add_option("--acc-noise", args->acc_noise,
-                  "accelerometer white noise density, m/s^2/sqrt(Hz) (default: the class's)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--acc-bias-instability", args->acc_bias_instability,
-                  "accelerometer bias instability (Gauss-Markov 1 sigma), m/s^2")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--gyr-noise", args->gyr_noise, "gyro white noise density, rad/s/sqrt(Hz)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--mag-noise", args->mag_noise, "magnetometer white noise, Gauss RMS per sample")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--mag-bias-instability", args->mag_bias_instability,
-                  "magnetometer bias instability (Gauss-Markov 1 sigma), Gauss")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--bias-tau", args->bias_tau_s,
-                  "correlation time of the Gauss-Markov bias instability, s (default: the class's, "
-                  "100)")
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--table-rate", args->table_rate_dps,
-                  "move at this rate, deg/s, on every axis (a trapezoidal profile; the shorter way "
-                  "round on the inner and outer axes); default: every move takes 3 s")
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--table-accel", args->table_accel_dps2,
-                  "the table's angular acceleration with --table-rate, deg/s^2")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd->add_option("--acc-random-walk", args->acc_random_walk,
-                  "accelerometer bias random walk, m/s^2/sqrt(s) (default 0)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--mag-random-walk", args->mag_random_walk,
-                  "magnetometer bias random walk, Gauss/sqrt(s) (default 0)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--acc-warmup", args->acc_warmup,
-                  "accelerometer warm-up: 1 sigma per axis of the bias offset at power-on that "
-                  "settles exponentially, m/s^2 (default 0)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--mag-warmup", args->mag_warmup,
-                  "magnetometer warm-up offset at power-on, Gauss (default 0)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--gyr-warmup", args->gyr_warmup,
-                  "gyroscope warm-up offset at power-on, rad/s (default 0; with a gyro model)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--warmup-tau", args->warmup_tau_s, "time constant of the warm-up, s")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd->add_flag("--no-quantisation", args->no_quantisation, "floats without ADC steps");
-  cmd->add_flag("--no-rate-segments", args->no_rate_segments,
-                "with a gyro model: a table without a rate mode, static poses only (the gyro model "
-                "then learns from the moves between them)");
-  cmd->add_flag(
-      "--faults", args->faults,
-      fmt::format("inject faults: bit flips (~1 frame in 500), dropped bytes (~1 in 700), "
-                  "one saturated sample, pose 1 announced {} s before the table finishes "
-                  "its move ({} s before its dwell)",
-                  sim::kSimEarlyBeforeMoveEnd_s,
-                  SessionSimOptions{}.settle_s + sim::kSimEarlyBeforeMoveEnd_s));
-  cmd->add_option("--live", args->lives,
-                  "also stream the device's bytes to this pty at real time (pose events on "
-                  "standard output); with --controller: a pty to create (or an existing tty) "
-                  "per simulated device, the device answering the daemon's dialogue");
-  cmd->add_option("--controller", args->controller,
-                  "turncald's socket: play the lab's controller too -- announce every pose there "
-                  "and hold the table until every device answered (docs/SIMULATOR.md)");
-  cmd->add_option(
-         "--answer-timeout", args->answer_timeout_s,
-         "with --controller: wall-clock seconds the table waits for an answer before moving on "
-         "(the daemon's timeouts are wall-clock too, whatever --live-speed)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd->add_option("--retries", args->retries,
-                  "with --controller: a rejected pose is announced again this often, 0.25 s after "
-                  "the rejection")
-      ->check(CLI::Range(0, 100))
-      ->capture_default_str();
-  cmd->add_option("--bit-error-rate", args->bit_error_rate,
-                  "with --controller: flip each bit the devices send with this probability "
-                  "(line noise; e.g. 1e-4)")
-      ->check(CLI::Range(0.0, 0.5));
-  cmd->add_option("--unplug", args->unplugs,
-                  "with --controller: POSE:mid|between[:DEVICE] -- the device's pty goes away "
-                  "halfway through the pose's dwell, or when the table leaves the pose, and comes "
-                  "back --unplug-s later (repeatable)");
-  cmd->add_option("--unplug-s", args->unplug_s,
-                  "with --controller: session seconds a device stays unplugged")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd->add_option("--device-state", args->device_state,
-                  "with --live: a folder for the MIP devices' non-volatile storage "
-                  "(DIR/SIM0001.nvm.json): a calibration the daemon saves into a device survives "
-                  "its unplug and the next run");
-  cmd->add_option("--lose-reply", args->lose_replies,
-                  "with --controller: DESC:FUNCTION -- the first 3DM command (set 0x0C) with this "
-                  "descriptor and function (1 write, 2 read, 3 save) is carried out but its reply "
-                  "is lost, e.g. 0x3B:3 (repeatable)");
-  cmd->add_option("--serial", args->serials,
-                  "with --live: the devices' serial numbers, one per --live in order (an Xbus "
-                  "device's is its device id, 8 hex digits); default SIM0001, ... and 03700001, "
-                  "...");
-  cmd->add_option("--hold-end", args->hold_end_s,
-                  "with --controller: after the last pose the table stays there this many session "
-                  "seconds, the devices streaming (time to write a calibration into a device)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--live-speed", args->live_speed, "time scale of --live (2 = twice as fast)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+  AddSimCommandOptions(cmd, args.get());
   cmd->callback([args] {
-    if (args->output.empty() && args->lives.empty()) {
-      throw CLI::ValidationError("sim", "give -o FILE.tcap and/or --live PATH");
-    }
-    args->protocol = args->protocols.front();
-    args->live = args->lives.empty() ? std::string() : args->lives.front();
-    if (args->serials.size() > args->lives.size()) {
-      throw CLI::ValidationError("sim", "--serial: at most one per --live device");
-    }
-    for (std::size_t i = 0; i < args->serials.size(); ++i) {
-      const auto& p = args->protocols.size() == 1 ? args->protocols.front() : args->protocols[i];
-      const std::string& serial = args->serials[i];
-      const bool hex8 = serial.size() == 8 &&
-                        serial.find_first_not_of("0123456789abcdefABCDEF") == std::string::npos;
-      if (serial.empty() || serial.size() > 16 || (p == "xbus" && !hex8)) {
-        throw CLI::ValidationError(
-            "sim", "--serial '" + serial +
-                       "': 1 to 16 characters (an Xbus device's: its device id, 8 hex digits)");
-      }
-    }
-    if (!args->controller.empty()) {
-      if (args->lives.empty()) throw CLI::ValidationError("sim", "--controller needs --live PTY");
-      if (!args->output.empty() || args->faults) {
-        throw CLI::ValidationError("sim", "--controller runs live only (no -o, no --faults)");
-      }
-      if (args->protocols.size() != 1 && args->protocols.size() != args->lives.size()) {
-        throw CLI::ValidationError("sim", "give one --protocol, or one per --live");
-      }
-    } else if (args->bit_error_rate > 0 || !args->unplugs.empty() || !args->lose_replies.empty()) {
-      throw CLI::ValidationError("sim",
-                                 "--bit-error-rate, --unplug and --lose-reply need --controller");
-    } else if (args->lives.size() > 1 || args->protocols.size() > 1) {
-      throw CLI::ValidationError("sim", "several --live devices need --controller");
-    }
+    ValidateSimArgs(args.get());
     throw CLI::RuntimeError(RunSim(*args));
   });
 }
