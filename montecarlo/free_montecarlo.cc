@@ -192,18 +192,9 @@ class FreeMonteCarlo {
     std::sort(s->top_reasons.rbegin(), s->top_reasons.rend());
     if (s->top_reasons.size() > 5) s->top_reasons.resize(5);
     s->z = ZScoreSummary(model_->num_parameters());
-    std::vector<double> p_values;
     double intervals = 0;
-    for (const FreeRun& r : s->runs) {
-      if (!r.ok) {
-        if (s->first_error.empty()) s->first_error = r.error;
-        continue;
-      }
-      ++s->solved;
-      s->z.Add(r.z);
-      p_values.push_back(r.p_value);
-      intervals += r.intervals;
-    }
+    const std::vector<double> p_values =
+        AddSolvedRuns(s, [&](const FreeRun& r) { intervals += r.intervals; });
     if (s->solved < 2) return;
     s->intervals_mean = intervals / s->solved;
     s->ks = KsUniform(p_values);

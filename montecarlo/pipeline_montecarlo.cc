@@ -363,16 +363,8 @@ class PipelineMonteCarlo {
   // The z-scores, p-values, gate and session figures over the runs with an estimate.
   void Summarise(PipelineMonteCarloSummary* s) const {
     s->z = ZScoreSummary(model_->num_parameters());
-    std::vector<double> p_values;
     double poses = 0, session_s = 0, gate_poses = 0, gate_s = 0;
-    for (const PipelineRun& r : s->runs) {
-      if (!r.ok) {
-        if (s->first_error.empty()) s->first_error = r.error;
-        continue;
-      }
-      ++s->solved;
-      s->z.Add(r.z);
-      p_values.push_back(r.p_value);
+    const std::vector<double> p_values = AddSolvedRuns(s, [&](const PipelineRun& r) {
       s->gate_pass += r.gate_pass;
       if (r.gate_poses > 0) {
         ++s->activated;
@@ -382,7 +374,7 @@ class PipelineMonteCarlo {
       }
       poses += r.poses;
       session_s += r.session_s;
-    }
+    });
     if (s->solved < 2) return;
     s->ks = KsUniform(p_values);
     s->poses_mean = poses / s->solved;

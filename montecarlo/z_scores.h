@@ -4,6 +4,8 @@
 // 0.27 % of them beyond 3 sigma, 0.006 % beyond 4, for a normal z).
 
 #include <Eigen/Core>
+#include <string>
+#include <vector>
 
 namespace turncal::montecarlo {
 
@@ -32,5 +34,24 @@ class ZScoreSummary {
   Eigen::VectorXd sum_, sum_sq_;
   Eigen::VectorXi beyond_3_, beyond_4_;
 };
+
+// The runs of an engine's summary (`s->runs`, each with ok, error, z and p_value) that have an
+// estimate, in order: their z-scores added to `s->z`, counted in `s->solved`, and `each` called
+// with each; the first error of the others in `s->first_error`. Returns their p-values.
+template <typename Summary, typename Each>
+std::vector<double> AddSolvedRuns(Summary* s, Each each) {
+  std::vector<double> p_values;
+  for (const auto& r : s->runs) {
+    if (!r.ok) {
+      if (s->first_error.empty()) s->first_error = r.error;
+      continue;
+    }
+    ++s->solved;
+    s->z.Add(r.z);
+    p_values.push_back(r.p_value);
+    each(r);
+  }
+  return p_values;
+}
 
 }  // namespace turncal::montecarlo
