@@ -143,10 +143,7 @@ TEST(Sequencer, WrongAnnouncementIsRejected) {
     seq.Push(x);
   }
   seq.Finish(s.sim.samples.back().t_host_ns);
-  ASSERT_EQ(c.rejected.size(), 1u);
-  EXPECT_EQ(c.rejected[0].index, 4);
-  EXPECT_NE(c.rejected[0].reason.find("wrong announcement"), std::string::npos)
-      << c.rejected[0].reason;
+  ExpectOneRejection(c, 4, "wrong announcement");
   EXPECT_EQ(c.captured.size(), 25u);
 }
 

@@ -99,6 +99,16 @@ inline void Replay(const Session& s, Sequencer* seq) {
   Replay(s, seq, [](Sample*) { return true; });
 }
 
+// The session's one rejection: pose `index` (-1: any pose), for a reason that contains `reason`.
+// (Its ASSERT ends only this function: callers do not look at c.rejected afterwards.)
+inline void ExpectOneRejection(const Collected& c, int index, const std::string& reason) {
+  ASSERT_EQ(c.rejected.size(), 1u);
+  if (index >= 0) {
+    EXPECT_EQ(c.rejected[0].index, index);
+  }
+  EXPECT_NE(c.rejected[0].reason.find(reason), std::string::npos) << c.rejected[0].reason;
+}
+
 // The per-sample noise sigma of the accelerometer in this session.
 inline double AccSigma(const Session& s) {
   return s.options.sensor.acc_noise_density * std::sqrt(s.options.rate_hz / 2.0);
