@@ -4,6 +4,8 @@
 
 #include <benchmark/benchmark.h>
 
+#include <initializer_list>
+
 #include "core/estimation/calibrator.h"
 #include "sim/synthetic.h"
 
@@ -84,36 +86,25 @@ void BM_Accel13IdentifyIncrementalAddPose(benchmark::State& state) {
   IncrementalAddPose(state, true, true);
 }
 
-BENCHMARK(BM_Accel13FullSolve)
-    ->Arg(10)
-    ->Arg(26)
-    ->Arg(50)
-    ->Arg(100)
-    ->Arg(200)
-    ->Arg(500)
-    ->Arg(1000)
-    ->Unit(benchmark::kMillisecond)
-    ->Complexity();
+// A full solve over these pose counts, in ms, with its complexity fitted.
+void OverPoseCounts(benchmark::internal::Benchmark* b, std::initializer_list<int> counts) {
+  for (int n : counts) b->Arg(n);
+  b->Unit(benchmark::kMillisecond)->Complexity();
+}
+
+BENCHMARK(BM_Accel13FullSolve)->Apply([](benchmark::internal::Benchmark* b) {
+  OverPoseCounts(b, {10, 26, 50, 100, 200, 500, 1000});
+});
 BENCHMARK(BM_Accel13IncrementalAddPose)->Arg(100)->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_Accel13DriftFullSolve)
-    ->Arg(26)
-    ->Arg(50)
-    ->Arg(100)
-    ->Arg(200)
-    ->Unit(benchmark::kMillisecond)
-    ->Complexity();
+BENCHMARK(BM_Accel13DriftFullSolve)->Apply([](benchmark::internal::Benchmark* b) {
+  OverPoseCounts(b, {26, 50, 100, 200});
+});
 BENCHMARK(BM_Accel13DriftIncrementalAddPose)->Arg(36)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Accel13IdentifyIncrementalAddPose)->Arg(36)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Mag13FullSolve)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_Mag22FullSolve)
-    ->Arg(10)
-    ->Arg(50)
-    ->Arg(100)
-    ->Arg(200)
-    ->Arg(500)
-    ->Arg(1000)
-    ->Unit(benchmark::kMillisecond)
-    ->Complexity();
+BENCHMARK(BM_Mag22FullSolve)->Apply([](benchmark::internal::Benchmark* b) {
+  OverPoseCounts(b, {10, 50, 100, 200, 500, 1000});
+});
 
 }  // namespace
 }  // namespace turncal

@@ -50,13 +50,19 @@ TEST(FitCheck, ResidualsSmallerThanTheNoiseModelAreReported) {
             std::string::npos);
 }
 
+// The check on `w` finds the innovations too large and its cause names `named`.
+FitCheck ExpectTooLargeNaming(const std::vector<Eigen::Vector3d>& w, const std::string& named) {
+  const FitCheck f = Check(w);
+  EXPECT_EQ(f.verdict, FitVerdict::kTooLarge);
+  EXPECT_NE(f.cause.find(named), std::string::npos) << f.cause;
+  return f;
+}
+
 TEST(FitCheck, OneBadPoseIsNamed) {
   auto w = White(100, 3);
   w[37] = Eigen::Vector3d(9, -8, 10);  // chi^2 + ~245: the upper tail, from one pose
-  const FitCheck f = Check(w);
-  EXPECT_EQ(f.verdict, FitVerdict::kTooLarge);
+  const FitCheck f = ExpectTooLargeNaming(w, "pose 37 alone");
   EXPECT_EQ(f.worst_pose, 37);
-  EXPECT_NE(f.cause.find("pose 37 alone"), std::string::npos) << f.cause;
 }
 
 TEST(FitCheck, ResidualsThatFollowEachOtherAreCalledDrift) {
@@ -65,18 +71,14 @@ TEST(FitCheck, ResidualsThatFollowEachOtherAreCalledDrift) {
   std::vector<Eigen::Vector3d> w(e.size());
   w[0] = e[0];
   for (std::size_t i = 1; i < e.size(); ++i) w[i] = 0.9 * w[i - 1] + e[i];
-  const FitCheck f = Check(w);
-  EXPECT_EQ(f.verdict, FitVerdict::kTooLarge);
+  const FitCheck f = ExpectTooLargeNaming(w, "drift");
   EXPECT_GT(f.lag1_correlation, 0.6);
-  EXPECT_NE(f.cause.find("drift"), std::string::npos) << f.cause;
 }
 
 TEST(FitCheck, OneNoisyAxisIsNamed) {
   auto w = White(100, 5);
   for (auto& v : w) v.y() *= 2.5;
-  const FitCheck f = Check(w);
-  EXPECT_EQ(f.verdict, FitVerdict::kTooLarge);
-  EXPECT_NE(f.cause.find("the y axis"), std::string::npos) << f.cause;
+  ExpectTooLargeNaming(w, "the y axis");
 }
 
 // Calibrations: a drift session calibrated with a noise model 3 x too pessimistic shows chi^2

@@ -30,6 +30,7 @@
 #include "drivers/mip/mip_stored.h"
 #include "protocol/sequencer_json.h"
 #include "sim/device.h"
+#include "tests/support/virtual_link.h"
 
 namespace turncal::daemon {
 namespace {
@@ -45,7 +46,7 @@ const drivers::ExchangeOptions kExchange{std::chrono::milliseconds(50), 3};
 
 // The host's line to the emulated device, on a virtual clock. After `silent_after` commands the
 // device still carries out what it receives but nothing comes back (the cable pulled mid-write).
-class EmulatorLink : public drivers::ByteLink {
+class EmulatorLink : public testing_support::VirtualClockLink {
  public:
   explicit EmulatorLink(sim::DeviceEmulator* device) : device_(device) {}
   // Nothing comes back after `more` commands from now; -1: answers again.
@@ -58,31 +59,14 @@ class EmulatorLink : public drivers::ByteLink {
     if (deaf_after_ >= 0 && commands_ > deaf_after_) return true;
     const std::vector<std::uint8_t> reply = device_->OnHostBytes(bytes);
     if (silent_after_ >= 0 && commands_ > silent_after_) return true;
-    queued_.insert(queued_.end(), reply.begin(), reply.end());
+    Queue(reply);
     return true;
   }
-  long Read(std::span<std::uint8_t> buffer, std::chrono::milliseconds timeout,
-            std::string*) override {
-    if (queued_.empty()) {
-      now_ns_ += std::chrono::duration_cast<std::chrono::nanoseconds>(timeout).count();
-      return 0;
-    }
-    const std::size_t n = std::min(buffer.size(), queued_.size());
-    for (std::size_t i = 0; i < n; ++i) {
-      buffer[i] = queued_.front();
-      queued_.pop_front();
-    }
-    now_ns_ += 100'000;
-    return static_cast<long>(n);
-  }
-  std::int64_t NowNs() override { return now_ns_; }
 
  private:
   sim::DeviceEmulator* device_;
-  std::deque<std::uint8_t> queued_;
   int commands_ = 0;
   int silent_after_ = -1, deaf_after_ = -1;
-  std::int64_t now_ns_ = 0;
 };
 
 using Loop = std::deque<std::function<void()>>;

@@ -38,7 +38,8 @@ import sys
 import tempfile
 import time
 
-from live_session import check, cube_poses, failures, finish_dir, sending_times, wait_for
+from live_session import (check, cube_poses, failures, finish_dir, sending_times,
+                          start_daemon_on_mip, wait_for)
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
 SPEED = 10
@@ -157,15 +158,22 @@ def compare(inside, truth_output, truth, streams, label):
     return worst_raw, worst_corrected
 
 
-def main(d):
+def write_and_check(d, what, code, state, *args):
+    """`turncal device-write imu ARGS` exits CODE with STATE in its last line (the message: its
+    error, or its verification's summary, and stderr)."""
+    r, lines = write(d, *args)
+    reply = lines[-1] if lines else {}
+    detail = reply.get("error") or (reply.get("verification") or {}).get("summary")
+    check(r.returncode == code and reply.get("state") == state,
+          f"{what}: exit {r.returncode}, state {reply.get('state')}, {detail} {r.stderr.strip()}")
+
+
+def first_session(d):
+    """turncald and the first run (20 poses, a reply lost on the line): accel13 and mag13 active,
+    the device's stored calibration told. Returns the daemon, the simulator and that calibration."""
     cube_poses(TURNCAL, f"{d}/poses.csv", 20)
     cube_poses(TURNCAL, f"{d}/poses2.csv", 6)
-    with open(f"{d}/turncald.toml", "w") as f:
-        f.write('[station]\nmodels = ["accel13", "mag13"]\n')
-    daemon = subprocess.Popen(
-        [TURNCALD, "--config", f"{d}/turncald.toml", "--device", f"imu=mip:{d}/mip", "--socket",
-         f"{d}/t.sock", "--state-dir", f"{d}/state"],
-        stdout=open(f"{d}/daemon.log", "w"), stderr=subprocess.STDOUT)
+    daemon = start_daemon_on_mip(TURNCALD, d, ["accel13", "mag13"])
     # The reply to the first save of the soft iron is lost on the line (mag13's write, step 3).
     sim = start_sim(d, f"{d}/poses.csv", "", "--lose-reply", "0x3B:3")
     check(wait_for(f"{d}/t.sock", 30), "turncald's socket is up")
@@ -178,26 +186,32 @@ def main(d):
     original, _ = stored(d)
     check(original is not None and original.get("soft_iron") is not None,
           f"the device told its stored calibration: {original}")
+    return daemon, sim, original
 
-    # 1. The plan, nothing written.
+
+def plan_only(d, original):
+    """1. The plan, nothing written."""
     r = run("device-write", "imu", "--model", "mag13", "--dry-run", "--socket", f"{d}/t.sock")
     check(r.returncode == 0 and "soft-iron matrix" in r.stdout and "to write" in r.stdout and
           "1 sigma" in r.stdout, f"--dry-run shows the plan (exit {r.returncode}):\n{r.stdout}")
     check(stored(d)[0] == original, "--dry-run wrote nothing")
 
-    # 2. A save the device cannot do: rolled back.
+
+
+def rolled_back_save(d, original):
+    """2. A save the device cannot do: rolled back."""
     blocker = f"{d}/nvm/SIM0001.nvm.json.tmp"
     os.makedirs(blocker)
-    r, lines = write(d, "--model", "mag13", "--save")
-    reply = lines[-1] if lines else {}
-    check(r.returncode == 2 and reply.get("state") == "rolled_back",
-          f"a save the device NACKs: exit {r.returncode}, state {reply.get('state')}, "
-          f"{reply.get('error')}")
+    write_and_check(d, "a save the device NACKs", 2, "rolled_back", "--model", "mag13", "--save")
     check(wait_stored(d, original) == original,
           "after the rollback the device holds bit for bit what it held before")
     os.rmdir(blocker)
 
-    # 3. mag13, then accel13, written and saved.
+
+
+def write_and_save(d, original):
+    """3. mag13, then accel13, written and saved. Returns each triad's stream correction and the
+    values the device holds."""
     streams = {}
     for model, triad in (("mag13", "mag"), ("accel13", "acc")):
         r, lines = write(d, "--model", model, "--save")
@@ -231,8 +245,11 @@ def main(d):
     records = [f for f in os.listdir(f"{d}/state/device_writes")
                if f.startswith("imu.") and f != "imu.json"]
     check(len(records) == 3, f"3 writes in the state directory's history: {records}")
+    return streams, written
 
-    # The corrected stream after the writes, at the held pose (the last of the 20).
+
+def check_held_pose(d, streams):
+    """The corrected stream after the writes, at the held pose (the last of the 20)."""
     truth = json.load(open(f"{d}/truth.json"))
     watch = subprocess.Popen([TURNCAL, "watch", "--json", "--corrected", "--raw", "--uncertainty",
                               "--socket", f"{d}/t.sock"], stdout=open(f"{d}/watch_held.jsonl", "w"))
@@ -251,7 +268,10 @@ def main(d):
     else:
         check(False, f"{len(held)} corrected samples at the held pose")
 
-    # 4. The device restarts with what it saved.
+
+
+def restarted_device(d, sim, streams, written):
+    """4. The device restarts with what it saved. Returns the second run's simulator."""
     sim.terminate()
     sim.wait(timeout=30)
     r = run("reset", "--socket", f"{d}/t.sock", "--note", "the device restarted")
@@ -280,13 +300,12 @@ def main(d):
           f"stream's rest within {worst_raw[0]:.2f} sigma ({worst_raw[1]})")
     check(worst_corrected[0] <= 4.0, f"its corrected output is the truth within "
           f"{worst_corrected[0]:.2f} sigma ({worst_corrected[1]})")
+    return sim2
 
-    # 5. Restore.
-    r, lines = write(d, "--restore")
-    reply = lines[-1] if lines else {}
-    check(r.returncode == 0 and reply.get("state") == "saved",
-          f"--restore: exit {r.returncode}, state {reply.get('state')}, "
-          f"{(reply.get('verification') or {}).get('summary')} {r.stderr.strip()}")
+
+def restore(d, original, sim2):
+    """5. Restore."""
+    write_and_check(d, "--restore", 0, "saved", "--restore")
     check(wait_stored(d, original) == original,
           "after --restore the device holds bit for bit what it held before the writes")
     nvm = json.load(open(f"{d}/nvm/SIM0001.nvm.json"))
@@ -295,7 +314,12 @@ def main(d):
     sim2.terminate()
     sim2.wait(timeout=30)
 
-    # 6. A write as the table leaves a pose (a third run; the device starts with what it held
+
+
+def write_as_the_table_leaves_a_pose(d, original):
+    """6. A write as the table leaves a pose (a third run; the device starts with what it held
+    before): verified at once if the windows were still, else at the next captured pose. Returns
+    the third run's simulator."""
     #    before): verified at once if the windows were still, else at the next captured pose.
     watch = subprocess.Popen([TURNCAL, "watch", "--json", "--corrected", "--raw", "--uncertainty",
                               "--socket", f"{d}/t.sock"], stdout=open(f"{d}/watch3.jsonl", "w"))
@@ -348,6 +372,18 @@ def main(d):
     check(compared >= 3 and worst[0] <= 4.0,
           f"after the transform the corrected output is the truth within {worst[0]:.2f} sigma at "
           f"{compared} poses ({worst[1]})")
+    return sim3
+
+
+def main(d):
+    daemon, sim, original = first_session(d)
+    plan_only(d, original)
+    rolled_back_save(d, original)
+    streams, written = write_and_save(d, original)
+    check_held_pose(d, streams)
+    sim2 = restarted_device(d, sim, streams, written)
+    restore(d, original, sim2)
+    sim3 = write_as_the_table_leaves_a_pose(d, original)
     sim3.terminate()
     sim3.wait(timeout=30)
     daemon.terminate()

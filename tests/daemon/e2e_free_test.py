@@ -25,10 +25,9 @@ import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 
-from live_session import check, failures, finish_dir, wait_for
+from live_session import check, run_in_temp_dir, wait_for
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
 SPEED = 10
@@ -150,10 +149,4 @@ configure = false
     socat.terminate()
 
 
-d = tempfile.mkdtemp(prefix="turncal-e2e-free-")
-try:
-    main(d)
-finally:
-    finish_dir(d)
-print(f"e2e: {len(failures)} failure(s)")
-sys.exit(1 if failures else 0)
+run_in_temp_dir(main, "turncal-e2e-free-")

@@ -22,7 +22,7 @@ import sys
 import tempfile
 import time
 
-from live_session import check, failures, finish_dir, wait_for, worst_sigma
+from live_session import check, run_in_temp_dir, start_daemon_on_mip, wait_for, worst_sigma
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
 SPEED = 10
@@ -48,12 +48,7 @@ def write_poses(path):
 
 def main(d):
     n_poses = write_poses(f"{d}/poses.csv")
-    with open(f"{d}/turncald.toml", "w") as f:
-        f.write('[station]\nmodels = ["accel13", "mag13", "gyro12"]\n')
-    daemon = subprocess.Popen(
-        [TURNCALD, "--config", f"{d}/turncald.toml", "--device", f"imu=mip:{d}/mip", "--socket",
-         f"{d}/t.sock", "--state-dir", f"{d}/state"],
-        stdout=open(f"{d}/daemon.log", "w"), stderr=subprocess.STDOUT)
+    daemon = start_daemon_on_mip(TURNCALD, d, ["accel13", "mag13", "gyro12"])
     sim = subprocess.Popen(
         [TURNCAL, "sim", "--protocol", "mip", "--model", "gyro12", "--live", f"{d}/mip",
          "--controller", f"{d}/t.sock", "--live-speed", str(SPEED), "--poses", f"{d}/poses.csv",
@@ -130,10 +125,4 @@ def main(d):
     check(daemon.wait(timeout=20) == 0, "SIGTERM: turncald exits 0")
 
 
-d = tempfile.mkdtemp(prefix="turncal-e2e-gyro-")
-try:
-    main(d)
-finally:
-    finish_dir(d)
-print(f"e2e: {len(failures)} failure(s)")
-sys.exit(1 if failures else 0)
+run_in_temp_dir(main, "turncal-e2e-gyro-")

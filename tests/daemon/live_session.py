@@ -6,6 +6,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import time
 
@@ -68,6 +69,29 @@ def finish_dir(d):
         print(f"(kept {d} for inspection)")
     else:
         shutil.rmtree(d, ignore_errors=True)
+
+
+def run_in_temp_dir(main, prefix):
+    """main(DIR) in a new temporary directory, then finish_dir(DIR); the end line `e2e: N
+    failure(s)` and exit 1 on a failure, 0 otherwise (an exception propagates after the clean-up)."""
+    d = tempfile.mkdtemp(prefix=prefix)
+    try:
+        main(d)
+    finally:
+        finish_dir(d)
+    print(f"e2e: {len(failures)} failure(s)")
+    sys.exit(1 if failures else 0)
+
+
+def start_daemon_on_mip(turncald, d, models):
+    """turncald with [station] models = MODELS on one MIP device, imu on the pty DIR/mip; its
+    socket DIR/t.sock, state DIR/state, configuration DIR/turncald.toml, log DIR/daemon.log."""
+    with open(f"{d}/turncald.toml", "w") as f:
+        f.write("[station]\nmodels = [" + ", ".join(f'"{m}"' for m in models) + "]\n")
+    return subprocess.Popen(
+        [turncald, "--config", f"{d}/turncald.toml", "--device", f"imu=mip:{d}/mip", "--socket",
+         f"{d}/t.sock", "--state-dir", f"{d}/state"],
+        stdout=open(f"{d}/daemon.log", "w"), stderr=subprocess.STDOUT)
 
 
 def sending_times(samples):

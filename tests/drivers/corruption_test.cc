@@ -123,14 +123,22 @@ Sample Numbered(int i) {
 
 constexpr int kFrames = 20000;
 
+// The stream of `frames`, corrupted with `seed`: most frames stay intact and every intact one is
+// recovered.
+Outcome ExpectEveryIntactFrameRecovered(Protocol protocol, const std::vector<Bytes>& frames,
+                                        std::uint64_t seed) {
+  const Outcome o = RunCorrupted(protocol, frames, seed);
+  EXPECT_GT(o.intact, kFrames * 9 / 10);
+  EXPECT_EQ(o.recovered, o.intact);
+  return o;
+}
+
 TEST(Corruption, MipRecoversEveryIntactFrameAndAcceptsNoCorruptedOne) {
   std::vector<Bytes> frames;
   for (int i = 0; i < kFrames; ++i) {
     frames.push_back(i % 50 == 0 ? mip::Reply(0x01, 0x01, 0x00) : mip::SensorPacket(Numbered(i)));
   }
-  const Outcome o = RunCorrupted(Protocol::kMip, frames, 11);
-  EXPECT_GT(o.intact, kFrames * 9 / 10);
-  EXPECT_EQ(o.recovered, o.intact);
+  const Outcome o = ExpectEveryIntactFrameRecovered(Protocol::kMip, frames, 11);
   EXPECT_EQ(o.false_accepts, 0u);
 }
 
@@ -140,9 +148,7 @@ TEST(Corruption, XbusRecoversEveryIntactFrame) {
     frames.push_back(i % 50 == 0 ? xbus::Message(xbus::kGoToConfigAck)
                                  : xbus::MtData2(Numbered(i), {i % 4, VectorFrame::kEnu}));
   }
-  const Outcome o = RunCorrupted(Protocol::kXbus, frames, 12);
-  EXPECT_GT(o.intact, kFrames * 9 / 10);
-  EXPECT_EQ(o.recovered, o.intact);
+  const Outcome o = ExpectEveryIntactFrameRecovered(Protocol::kXbus, frames, 12);
   // The 8-bit checksum and the item structure let very few through (PROTOCOLS.md: ~1/256 of the
   // corrupted candidates pass the checksum alone): 2 of ~1600 corrupted messages with this seed.
   EXPECT_LT(o.false_accepts, 5u);
@@ -151,9 +157,7 @@ TEST(Corruption, XbusRecoversEveryIntactFrame) {
 TEST(Corruption, Gx2RecoversEveryIntactFrame) {
   std::vector<Bytes> frames;
   for (int i = 0; i < kFrames; ++i) frames.push_back(gx2::Reply(0xCB, Numbered(i), {}));
-  const Outcome o = RunCorrupted(Protocol::kGx2, frames, 13);
-  EXPECT_GT(o.intact, kFrames * 9 / 10);
-  EXPECT_EQ(o.recovered, o.intact);
+  const Outcome o = ExpectEveryIntactFrameRecovered(Protocol::kGx2, frames, 13);
   EXPECT_LT(o.false_accepts, 5u);
 }
 

@@ -10,14 +10,16 @@
 #include "drivers/mip/mip_encoder.h"
 #include "drivers/xbus/xbus_dialogue.h"
 #include "drivers/xbus/xbus_encoder.h"
+#include "tests/support/virtual_link.h"
 
 namespace turncal::drivers {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-class ScriptedLink : public ByteLink {
+class ScriptedLink : public testing_support::VirtualClockLink {
  public:
+  ScriptedLink() : VirtualClockLink(37) {}
   std::function<Bytes(std::span<const std::uint8_t>)> on_write;  // the device's answer
   std::function<Bytes()> stream;                                 // data while streaming
   bool streaming = true;
@@ -35,30 +37,13 @@ class ScriptedLink : public ByteLink {
     Queue(on_write(bytes));
     return true;
   }
-  long Read(std::span<std::uint8_t> buffer, std::chrono::milliseconds timeout,
-            std::string*) override {
-    if (queued_.empty() && streaming) {
-      Queue(stream());
-      now_ns_ += 2'000'000;
-    }
-    if (queued_.empty()) {
-      now_ns_ += std::chrono::duration_cast<std::chrono::nanoseconds>(timeout).count();
-      return 0;
-    }
-    const std::size_t n = std::min<std::size_t>({buffer.size(), queued_.size(), 37});
-    for (std::size_t i = 0; i < n; ++i) {
-      buffer[i] = queued_.front();
-      queued_.pop_front();
-    }
-    now_ns_ += 100'000;
-    return static_cast<long>(n);
-  }
-  std::int64_t NowNs() override { return now_ns_; }
 
- private:
-  void Queue(const Bytes& b) { queued_.insert(queued_.end(), b.begin(), b.end()); }
-  std::deque<std::uint8_t> queued_;
-  std::int64_t now_ns_ = 0;
+ protected:
+  bool StreamWhileIdle() override {
+    if (!streaming) return false;
+    Queue(stream());
+    return true;
+  }
 };
 
 Bytes Floats(std::initializer_list<float> values) {

@@ -161,18 +161,9 @@ def check_all_once(pg, st, what):
     return files
 
 
-def main(d):
-    if not pg_server.available():
-        print("SKIP: PostgreSQL (initdb, pg_ctl, psql) is not installed: apt-get install postgresql")
-        return 77
-    pg = pg_server.PgServer(f"{d}/pg", tls=True)
-    pg.init(password=PASSWORD)
-    os.environ["PGPASSWORD"] = PASSWORD  # psql's, for the checks
-    db = pg.conninfo()
-    cube_poses(TURNCAL, f"{d}/poses.csv", 9)
-
-    # 1. line-a: a MIP and an Xbus IMU, the registry up throughout, reached over TLS (TCP,
-    # sslmode=verify-full against the server's certificate).
+def line_a(d, pg):
+    """1. line-a: a MIP and an Xbus IMU, the registry up throughout, reached over TLS (TCP,
+    sslmode=verify-full against the server's certificate). Returns the station, stopped."""
     a = Station(f"{d}/a", "line-a", pg.tls_conninfo())
     a.start()
     tls = wait_until(lambda: pg.psql(
@@ -206,8 +197,12 @@ def main(d):
           (len(writes) == 1 and writes[0][0] == "6251.00001" and writes[0][1] == "write"),
           f"line-a: the write into the device is in the registry once: {writes}")
     a.stop()
+    return a
 
-    # 2. A password file others may read is refused, with a clear reason in `status`.
+
+def line_a_refusals(d, pg, a):
+    """2. A password file others may read, and a server certificate another CA signed, are
+    refused with their reason in `status`."""
     os.chmod(f"{a.d}/password", 0o644)
     a.start()
     r = wait_until(lambda: (a.registry() or {}).get("last_error"), 30)
@@ -226,7 +221,11 @@ def main(d):
     a.stop()
     open(f"{a.d}/turncald.toml", "w").write(toml)
 
-    # 3. line-b: the server stops mid-session.
+
+def line_b_server_stops(d, pg, db):
+    """3. line-b: the server stops mid-session; kill -9 with entries in the outbox, the newest
+    entry removed (a crash between a calibration's file and its entry). Returns the station, the
+    outbox's depth and the removed entry's key."""
     b = Station(f"{d}/b", "line-b", db)
     b.start()
     sim = b.simulate(["6251.00003", "03A00004"], 12, f"{d}/poses.csv")
@@ -249,8 +248,12 @@ def main(d):
     lost = b.outbox()[-1]
     lost_key = json.load(open(lost))["key"]
     os.unlink(lost)
+    return b, waiting, lost_key
 
-    # 4. The server is back; turncald holds after its first commit and is killed there.
+
+def line_b_restarts(pg, b, waiting, lost_key):
+    """4. The server is back; turncald holds after its first commit and is killed there. 5. A
+    normal start drains the outbox; the committed entry is not written twice."""
     pg.start()
     b.start({"TURNCAL_TEST_REGISTRY_HOLD_AFTER_COMMIT": "1"})
     check(wait_until(lambda: "holding before it leaves the outbox" in b.log(), 60),
@@ -273,7 +276,10 @@ def main(d):
     check(lost_key in registry_keys(pg, "line-b"), f"line-b: {lost_key} (its entry lost) arrived")
     check(len(held) < len(files_b), "line-b: calibrations arrived after the restarts")
 
-    # 6. 6251.00001 moves from line-a to line-b.
+
+def moved_imu(d, pg, b, db):
+    """6. 6251.00001 moves from line-a to line-b: history across stations, latest, export,
+    stations."""
     check(run("reset", "--socket", f"{b.d}/t.sock").returncode == 0, "line-b: reset")
     sim = b.simulate(["6251.00001", "03A00004"], 13, f"{d}/poses.csv")
     check(sim.wait(timeout=300) == 0, "line-b: the moved IMU's 9 poses were answered")
@@ -311,7 +317,11 @@ def main(d):
     stations = {s["station"]: s for s in json.loads(r.stdout)} if r.returncode == 0 else {}
     check(set(stations) == {"line-a", "line-b"} and stations["line-b"]["calibrations"] > 0,
           f"registry stations: {sorted(stations)} with their last contact")
-    # A certificate of the moved IMU's latest passing accel13, straight from the registry.
+
+
+def registry_certificate(d, db):
+    """A certificate of the moved IMU's latest passing accel13, straight from the registry; a
+    forgery with a recomputed hash passes certificate --verify but not registry verify."""
     r = run("registry", "certificate", "6251.00001", "--model", "accel13", "-o", f"{d}/cert.html",
             "--db", db)
     v = run("certificate", "--verify", f"{d}/cert.html")
@@ -334,6 +344,23 @@ def main(d):
     r = run("registry", "verify", f"{d}/forged.html", "--db", db)
     check(r.returncode == 1 and "did not issue it" in r.stdout,
           f"registry verify refuses the forgery: {r.stdout.strip()}")
+
+
+def main(d):
+    if not pg_server.available():
+        print("SKIP: PostgreSQL (initdb, pg_ctl, psql) is not installed: apt-get install postgresql")
+        return 77
+    pg = pg_server.PgServer(f"{d}/pg", tls=True)
+    pg.init(password=PASSWORD)
+    os.environ["PGPASSWORD"] = PASSWORD  # psql's, for the checks
+    db = pg.conninfo()
+    cube_poses(TURNCAL, f"{d}/poses.csv", 9)
+    a = line_a(d, pg)
+    line_a_refusals(d, pg, a)
+    b, waiting, lost_key = line_b_server_stops(d, pg, db)
+    line_b_restarts(pg, b, waiting, lost_key)
+    moved_imu(d, pg, b, db)
+    registry_certificate(d, db)
     dup = pg.psql("SELECT count(*) - count(DISTINCT document) FROM calibrations")[0][0]
     check(dup == "0", "no calibration document is in the registry twice")
     b.stop()

@@ -13,6 +13,7 @@
 
 #include "drivers/mip/mip_encoder.h"
 #include "sim/device.h"
+#include "tests/support/virtual_link.h"
 
 namespace turncal::sim {
 namespace {
@@ -23,7 +24,7 @@ namespace mip = drivers::mip;
 // The host's link to the emulated device on a virtual clock, streaming while the device streams;
 // replies can be lost: the `lose`-th command to 3DM descriptor `lose_descriptor` (1-based, counted
 // over retries too) and, with `silent_after`, every reply after that many commands.
-class LossyLink : public drivers::ByteLink {
+class LossyLink : public testing_support::VirtualClockLink {
  public:
   explicit LossyLink(DeviceEmulator* device) : device_(device) {}
   std::uint8_t lose_descriptor = 0;
@@ -42,21 +43,6 @@ class LossyLink : public drivers::ByteLink {
     Queue(reply);
     return true;
   }
-  long Read(std::span<std::uint8_t> buffer, std::chrono::milliseconds timeout,
-            std::string*) override {
-    if (queued_.empty()) {
-      now_ns_ += std::chrono::duration_cast<std::chrono::nanoseconds>(timeout).count();
-      return 0;
-    }
-    const std::size_t n = std::min(buffer.size(), queued_.size());
-    for (std::size_t i = 0; i < n; ++i) {
-      buffer[i] = queued_.front();
-      queued_.pop_front();
-    }
-    now_ns_ += 100'000;
-    return static_cast<long>(n);
-  }
-  std::int64_t NowNs() override { return now_ns_; }
 
  private:
   static Sample StreamSample() {
@@ -67,10 +53,7 @@ class LossyLink : public drivers::ByteLink {
     s.mag = Eigen::Vector3d(0.2, 0, 0.4);
     return s;
   }
-  void Queue(const Bytes& b) { queued_.insert(queued_.end(), b.begin(), b.end()); }
   DeviceEmulator* device_;
-  std::deque<std::uint8_t> queued_;
-  std::int64_t now_ns_ = 0;
 };
 
 const drivers::ExchangeOptions kOptions{std::chrono::milliseconds(50), 3};

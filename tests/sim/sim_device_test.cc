@@ -14,6 +14,7 @@
 #include "drivers/xbus/xbus_dialogue.h"
 #include "drivers/xbus/xbus_encoder.h"
 #include "sim/capture.h"
+#include "tests/support/virtual_link.h"
 
 namespace turncal::sim {
 namespace {
@@ -54,9 +55,10 @@ Bytes SampleFrame(Protocol protocol, std::uint32_t counter) {
 // The host's link to an emulated device, on a virtual clock. Each write goes to the emulator
 // (whole, or one byte at a time); while the emulator streams, sample frames are already on their
 // way before its reply and keep coming when the host waits.
-class EmulatorLink : public drivers::ByteLink {
+class EmulatorLink : public testing_support::VirtualClockLink {
  public:
-  EmulatorLink(DeviceEmulator* device, Protocol protocol) : device_(device), protocol_(protocol) {}
+  EmulatorLink(DeviceEmulator* device, Protocol protocol)
+      : VirtualClockLink(37), device_(device), protocol_(protocol) {}
 
   bool byte_at_a_time = false;
   int corrupt_write = 0;  // 1-based index of the write whose last byte is flipped; 0: none
@@ -79,34 +81,19 @@ class EmulatorLink : public drivers::ByteLink {
                      device_->streaming());
     return true;
   }
-  long Read(std::span<std::uint8_t> buffer, std::chrono::milliseconds timeout,
-            std::string*) override {
-    if (queued_.empty() && device_->streaming()) {
-      Stream();
-      now_ns_ += 2'000'000;
-    }
-    if (queued_.empty()) {
-      now_ns_ += std::chrono::duration_cast<std::chrono::nanoseconds>(timeout).count();
-      return 0;
-    }
-    const std::size_t n = std::min<std::size_t>({buffer.size(), queued_.size(), 37});
-    for (std::size_t i = 0; i < n; ++i) {
-      buffer[i] = queued_.front();
-      queued_.pop_front();
-    }
-    now_ns_ += 100'000;
-    return static_cast<long>(n);
+
+ protected:
+  bool StreamWhileIdle() override {
+    if (!device_->streaming()) return false;
+    Stream();
+    return true;
   }
-  std::int64_t NowNs() override { return now_ns_; }
 
  private:
   void Stream() { Queue(SampleFrame(protocol_, static_cast<std::uint32_t>(frames_streamed++))); }
-  void Queue(const Bytes& b) { queued_.insert(queued_.end(), b.begin(), b.end()); }
 
   DeviceEmulator* device_;
   Protocol protocol_;
-  std::deque<std::uint8_t> queued_;
-  std::int64_t now_ns_ = 0;
 };
 
 // Short timeouts: the clock is virtual anyway, this keeps the retries quick.

@@ -10,13 +10,8 @@ set -uo pipefail
 turncal=$1
 turncald=$2
 keep=${3:-}
-dir=$(mktemp -d)
-trap 'rm -rf "$dir"' EXIT
-failures=0
-fail() {
-  echo "FAIL: $*"
-  failures=$((failures + 1))
-}
+# shellcheck source=shell_test_lib.sh
+. "$(dirname "$0")/shell_test_lib.sh"
 die() {
   echo "FAIL: $*"
   echo "certificate chromium: $((failures + 1)) failures"

@@ -8,13 +8,8 @@
 set -uo pipefail
 turncal=$1
 turncald=$2
-dir=$(mktemp -d)
-trap 'rm -rf "$dir"' EXIT
-failures=0
-fail() {
-  echo "FAIL: $*"
-  failures=$((failures + 1))
-}
+# shellcheck source=shell_test_lib.sh
+. "$(dirname "$0")/shell_test_lib.sh"
 # expect_refusal WORDS COMMAND...: exit code 2 and WORDS in the message.
 expect_refusal() {
   local words=$1
