@@ -257,64 +257,99 @@ DriftScale Calibrator::IdentifyDrift(const Estimate& est) const {
   return IdentifyDriftScale(J, r, white, windows, options_.drift, options_.drift_scale);
 }
 
-Estimate Calibrator::SolveOnce() {
-  Estimate est;
-  est.model = options_.model;
-  est.poses = num_poses() - moves_;
-  est.moves = moves_;
-  if (!model_) {
-    est.error = model_error_;
-    return est;
-  }
-  est.parameters = model_->parameters();
-  const int N = model_->num_parameters();
-  const int n = num_poses();
-  const bool gauge = model_->gauge_dimension() > 0;
-  const int identifiable = N - model_->gauge_dimension();
-  if (3 * n < identifiable) {
-    est.error = fmt::format("{} poses give {} equations for {} parameters: add at least {} poses",
-                            n, 3 * n, identifiable, (identifiable + 2) / 3 - n);
-    return est;
-  }
+namespace {
 
-  {
-    std::string error;
-    if (!BuildBlocks(&error)) {
-      est.error = error;
-      return est;
-    }
-  }
-
+// The solver's problem does not own the blocks or the loss: the calibrator keeps them.
+ceres::Problem::Options ProblemOptions() {
   ceres::Problem::Options problem_options;
   problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  return problem_options;
+}
+
+ceres::Solver::Options SolverOptions(const CalibratorOptions& options) {
   ceres::Solver::Options solver_options;
   solver_options.minimizer_type = ceres::TRUST_REGION;
   solver_options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
   solver_options.linear_solver_type = ceres::DENSE_QR;
-  solver_options.max_num_iterations = options_.max_iterations;
-  solver_options.function_tolerance = options_.function_tolerance;
-  solver_options.gradient_tolerance = options_.gradient_tolerance;
-  solver_options.parameter_tolerance = options_.parameter_tolerance;
+  solver_options.max_num_iterations = options.max_iterations;
+  solver_options.function_tolerance = options.function_tolerance;
+  solver_options.gradient_tolerance = options.gradient_tolerance;
+  solver_options.parameter_tolerance = options.parameter_tolerance;
   solver_options.logging_type = ceres::SILENT;
   solver_options.num_threads = 1;
+  return solver_options;
+}
 
-  auto run = [&](Eigen::VectorXd* theta, ceres::Solver::Summary* summary) {
-    ceres::Problem problem(problem_options);
-    for (auto* block : blocks_) problem.AddResidualBlock(block, loss_.get(), theta->data());
-    ceres::Solve(solver_options, &problem, summary);
-  };
+// One solve of `blocks` over theta from where it stands.
+void RunSolver(const std::vector<ceres::CostFunction*>& blocks, ceres::LossFunction* loss,
+               const CalibratorOptions& options, Eigen::VectorXd* theta,
+               ceres::Solver::Summary* summary) {
+  ceres::Problem problem(ProblemOptions());
+  for (auto* block : blocks) problem.AddResidualBlock(block, loss, theta->data());
+  ceres::Solve(SolverOptions(options), &problem, summary);
+}
 
+}  // namespace
+
+Estimate Calibrator::SolveOnce() {
+  Estimate est;
+  if (!PrepareSolve(&est)) return est;
   Eigen::VectorXd theta;
+  if (!Minimize(&theta, &est)) {
+    theta_.resize(0);
+    return est;
+  }
+  Canonicalize(&theta, &est);
+  Eigen::MatrixXd cov = RankAndCovariance(&theta, &est);
+  ComputeResiduals(theta, &est);
+  CheckFitAndInflate(&est, &cov);
+  est.theta = theta;
+  est.covariance = cov;
+  est.sigma = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  MarkUndetermined(theta, &est);
+  est.ok = true;
+  theta_ = theta;
+  last_cost_per_dof_ = est.dof > 0 ? est.chi2 / est.dof : 0.0;
+  return est;
+}
+
+bool Calibrator::PrepareSolve(Estimate* est) {
+  est->model = options_.model;
+  est->poses = num_poses() - moves_;
+  est->moves = moves_;
+  if (!model_) {
+    est->error = model_error_;
+    return false;
+  }
+  est->parameters = model_->parameters();
+  const int n = num_poses();
+  const int identifiable = model_->num_parameters() - model_->gauge_dimension();
+  if (3 * n < identifiable) {
+    est->error = fmt::format("{} poses give {} equations for {} parameters: add at least {} poses",
+                             n, 3 * n, identifiable, (identifiable + 2) / 3 - n);
+    return false;
+  }
+  std::string error;
+  if (!BuildBlocks(&error)) {
+    est->error = error;
+    return false;
+  }
+  return true;
+}
+
+bool Calibrator::Minimize(Eigen::VectorXd* theta, Estimate* est) const {
+  const int n = num_poses();
+  const int identifiable = model_->num_parameters() - model_->gauge_dimension();
   ceres::Solver::Summary summary;
-  bool warm = theta_.size() == N;
+  bool warm = theta_.size() == model_->num_parameters();
   if (warm) {
-    theta = theta_;
-    run(&theta, &summary);
+    *theta = theta_;
+    RunSolver(blocks_, loss_.get(), options_, theta, &summary);
     const double cost_per_dof = 2 * summary.final_cost / std::max(1, 3 * n - identifiable);
-    if (!summary.IsSolutionUsable() || !theta.allFinite() ||
+    if (!summary.IsSolutionUsable() || !theta->allFinite() ||
         cost_per_dof > options_.restart_cost_ratio * std::max(last_cost_per_dof_, 1.0)) {
-      est.warnings.push_back(fmt::format(
+      est->warnings.push_back(fmt::format(
           "the warm-started solve ended at cost/dof {:.3g} (was {:.3g}); restarted from the "
           "linear form",
           cost_per_dof, last_cost_per_dof_));
@@ -323,30 +358,35 @@ Estimate Calibrator::SolveOnce() {
   }
   if (!warm) {
     std::string error;
-    if (StartFromLinearForm(&theta, &error)) {
-      est.linear_start = true;
+    if (StartFromLinearForm(theta, &error)) {
+      est->linear_start = true;
     } else {
-      est.warnings.push_back("no linear start (" + error + "); started from nominal values");
-      theta = model_->nominal();
+      est->warnings.push_back("no linear start (" + error + "); started from nominal values");
+      *theta = model_->nominal();
     }
-    run(&theta, &summary);
+    RunSolver(blocks_, loss_.get(), options_, theta, &summary);
   }
-  est.iterations = static_cast<int>(summary.iterations.size());
-  est.termination = ceres::TerminationTypeToString(summary.termination_type);
-  est.solve_time_s = summary.total_time_in_seconds;
-  if (!summary.IsSolutionUsable() || !theta.allFinite()) {
-    est.error = "the solver failed: " + summary.message;
-    theta_.resize(0);
-    return est;
+  est->iterations = static_cast<int>(summary.iterations.size());
+  est->termination = ceres::TerminationTypeToString(summary.termination_type);
+  est->solve_time_s = summary.total_time_in_seconds;
+  if (!summary.IsSolutionUsable() || !theta->allFinite()) {
+    est->error = "the solver failed: " + summary.message;
+    return false;
   }
   if (summary.termination_type == ceres::NO_CONVERGENCE) {
-    est.warnings.push_back(
-        fmt::format("the solver stopped after {} iterations without converging", est.iterations));
+    est->warnings.push_back(
+        fmt::format("the solver stopped after {} iterations without converging", est->iterations));
   }
+  return true;
+}
+
+void Calibrator::Canonicalize(Eigen::VectorXd* theta_out, Estimate* est) const {
+  Eigen::VectorXd& theta = *theta_out;
+  const int N = model_->num_parameters();
   // The heading beta is an angle: its estimate is reported in (-pi, pi] (a solve may end a turn
   // away, which is the same calibration).
   for (int j = 0; j < N; ++j) {
-    if (est.parameters[static_cast<std::size_t>(j)].name == "beta") {
+    if (est->parameters[static_cast<std::size_t>(j)].name == "beta") {
       theta[j] = std::remainder(theta[j], 2 * M_PI);
     }
   }
@@ -372,147 +412,159 @@ Estimate Calibrator::SolveOnce() {
       theta.segment<3>(iE) = canonical.eps;
     }
   }
-  if (gauge) {
+  if (model_->gauge_dimension() > 0) {
     ApplyMag22Gauge(*model_, &theta);
-    est.gauge = ToString(options_.mag22_gauge);
+    est->gauge = ToString(options_.mag22_gauge);
   }
+}
 
+Eigen::MatrixXd Calibrator::RankAndCovariance(Eigen::VectorXd* theta, Estimate* est) const {
+  const int N = model_->num_parameters();
+  const int identifiable = N - model_->gauge_dimension();
   // Jacobian at the estimate, as the solver sees it (whitened, robust loss applied).
-  ceres::Problem problem(problem_options);
-  for (auto* block : blocks_) problem.AddResidualBlock(block, loss_.get(), theta.data());
+  ceres::Problem problem(ProblemOptions());
+  for (auto* block : blocks_) problem.AddResidualBlock(block, loss_.get(), theta->data());
   const Eigen::MatrixXd J = DenseJacobian(&problem);
   Eigen::VectorXd scale = J.colwise().norm().transpose();
   for (int j = 0; j < N; ++j) scale[j] = scale[j] > 0 ? 1.0 / scale[j] : 1.0;
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(J * scale.asDiagonal(), Eigen::ComputeThinV);
   const Eigen::VectorXd& s = svd.singularValues();
-  est.rank = 0;
-  for (int i = 0; i < s.size(); ++i) est.rank += s[i] > options_.rank_tolerance * s[0];
-  est.condition = s[s.size() - 1] > 0 ? s[0] / s[s.size() - 1] : INFINITY;
+  est->rank = 0;
+  for (int i = 0; i < s.size(); ++i) est->rank += s[i] > options_.rank_tolerance * s[0];
+  est->condition = s[s.size() - 1] > 0 ? s[0] / s[s.size() - 1] : INFINITY;
   const int expected_rank = identifiable;
-  if (est.rank < expected_rank) {
-    est.warnings.push_back(
+  if (est->rank < expected_rank) {
+    est->warnings.push_back(
         fmt::format("rank {} of {}: the poses do not determine every parameter (pose diversity)",
-                    est.rank, expected_rank));
+                    est->rank, expected_rank));
   }
 
   // Covariance: Ceres' dense SVD for the models without a gauge; for mag22 the inverse Fisher
-  // information restricted to the gauge's tangent space, B (B^T J^T J B)^-1 B^T.
+  // information restricted to the gauge's tangent space.
+  if (model_->gauge_dimension() > 0) return GaugeCovariance(J, *theta);
   Eigen::MatrixXd cov(N, N);
-  if (gauge) {
-    const Eigen::MatrixXd B = Mag22GaugeTangentBasis(*model_, theta);
-    const Eigen::MatrixXd JB = J * B;
-    Eigen::JacobiSVD<Eigen::MatrixXd> svd_b(JB, Eigen::ComputeThinV);
-    const Eigen::VectorXd sb = svd_b.singularValues();
-    Eigen::VectorXd inv = Eigen::VectorXd::Zero(sb.size());
-    for (int i = 0; i < sb.size(); ++i)
-      if (sb[i] > options_.rank_tolerance * sb[0]) inv[i] = 1.0 / (sb[i] * sb[i]);
-    cov = B * svd_b.matrixV() * inv.asDiagonal() * svd_b.matrixV().transpose() * B.transpose();
+  ceres::Covariance::Options cov_options;
+  cov_options.algorithm_type = ceres::DENSE_SVD;
+  cov_options.null_space_rank = est->rank < N ? N - est->rank : 0;
+  cov_options.num_threads = 1;
+  ceres::Covariance covariance(cov_options);
+  std::vector<std::pair<const double*, const double*>> blocks = {{theta->data(), theta->data()}};
+  if (covariance.Compute(blocks, &problem)) {
+    covariance.GetCovarianceBlock(theta->data(), theta->data(), cov.data());
   } else {
-    ceres::Covariance::Options cov_options;
-    cov_options.algorithm_type = ceres::DENSE_SVD;
-    cov_options.null_space_rank = est.rank < N ? N - est.rank : 0;
-    cov_options.num_threads = 1;
-    ceres::Covariance covariance(cov_options);
-    std::vector<std::pair<const double*, const double*>> blocks = {{theta.data(), theta.data()}};
-    if (covariance.Compute(blocks, &problem)) {
-      covariance.GetCovarianceBlock(theta.data(), theta.data(), cov.data());
-    } else {
-      est.warnings.push_back("Ceres could not compute the covariance; using the pseudo-inverse");
-      const Eigen::MatrixXd& V = svd.matrixV();
-      Eigen::VectorXd inv = Eigen::VectorXd::Zero(s.size());
-      for (int i = 0; i < est.rank; ++i) inv[i] = 1.0 / (s[i] * s[i]);
-      cov = scale.asDiagonal() * V * inv.asDiagonal() * V.transpose() * scale.asDiagonal();
-    }
+    est->warnings.push_back("Ceres could not compute the covariance; using the pseudo-inverse");
+    const Eigen::MatrixXd& V = svd.matrixV();
+    Eigen::VectorXd inv = Eigen::VectorXd::Zero(s.size());
+    for (int i = 0; i < est->rank; ++i) inv[i] = 1.0 / (s[i] * s[i]);
+    cov = scale.asDiagonal() * V * inv.asDiagonal() * V.transpose() * scale.asDiagonal();
   }
+  return cov;
+}
 
+Eigen::MatrixXd Calibrator::GaugeCovariance(const Eigen::MatrixXd& J,
+                                            const Eigen::VectorXd& theta) const {
+  // B (B^T J^T J B)^-1 B^T, B the gauge's tangent basis.
+  const Eigen::MatrixXd B = Mag22GaugeTangentBasis(*model_, theta);
+  const Eigen::MatrixXd JB = J * B;
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd_b(JB, Eigen::ComputeThinV);
+  const Eigen::VectorXd sb = svd_b.singularValues();
+  Eigen::VectorXd inv = Eigen::VectorXd::Zero(sb.size());
+  for (int i = 0; i < sb.size(); ++i)
+    if (sb[i] > options_.rank_tolerance * sb[0]) inv[i] = 1.0 / (sb[i] * sb[i]);
+  Eigen::MatrixXd cov(model_->num_parameters(), model_->num_parameters());
+  cov = B * svd_b.matrixV() * inv.asDiagonal() * svd_b.matrixV().transpose() * B.transpose();
+  return cov;
+}
+
+void Calibrator::ComputeResiduals(const Eigen::VectorXd& theta, Estimate* est) const {
+  const int n = num_poses();
   // Residuals, chi^2 (without the robust loss: the likelihood of the data as they are).
   // With drift a pose's whitened residual is its innovation (what the earlier poses did not
   // predict of it), so chi^2 = r^T C^-1 r and an outlier is judged against its own sigma.
-  est.chi2 = 0;
+  est->chi2 = 0;
   for (const auto& p : poses_) {
     PoseResidual r;
     r.raw = MeasuredMinusPredicted(p, theta, nullptr);
     r.whitened = p.weighted.sqrt_information * r.raw;
-    est.residuals.push_back(r);
+    est->residuals.push_back(r);
   }
   if (options_.drift.enabled()) {
     Eigen::VectorXd stacked(3 * n);
     for (int k = 0; k < n; ++k) {
-      stacked.segment<3>(3 * k) = est.residuals[static_cast<std::size_t>(order_[k])].raw;
+      stacked.segment<3>(3 * k) = est->residuals[static_cast<std::size_t>(order_[k])].raw;
     }
     const Eigen::VectorXd innovations = gls_w_.triangularView<Eigen::Lower>() * stacked;
     for (int k = 0; k < n; ++k) {
-      est.residuals[static_cast<std::size_t>(order_[k])].whitened = innovations.segment<3>(3 * k);
+      est->residuals[static_cast<std::size_t>(order_[k])].whitened = innovations.segment<3>(3 * k);
     }
     const TimeWindow& ref = poses_[static_cast<std::size_t>(order_.back())].host_window;
-    est.bias_window = ref;
-    est.drift = drift_;
-    est.drift_scale_used = drift_scale_;
-    if (!std::isfinite(est.drift.warmup_origin_s)) {
+    est->bias_window = ref;
+    est->drift = drift_;
+    est->drift_scale_used = drift_scale_;
+    if (!std::isfinite(est->drift.warmup_origin_s)) {
       // On the host's clock, as the bias window (corrected output's sigma uses both).
-      est.drift.warmup_origin_s = poses_[static_cast<std::size_t>(order_.front())].host_window.t0_s;
+      est->drift.warmup_origin_s =
+          poses_[static_cast<std::size_t>(order_.front())].host_window.t0_s;
     }
   }
-  for (auto& r : est.residuals) {
+  for (auto& r : est->residuals) {
     r.normalized = std::sqrt(r.whitened.squaredNorm() / 3.0);
     r.outlier = r.normalized > options_.outlier_threshold;
-    est.chi2 += r.whitened.squaredNorm();
+    est->chi2 += r.whitened.squaredNorm();
   }
-  est.dof = 3 * n - est.rank;
-  est.p_value = est.dof > 0 ? boost::math::gamma_q(est.dof / 2.0, est.chi2 / 2.0) : 1.0;
-  {
-    // The two-sided check on the innovations in time order (with drift, order_ is that order).
-    std::vector<int> order = order_;
-    if (order.empty()) {
-      std::vector<TimeWindow> windows;
-      for (const auto& p : poses_) windows.push_back(p.window);
-      order = TimeOrder(windows);
-    }
-    std::vector<Eigen::Vector3d> innovations;
-    for (int i : order) innovations.push_back(est.residuals[static_cast<std::size_t>(i)].whitened);
-    est.fit = CheckFit(innovations, order, est.chi2, est.dof, options_.chi2_inflation_p_value,
-                       options_.outlier_threshold);
-    if (est.fit.verdict != FitVerdict::kOk) {
-      est.warnings.push_back(est.fit.Message(ToString(model_->sensor())));
-    }
+  est->dof = 3 * n - est->rank;
+  est->p_value = est->dof > 0 ? boost::math::gamma_q(est->dof / 2.0, est->chi2 / 2.0) : 1.0;
+}
+
+void Calibrator::CheckFitAndInflate(Estimate* est, Eigen::MatrixXd* cov) const {
+  // The two-sided check on the innovations in time order (with drift, order_ is that order).
+  std::vector<int> order = order_;
+  if (order.empty()) {
+    std::vector<TimeWindow> windows;
+    for (const auto& p : poses_) windows.push_back(p.window);
+    order = TimeOrder(windows);
   }
-  const int outliers = static_cast<int>(std::count_if(
-      est.residuals.begin(), est.residuals.end(), [](const PoseResidual& r) { return r.outlier; }));
+  std::vector<Eigen::Vector3d> innovations;
+  for (int i : order) innovations.push_back(est->residuals[static_cast<std::size_t>(i)].whitened);
+  est->fit = CheckFit(innovations, order, est->chi2, est->dof, options_.chi2_inflation_p_value,
+                      options_.outlier_threshold);
+  if (est->fit.verdict != FitVerdict::kOk) {
+    est->warnings.push_back(est->fit.Message(ToString(model_->sensor())));
+  }
+  const int outliers =
+      static_cast<int>(std::count_if(est->residuals.begin(), est->residuals.end(),
+                                     [](const PoseResidual& r) { return r.outlier; }));
   if (outliers > 0) {
-    est.warnings.push_back(fmt::format("{} pose(s) with normalised residual above {}", outliers,
-                                       options_.outlier_threshold));
+    est->warnings.push_back(fmt::format("{} pose(s) with normalised residual above {}", outliers,
+                                        options_.outlier_threshold));
   }
-  if (options_.inflate_covariance_by_chi2 && est.dof > 0 &&
-      est.p_value < options_.chi2_inflation_p_value) {
-    est.covariance_scale = est.chi2 / est.dof;
-    cov *= est.covariance_scale;
-    est.warnings.push_back(fmt::format(
+  if (options_.inflate_covariance_by_chi2 && est->dof > 0 &&
+      est->p_value < options_.chi2_inflation_p_value) {
+    est->covariance_scale = est->chi2 / est->dof;
+    *cov *= est->covariance_scale;
+    est->warnings.push_back(fmt::format(
         "chi2/dof = {:.2f} (p = {:.2g}): the noise or the model does not explain the data; "
         "covariance inflated by that factor",
-        est.covariance_scale, est.p_value));
+        est->covariance_scale, est->p_value));
   }
-  est.theta = theta;
-  est.covariance = cov;
-  est.sigma = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
-  if (est.rank < identifiable) {
-    // The pseudo-inverse gives a finite number for a parameter the data do not determine; say
-    // infinity instead (the observability analysis names the directions).
-    ObservabilityOptions analysis_options;
-    analysis_options.rank_tolerance = options_.rank_tolerance;
-    const DataReport data = AnalyzeData(*model_, theta, weighted_poses(), analysis_options);
-    std::string names;
-    for (int j = 0; j < N; ++j) {
-      if (std::isinf(data.sigma[j])) {
-        est.sigma[j] = INFINITY;
-        names += (names.empty() ? "" : " ") + est.parameters[static_cast<std::size_t>(j)].name;
-      }
+}
+
+void Calibrator::MarkUndetermined(const Eigen::VectorXd& theta, Estimate* est) const {
+  const int N = model_->num_parameters();
+  if (est->rank >= N - model_->gauge_dimension()) return;
+  // The pseudo-inverse gives a finite number for a parameter the data do not determine; say
+  // infinity instead (the observability analysis names the directions).
+  ObservabilityOptions analysis_options;
+  analysis_options.rank_tolerance = options_.rank_tolerance;
+  const DataReport data = AnalyzeData(*model_, theta, weighted_poses(), analysis_options);
+  std::string names;
+  for (int j = 0; j < N; ++j) {
+    if (std::isinf(data.sigma[j])) {
+      est->sigma[j] = INFINITY;
+      names += (names.empty() ? "" : " ") + est->parameters[static_cast<std::size_t>(j)].name;
     }
-    if (!names.empty()) est.warnings.push_back("not determined by these poses: " + names);
   }
-  est.ok = true;
-  theta_ = theta;
-  last_cost_per_dof_ = est.dof > 0 ? est.chi2 / est.dof : 0.0;
-  return est;
+  if (!names.empty()) est->warnings.push_back("not determined by these poses: " + names);
 }
 
 }  // namespace turncal

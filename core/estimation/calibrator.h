@@ -205,7 +205,28 @@ class Calibrator {
 
  private:
   struct Pose;
+  // One solve from the poses as they are, in steps: PrepareSolve, Minimize, Canonicalize,
+  // RankAndCovariance, ComputeResiduals, CheckFitAndInflate, MarkUndetermined.
   Estimate SolveOnce();
+  // The estimate's model, counts and parameters, and the residual blocks; false (est->error
+  // says why) without a model, with too few poses or when the blocks cannot be built.
+  bool PrepareSolve(Estimate* est);
+  // Solves warm from the last estimate, or from the linear form (nominal values without one)
+  // when there is none or the warm solve ends far worse; false when the solver fails.
+  bool Minimize(Eigen::VectorXd* theta, Estimate* est) const;
+  // The estimate on its canonical branch: beta in (-pi, pi], the physical parameters as the LQ
+  // decomposition of their G gives them, mag22's gauge applied.
+  void Canonicalize(Eigen::VectorXd* theta_out, Estimate* est) const;
+  // Rank and condition of the Jacobian the solver sees at theta, and the covariance.
+  Eigen::MatrixXd RankAndCovariance(Eigen::VectorXd* theta, Estimate* est) const;
+  // mag22's covariance: the inverse Fisher information in the gauge's tangent space.
+  Eigen::MatrixXd GaugeCovariance(const Eigen::MatrixXd& J, const Eigen::VectorXd& theta) const;
+  // Each pose's residual (with drift: its innovation), chi^2, dof and p-value.
+  void ComputeResiduals(const Eigen::VectorXd& theta, Estimate* est) const;
+  // The two-sided fit check, the outliers, the covariance inflated when chi^2 is too large.
+  void CheckFitAndInflate(Estimate* est, Eigen::MatrixXd* cov) const;
+  // Sigma infinite for the parameters the poses do not determine (rank below identifiable).
+  void MarkUndetermined(const Eigen::VectorXd& theta, Estimate* est) const;
   // The drift scale the poses and `est` (a solve) give, with options_.drift as the prior.
   DriftScale IdentifyDrift(const Estimate& est) const;
   bool StartFromLinearForm(Eigen::VectorXd* theta, std::string* error) const;

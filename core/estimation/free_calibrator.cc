@@ -11,6 +11,7 @@
 #include <boost/math/special_functions/gamma.hpp>
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <set>
 
 namespace turncal {
@@ -90,98 +91,133 @@ std::vector<MisfitFigure> SummarizeMisfits(const std::vector<FreeModel::Misfit>&
   return out;
 }
 
-FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
-                           const FreeCalibratorOptions& options) {
-  FreeEstimate out;
-  Estimate& est = out.estimate;
-  est.model = model.name();
-  est.parameters = model.parameters();
-  const int n = model.num_parameters();
-  out.relative_scale =
-      model.sensor() == SensorKind::kMagnetometer && !(data.context.field_magnitude > 0);
-  for (const auto& iv : data.intervals) {
-    bool has = true;
-    for (SensorKind k :
-         {SensorKind::kAccelerometer, SensorKind::kGyroscope, SensorKind::kMagnetometer}) {
-      const bool present = k == SensorKind::kAccelerometer ? iv.acc.has_value()
-                           : k == SensorKind::kGyroscope   ? iv.gyr.has_value()
-                                                           : iv.mag.has_value();
-      if (model.Needs(k) && !present) has = false;
+namespace {
+
+// The named triads a free model's intervals may carry.
+constexpr SensorKind kTriads[] = {SensorKind::kAccelerometer, SensorKind::kGyroscope,
+                                  SensorKind::kMagnetometer};
+
+// CalibrateFree's steps, in the order Run takes them (the shape of Ceres' TrustRegionMinimizer):
+// the start, the drift's reference window, the solve re-whitened at each pass' result, the terms
+// at the solution, rank and covariance, chi^2 and the fit check, the undetermined and weak
+// parameters, the coverage and misfits, and the gate.
+class FreeCalibration {
+ public:
+  FreeCalibration(const FreeModel& model, const FreeData& data,
+                  const FreeCalibratorOptions& options)
+      : model_(model),
+        data_(data),
+        options_(options),
+        est_(out_.estimate),
+        n_(model.num_parameters()),
+        upstream_(data.upstream_theta) {}
+
+  FreeEstimate Run() {
+    est_.model = model_.name();
+    est_.parameters = model_.parameters();
+    out_.relative_scale =
+        model_.sensor() == SensorKind::kMagnetometer && !(data_.context.field_magnitude > 0);
+    out_.intervals = CountIntervals();
+    est_.poses = out_.intervals;
+    if (!model_.Start(data_, &theta_, &est_.error)) return std::move(out_);
+    ChooseDrifts();
+    for (int pass = 0; pass < options_.passes; ++pass) {
+      if (!SolvePass()) return std::move(out_);
     }
-    out.intervals += has;
+    if (!EvaluateAtSolution()) return std::move(out_);
+    RankAndCovariance();
+    CheckFit();
+    est_.covariance = cov_;
+    est_.sigma = cov_.diagonal().cwiseMax(0).cwiseSqrt();
+    NameUndeterminedAndWeak();
+    MeasureCoverageAndMisfits();
+    ApplyGate();
+    return std::move(out_);
   }
-  est.poses = out.intervals;
-  Eigen::VectorXd theta;
-  if (!model.Start(data, &theta, &est.error)) return out;
-  const Eigen::VectorXd upstream = data.upstream_theta;
+
+ private:
+  // The static intervals that carry every triad the model needs.
+  int CountIntervals() const {
+    int count = 0;
+    for (const auto& iv : data_.intervals) {
+      bool has = true;
+      for (SensorKind k : kTriads) {
+        const bool present = k == SensorKind::kAccelerometer ? iv.acc.has_value()
+                             : k == SensorKind::kGyroscope   ? iv.gyr.has_value()
+                                                             : iv.mag.has_value();
+        if (model_.Needs(k) && !present) has = false;
+      }
+      count += has;
+    }
+    return count;
+  }
 
   // The drift of the triads whose bias the model carries, and the reference window: the latest
   // interval's (on the sensor's clock; the bias parameters are then the bias over it).
   // Every triad with a drift model: with the model's bias column for it, or none (its drift
-  // still reaches terms through their extra_drift: gyro9's accelerometer).
-  std::vector<FreeDriftTriad> drifts;
-  for (SensorKind kind :
-       {SensorKind::kAccelerometer, SensorKind::kGyroscope, SensorKind::kMagnetometer}) {
-    const BiasDrift& d = kind == SensorKind::kAccelerometer  ? data.context.acc_drift
-                         : kind == SensorKind::kMagnetometer ? data.context.mag_drift
-                                                             : data.context.gyr_drift;
-    if (!d.enabled() || !model.Needs(kind)) continue;
-    int column = -1;
-    for (const auto& [k, c] : model.BiasColumns()) {
-      if (k == kind) column = c;
+  // still reaches terms through their extra_drift: gyro9's accelerometer). The terms are
+  // whitened together when a drift correlates them or they share noise.
+  void ChooseDrifts() {
+    for (SensorKind kind : kTriads) {
+      const BiasDrift& d = kind == SensorKind::kAccelerometer  ? data_.context.acc_drift
+                           : kind == SensorKind::kMagnetometer ? data_.context.mag_drift
+                                                               : data_.context.gyr_drift;
+      if (!d.enabled() || !model_.Needs(kind)) continue;
+      int column = -1;
+      for (const auto& [k, c] : model_.BiasColumns()) {
+        if (k == kind) column = c;
+      }
+      drifts_.push_back({kind, column, d});
     }
-    drifts.push_back({kind, column, d});
+    const FreeInterval* latest = nullptr;
+    for (const auto& iv : data_.intervals) {
+      origin_s_ = std::min(origin_s_, iv.sensor_start_s());
+      if (!latest || iv.sensor_end_s() > latest->sensor_end_s()) latest = &iv;
+    }
+    if (!drifts_.empty() && latest) {
+      reference_ = TimeWindow{latest->sensor_start_s(), latest->sensor_end_s()};
+      out_.bias_window = reference_;
+      out_.bias_window_host = TimeWindow{latest->t_start_s, latest->t_end_s};
+    } else {
+      drifts_.clear();
+    }
+    joint_ = !drifts_.empty();
+    for (const auto& t : model_.Terms(data_, theta_)) joint_ |= !t.shared.empty();
   }
-  TimeWindow reference;
-  double origin_s = INFINITY;
-  const FreeInterval* latest = nullptr;
-  for (const auto& iv : data.intervals) {
-    origin_s = std::min(origin_s, iv.sensor_start_s());
-    if (!latest || iv.sensor_end_s() > latest->sensor_end_s()) latest = &iv;
-  }
-  if (!drifts.empty() && latest) {
-    reference = TimeWindow{latest->sensor_start_s(), latest->sensor_end_s()};
-    out.bias_window = reference;
-    out.bias_window_host = TimeWindow{latest->t_start_s, latest->t_end_s};
-  } else {
-    drifts.clear();
-  }
-  // The terms are whitened together when a drift correlates them or they share noise.
-  bool joint = !drifts.empty();
-  for (const auto& t : model.Terms(data, theta)) joint |= !t.shared.empty();
-  auto whitener = [&](const std::vector<FreeTerm>& t, const Eigen::VectorXd& at) {
-    const Evaluated e = Evaluate(t, at, upstream, nullptr);
-    for (const auto& term : t) origin_s = std::min(origin_s, term.window.t0_s);
-    return FreeDriftWhitener(t, e.J, drifts, reference, origin_s);
-  };
 
-  // Solve, re-whitening at each result.
-  std::vector<FreeTerm> terms;
-  std::unique_ptr<StackedFreeCost> stacked;
-  for (int pass = 0; pass < options.passes; ++pass) {
-    terms = model.Terms(data, theta);
-    if (terms.empty()) {
-      est.error = fmt::format("{}: the intervals give no residuals", model.name());
-      return out;
+  // W for `terms` at `at` (the origin of time moves to the earliest term's start).
+  Eigen::MatrixXd Whitener(const std::vector<FreeTerm>& terms, const Eigen::VectorXd& at) {
+    const Evaluated e = Evaluate(terms, at, upstream_, nullptr);
+    for (const auto& term : terms) origin_s_ = std::min(origin_s_, term.window.t0_s);
+    return FreeDriftWhitener(terms, e.J, drifts_, reference_, origin_s_);
+  }
+
+  // One solve with the terms whitened at theta_; false (est_.error says why) when it fails.
+  bool SolvePass() {
+    terms_ = model_.Terms(data_, theta_);
+    if (terms_.empty()) {
+      est_.error = fmt::format("{}: the intervals give no residuals", model_.name());
+      return false;
     }
     ceres::Problem::Options po;
     po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     ceres::Problem problem(po);
-    Eigen::VectorXd up = upstream;
-    if (joint) {
-      stacked = std::make_unique<StackedFreeCost>(
-          terms, whitener(terms, theta), model.num_parameters(), static_cast<int>(upstream.size()));
-      if (stacked->uses_upstream()) {
-        problem.AddResidualBlock(stacked.get(), nullptr, theta.data(), up.data());
+    Eigen::VectorXd up = upstream_;
+    if (joint_) {
+      stacked_ = std::make_unique<StackedFreeCost>(terms_, Whitener(terms_, theta_),
+                                                   model_.num_parameters(),
+                                                   static_cast<int>(upstream_.size()));
+      if (stacked_->uses_upstream()) {
+        problem.AddResidualBlock(stacked_.get(), nullptr, theta_.data(), up.data());
       } else {
-        problem.AddResidualBlock(stacked.get(), nullptr, theta.data());
+        problem.AddResidualBlock(stacked_.get(), nullptr, theta_.data());
       }
     } else {
-      for (const auto& t : terms) {
+      for (const auto& t : terms_) {
         if (t.upstream) {
-          problem.AddResidualBlock(t.cost.get(), nullptr, theta.data(), up.data());
+          problem.AddResidualBlock(t.cost.get(), nullptr, theta_.data(), up.data());
         } else {
-          problem.AddResidualBlock(t.cost.get(), nullptr, theta.data());
+          problem.AddResidualBlock(t.cost.get(), nullptr, theta_.data());
         }
       }
     }
@@ -190,198 +226,244 @@ FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
     }
     ceres::Solver::Options so;
     so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = options.max_iterations;
+    so.max_num_iterations = options_.max_iterations;
     so.function_tolerance = 1e-12;
     so.gradient_tolerance = 1e-14;
     so.parameter_tolerance = 1e-12;
     so.num_threads = 1;
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);
-    est.iterations += static_cast<int>(summary.iterations.size());
-    est.termination = ceres::TerminationTypeToString(summary.termination_type);
-    est.solve_time_s += summary.total_time_in_seconds;
-    if (!summary.IsSolutionUsable() || !theta.allFinite()) {
-      est.error = fmt::format("{}: the solve failed ({})", model.name(), summary.message);
-      return out;
+    est_.iterations += static_cast<int>(summary.iterations.size());
+    est_.termination = ceres::TerminationTypeToString(summary.termination_type);
+    est_.solve_time_s += summary.total_time_in_seconds;
+    if (!summary.IsSolutionUsable() || !theta_.allFinite()) {
+      est_.error = fmt::format("{}: the solve failed ({})", model_.name(), summary.message);
+      return false;
     }
-  }
-  terms = model.Terms(data, theta);
-  Evaluated ev = Evaluate(terms, theta, upstream, &out.terms);
-  if (joint && ev.r.allFinite()) {
-    // The innovations: the terms whitened together.
-    const Eigen::MatrixXd W = whitener(terms, theta);
-    ev.r = W * ev.r;
-    ev.J = W * ev.J;
-    if (ev.Ju.cols() > 0) ev.Ju = W * ev.Ju;
-    int row = 0;
-    for (auto& t : out.terms) {
-      const auto k = t.whitened.size();
-      t.whitened = ev.r.segment(row, k);
-      row += static_cast<int>(k);
-    }
-  }
-  if (!ev.r.allFinite()) {
-    est.error = fmt::format("{}: a residual is not finite at the solution", model.name());
-    return out;
-  }
-  out.residuals = static_cast<int>(ev.r.size());
-  est.theta = theta;
-  est.ok = true;
-
-  // Rank and covariance in scaled units.
-  const Eigen::VectorXd scales = model.Scales(data, theta);
-  out.analysis = AnalyzeRank(ev.J, model.parameters(), scales, options.observability);
-  est.rank = out.analysis.rank;
-  est.condition = out.analysis.condition;
-  const Eigen::MatrixXd Js = ev.J * scales.asDiagonal();
-  const bool with_upstream = upstream.size() > 0 &&
-                             data.upstream_covariance.rows() == upstream.size() &&
-                             data.upstream_covariance.allFinite();
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(
-      Js, with_upstream ? (Eigen::ComputeFullU | Eigen::ComputeFullV) : Eigen::ComputeFullV);
-  const Eigen::VectorXd& s = svd.singularValues();
-  Eigen::MatrixXd pinv = Eigen::MatrixXd::Zero(n, n);
-  for (int i = 0; i < est.rank && i < s.size(); ++i) {
-    pinv += svd.matrixV().col(i) * svd.matrixV().col(i).transpose() / (s[i] * s[i]);
-  }
-  Eigen::MatrixXd cov = scales.asDiagonal() * pinv * scales.asDiagonal();
-  if (with_upstream) {
-    const Eigen::MatrixXd G = cov * ev.J.transpose() * ev.Ju;  // d theta / d upstream
-    cov += G * data.upstream_covariance * G.transpose();
+    return true;
   }
 
-  // chi^2 and the fit check.
-  est.chi2 = ev.r.squaredNorm();
-  if (with_upstream && est.rank < ev.r.size()) {
-    // The upstream estimate's error is in every residual too: in the residuals' space, left after
-    // the fit (N, the complement of J's columns), they have the covariance N^T (I + A C_u A^T) N,
-    // A = d r / d upstream. chi^2 against it (without it, a noisy upstream read as misfit: gyro9
-    // on an accelerometer with 8 mg per sample had chi^2/dof 1.09).
-    const Eigen::MatrixXd N = svd.matrixU().rightCols(ev.r.size() - est.rank);
-    const Eigen::MatrixXd NA = N.transpose() * ev.Ju;
-    Eigen::MatrixXd C = NA * data.upstream_covariance * NA.transpose();
-    C.diagonal().array() += 1.0;
-    const Eigen::VectorXd y = N.transpose() * ev.r;
-    const Eigen::LLT<Eigen::MatrixXd> llt(C);
-    if (llt.info() == Eigen::Success) est.chi2 = y.dot(llt.solve(y));
-  }
-  est.dof = out.residuals - est.rank;
-  FitCheck& fit = est.fit;
-  fit.chi2 = est.chi2;
-  fit.dof = est.dof;
-  if (est.dof > 0) {
-    fit.p_upper = boost::math::gamma_q(est.dof / 2.0, est.chi2 / 2.0);
-    fit.p_lower = boost::math::gamma_p(est.dof / 2.0, est.chi2 / 2.0);
-  }
-  est.p_value = fit.p_upper;
-  for (const auto& t : out.terms) {
-    const double normalized = std::sqrt(t.whitened.squaredNorm() / t.whitened.size());
-    if (normalized > fit.worst_normalized) {
-      fit.worst_normalized = normalized;
-      fit.worst_pose = t.interval;
-    }
-  }
-  if (est.dof > 0 && fit.p_upper < options.chi2_inflation_p_value) {
-    fit.verdict = FitVerdict::kTooLarge;
-    fit.cause =
-        fit.worst_normalized > options.outlier_threshold
-            ? fmt::format(
-                  "interval {} has the largest residual ({:.1f} sigma): it may not have "
-                  "been still, or the model does not fit it",
-                  fit.worst_pose, fit.worst_normalized)
-            : "the intervals' noise is larger than their own scatter says (bias instability, a "
-              "hand's placement), or the model does not fit";
-    if (options.inflate_covariance_by_chi2) {
-      est.covariance_scale = est.chi2 / est.dof;
-      cov *= est.covariance_scale;
-      est.warnings.push_back(
-          fmt::format("chi2/dof = {:.2f} (p = {:.2g}): covariance inflated by that factor",
-                      est.covariance_scale, fit.p_upper));
-    }
-  } else if (est.dof > 0 && fit.p_lower < options.chi2_inflation_p_value) {
-    fit.verdict = FitVerdict::kTooSmall;
-    fit.cause = "the residuals are smaller than the intervals' noise says";
-  }
-  est.covariance = cov;
-  est.sigma = cov.diagonal().cwiseMax(0).cwiseSqrt();
-
-  // Named null and weak directions.
-  std::set<std::string> undetermined, weak;
-  for (const auto& d : out.analysis.null) {
-    for (int i = 0; i < n; ++i) {
-      if (std::abs(d.scaled[i]) > options.observability.involvement) {
-        est.sigma[i] = INFINITY;
-        undetermined.insert(model.parameters()[i].name);
+  // The terms at the solution (with a joint whitening: the innovations, the terms whitened
+  // together); false when a residual is not finite.
+  bool EvaluateAtSolution() {
+    terms_ = model_.Terms(data_, theta_);
+    ev_ = Evaluate(terms_, theta_, upstream_, &out_.terms);
+    if (joint_ && ev_.r.allFinite()) {
+      const Eigen::MatrixXd W = Whitener(terms_, theta_);
+      ev_.r = W * ev_.r;
+      ev_.J = W * ev_.J;
+      if (ev_.Ju.cols() > 0) ev_.Ju = W * ev_.Ju;
+      int row = 0;
+      for (auto& t : out_.terms) {
+        const auto k = t.whitened.size();
+        t.whitened = ev_.r.segment(row, k);
+        row += static_cast<int>(k);
       }
     }
-  }
-  for (const auto& d : out.analysis.weak) {
-    if (d.relative_singular_value >= options.min_relative_singular) continue;
-    for (const auto& name : d.involved) weak.insert(name);
-  }
-  for (const auto& p : model.parameters()) {
-    if (undetermined.count(p.name)) out.undetermined.push_back(p.name);
-    if (weak.count(p.name) && !undetermined.count(p.name)) out.weak.push_back(p.name);
+    if (!ev_.r.allFinite()) {
+      est_.error = fmt::format("{}: a residual is not finite at the solution", model_.name());
+      return false;
+    }
+    out_.residuals = static_cast<int>(ev_.r.size());
+    est_.theta = theta_;
+    est_.ok = true;
+    return true;
   }
 
-  // Coverage of the corrected triad's directions.
-  for (const auto& iv : data.intervals) {
-    const Eigen::Vector3d d = model.Direction(data, theta, iv);
-    if (d.squaredNorm() > 0) out.directions.push_back(d);
+  // Rank and covariance in scaled units, with the upstream estimate's part (Murphy and Topel).
+  void RankAndCovariance() {
+    const Eigen::VectorXd scales = model_.Scales(data_, theta_);
+    out_.analysis = AnalyzeRank(ev_.J, model_.parameters(), scales, options_.observability);
+    est_.rank = out_.analysis.rank;
+    est_.condition = out_.analysis.condition;
+    const Eigen::MatrixXd Js = ev_.J * scales.asDiagonal();
+    with_upstream_ = upstream_.size() > 0 && data_.upstream_covariance.rows() == upstream_.size() &&
+                     data_.upstream_covariance.allFinite();
+    svd_.emplace(
+        Js, with_upstream_ ? (Eigen::ComputeFullU | Eigen::ComputeFullV) : Eigen::ComputeFullV);
+    const Eigen::VectorXd& s = svd_->singularValues();
+    Eigen::MatrixXd pinv = Eigen::MatrixXd::Zero(n_, n_);
+    for (int i = 0; i < est_.rank && i < s.size(); ++i) {
+      pinv += svd_->matrixV().col(i) * svd_->matrixV().col(i).transpose() / (s[i] * s[i]);
+    }
+    cov_ = scales.asDiagonal() * pinv * scales.asDiagonal();
+    if (with_upstream_) {
+      const Eigen::MatrixXd G = cov_ * ev_.J.transpose() * ev_.Ju;  // d theta / d upstream
+      cov_ += G * data_.upstream_covariance * G.transpose();
+    }
   }
-  out.coverage = CoverageOf(out.directions);
-  out.before = SummarizeMisfits(model.Misfits(data, model.Identity(data)));
-  out.after = SummarizeMisfits(model.Misfits(data, theta));
 
-  // The gate.
-  auto refuse = [&](std::string why) { out.gate_reasons.push_back(std::move(why)); };
-  auto join = [](const std::vector<std::string>& v) {
+  // chi^2, the two-sided fit check and, when chi^2 is too large, the covariance's inflation.
+  void CheckFit() {
+    est_.chi2 = ev_.r.squaredNorm();
+    if (with_upstream_ && est_.rank < ev_.r.size()) {
+      // The upstream estimate's error is in every residual too: in the residuals' space, left
+      // after the fit (N, the complement of J's columns), they have the covariance
+      // N^T (I + A C_u A^T) N, A = d r / d upstream. chi^2 against it (without it, a noisy
+      // upstream read as misfit: gyro9 on an accelerometer with 8 mg per sample had chi^2/dof
+      // 1.09).
+      const Eigen::MatrixXd N = svd_->matrixU().rightCols(ev_.r.size() - est_.rank);
+      const Eigen::MatrixXd NA = N.transpose() * ev_.Ju;
+      Eigen::MatrixXd C = NA * data_.upstream_covariance * NA.transpose();
+      C.diagonal().array() += 1.0;
+      const Eigen::VectorXd y = N.transpose() * ev_.r;
+      const Eigen::LLT<Eigen::MatrixXd> llt(C);
+      if (llt.info() == Eigen::Success) est_.chi2 = y.dot(llt.solve(y));
+    }
+    est_.dof = out_.residuals - est_.rank;
+    FitCheck& fit = est_.fit;
+    fit.chi2 = est_.chi2;
+    fit.dof = est_.dof;
+    if (est_.dof > 0) {
+      fit.p_upper = boost::math::gamma_q(est_.dof / 2.0, est_.chi2 / 2.0);
+      fit.p_lower = boost::math::gamma_p(est_.dof / 2.0, est_.chi2 / 2.0);
+    }
+    est_.p_value = fit.p_upper;
+    for (const auto& t : out_.terms) {
+      const double normalized = std::sqrt(t.whitened.squaredNorm() / t.whitened.size());
+      if (normalized > fit.worst_normalized) {
+        fit.worst_normalized = normalized;
+        fit.worst_pose = t.interval;
+      }
+    }
+    if (est_.dof > 0 && fit.p_upper < options_.chi2_inflation_p_value) {
+      fit.verdict = FitVerdict::kTooLarge;
+      fit.cause =
+          fit.worst_normalized > options_.outlier_threshold
+              ? fmt::format(
+                    "interval {} has the largest residual ({:.1f} sigma): it may not have "
+                    "been still, or the model does not fit it",
+                    fit.worst_pose, fit.worst_normalized)
+              : "the intervals' noise is larger than their own scatter says (bias instability, "
+                "a hand's placement), or the model does not fit";
+      if (options_.inflate_covariance_by_chi2) {
+        est_.covariance_scale = est_.chi2 / est_.dof;
+        cov_ *= est_.covariance_scale;
+        est_.warnings.push_back(
+            fmt::format("chi2/dof = {:.2f} (p = {:.2g}): covariance inflated by that factor",
+                        est_.covariance_scale, fit.p_upper));
+      }
+    } else if (est_.dof > 0 && fit.p_lower < options_.chi2_inflation_p_value) {
+      fit.verdict = FitVerdict::kTooSmall;
+      fit.cause = "the residuals are smaller than the intervals' noise says";
+    }
+  }
+
+  // The parameters in a null direction (sigma infinite) and in a direction weaker than the gate
+  // allows, in the model's order.
+  void NameUndeterminedAndWeak() {
+    std::set<std::string> undetermined, weak;
+    for (const auto& d : out_.analysis.null) {
+      for (int i = 0; i < n_; ++i) {
+        if (std::abs(d.scaled[i]) > options_.observability.involvement) {
+          est_.sigma[i] = INFINITY;
+          undetermined.insert(model_.parameters()[i].name);
+        }
+      }
+    }
+    for (const auto& d : out_.analysis.weak) {
+      if (d.relative_singular_value >= options_.min_relative_singular) continue;
+      for (const auto& name : d.involved) weak.insert(name);
+    }
+    for (const auto& p : model_.parameters()) {
+      if (undetermined.count(p.name)) out_.undetermined.push_back(p.name);
+      if (weak.count(p.name) && !undetermined.count(p.name)) out_.weak.push_back(p.name);
+    }
+  }
+
+  // Coverage of the corrected triad's directions; the misfits before and after.
+  void MeasureCoverageAndMisfits() {
+    for (const auto& iv : data_.intervals) {
+      const Eigen::Vector3d d = model_.Direction(data_, theta_, iv);
+      if (d.squaredNorm() > 0) out_.directions.push_back(d);
+    }
+    out_.coverage = CoverageOf(out_.directions);
+    out_.before = SummarizeMisfits(model_.Misfits(data_, model_.Identity(data_)));
+    out_.after = SummarizeMisfits(model_.Misfits(data_, theta_));
+  }
+
+  void Refuse(std::string why) { out_.gate_reasons.push_back(std::move(why)); }
+
+  static std::string Join(const std::vector<std::string>& v) {
     std::string text;
     for (const auto& x : v) text += (text.empty() ? "" : ", ") + x;
     return text;
-  };
-  if (est.rank < n) {
-    refuse(fmt::format("rank {} of {}: the data do not determine {}", est.rank, n,
-                       join(out.undetermined)));
-  } else if (!out.weak.empty()) {
-    refuse(fmt::format(
-        "the weakest direction ({:.2g} of the strongest) involves {}",
-        out.analysis.weak.empty() ? 0.0 : out.analysis.weak.back().relative_singular_value,
-        join(out.weak)));
   }
-  if (options.min_coverage > 0 && out.coverage.fraction() < options.min_coverage) {
-    refuse(fmt::format("coverage {:.1f} % of the sphere is below the {:.1f} % required",
-                       100 * out.coverage.fraction(), 100 * options.min_coverage));
-  }
-  if (options.precision) {
-    const GateOptions& g = *options.precision;
-    if (est.dof < g.min_dof) {
-      refuse(fmt::format("{} redundant equations: the fit check needs at least {}", est.dof,
-                         g.min_dof));
-    } else if (est.p_value < g.min_p_value) {
-      refuse(fmt::format(
-          "chi2/dof {:.2f} (p {:.2g}, below {:.2g}): {}", est.dof > 0 ? est.chi2 / est.dof : 0.0,
-          est.p_value, g.min_p_value,
-          est.fit.cause.empty() ? "the noise model or the model does not fit" : est.fit.cause));
+
+  // The gate: rank and weak directions, coverage, the station's precision, the sigma limits.
+  void ApplyGate() {
+    if (est_.rank < n_) {
+      Refuse(fmt::format("rank {} of {}: the data do not determine {}", est_.rank, n_,
+                         Join(out_.undetermined)));
+    } else if (!out_.weak.empty()) {
+      Refuse(fmt::format(
+          "the weakest direction ({:.2g} of the strongest) involves {}",
+          out_.analysis.weak.empty() ? 0.0 : out_.analysis.weak.back().relative_singular_value,
+          Join(out_.weak)));
     }
-    for (int i = 0; i < n; ++i) {
+    if (options_.min_coverage > 0 && out_.coverage.fraction() < options_.min_coverage) {
+      Refuse(fmt::format("coverage {:.1f} % of the sphere is below the {:.1f} % required",
+                         100 * out_.coverage.fraction(), 100 * options_.min_coverage));
+    }
+    if (options_.precision) ApplyPrecisionGate(*options_.precision);
+    for (const auto& [name, limit] : options_.max_sigma) {
+      const int i = model_.index_of(name);
+      if (i >= 0 && !(est_.sigma[i] <= limit)) {
+        Refuse(fmt::format("sigma of {} is {:.3g}, above its limit {:.3g}", name, est_.sigma[i],
+                           limit));
+      }
+    }
+    out_.gate_passed = out_.gate_reasons.empty();
+  }
+
+  // The station's gate: redundancy, the fit check's p-value, each parameter's tolerance.
+  void ApplyPrecisionGate(const GateOptions& g) {
+    if (est_.dof < g.min_dof) {
+      Refuse(fmt::format("{} redundant equations: the fit check needs at least {}", est_.dof,
+                         g.min_dof));
+    } else if (est_.p_value < g.min_p_value) {
+      Refuse(fmt::format(
+          "chi2/dof {:.2f} (p {:.2g}, below {:.2g}): {}", est_.dof > 0 ? est_.chi2 / est_.dof : 0.0,
+          est_.p_value, g.min_p_value,
+          est_.fit.cause.empty() ? "the noise model or the model does not fit" : est_.fit.cause));
+    }
+    for (int i = 0; i < n_; ++i) {
       ParameterInfo as;
-      const double limit = FreeToleranceFor(model.parameters()[i], g, &as);
-      if (limit > 0 && std::isfinite(est.sigma[i]) && !(est.sigma[i] <= limit)) {
-        refuse(fmt::format("{}: sigma {} exceeds the tolerance {}", as.name,
-                           FormatSigma(as, est.sigma[i]), FormatSigma(as, limit)));
+      const double limit = FreeToleranceFor(model_.parameters()[i], g, &as);
+      if (limit > 0 && std::isfinite(est_.sigma[i]) && !(est_.sigma[i] <= limit)) {
+        Refuse(fmt::format("{}: sigma {} exceeds the tolerance {}", as.name,
+                           FormatSigma(as, est_.sigma[i]), FormatSigma(as, limit)));
       }
     }
   }
-  for (const auto& [name, limit] : options.max_sigma) {
-    const int i = model.index_of(name);
-    if (i >= 0 && !(est.sigma[i] <= limit)) {
-      refuse(
-          fmt::format("sigma of {} is {:.3g}, above its limit {:.3g}", name, est.sigma[i], limit));
-    }
-  }
-  out.gate_passed = out.gate_reasons.empty();
-  return out;
+
+  const FreeModel& model_;
+  const FreeData& data_;
+  const FreeCalibratorOptions& options_;
+  FreeEstimate out_;
+  Estimate& est_;
+  const int n_;
+  Eigen::VectorXd theta_;
+  const Eigen::VectorXd upstream_;
+  // The drift's whitening: the triads, the reference window, the origin of time.
+  std::vector<FreeDriftTriad> drifts_;
+  TimeWindow reference_;
+  double origin_s_ = INFINITY;
+  bool joint_ = false;
+  // The solve's terms (the stacked cost refers to them) and the terms at the solution.
+  std::vector<FreeTerm> terms_;
+  std::unique_ptr<StackedFreeCost> stacked_;
+  Evaluated ev_;
+  bool with_upstream_ = false;
+  std::optional<Eigen::JacobiSVD<Eigen::MatrixXd>> svd_;
+  Eigen::MatrixXd cov_;
+};
+
+}  // namespace
+
+FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
+                           const FreeCalibratorOptions& options) {
+  return FreeCalibration(model, data, options).Run();
 }
 
 bool CalibrateFreeModels(const std::vector<std::string>& models,

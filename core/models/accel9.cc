@@ -21,7 +21,8 @@ struct Accel9Correction {
 
 class Accel9 final : public free::NormFreeModel {
  public:
-  explicit Accel9(const FreeContext& context) : context_(context) {
+  explicit Accel9(const FreeContext& context)
+      : NormFreeModel("accel9", SensorKind::kAccelerometer, 6, context.gravity_mps2) {
     const auto G = ParameterKind::kSensor;
     for (const char* k : {"kx", "ky", "kz"}) params_.push_back({k, G, ParameterUnit::kGain, 1.0});
     for (const char* m : {"m_yz", "m_zy", "m_zx"}) {
@@ -31,18 +32,10 @@ class Accel9 final : public free::NormFreeModel {
       params_.push_back({b, G, ParameterUnit::kAcceleration, 0.0});
     }
   }
-  const std::string& name() const override { return name_; }
   std::string description() const override {
     return "accelerometer without poses: gains, upper-triangular non-orthogonality and bias "
            "from |f| = g in each static interval (imu_tk's model)";
   }
-  SensorKind sensor() const override { return SensorKind::kAccelerometer; }
-  bool Needs(SensorKind t) const override { return t == SensorKind::kAccelerometer; }
-  const std::vector<ParameterInfo>& parameters() const override { return params_; }
-  std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
-    return {{SensorKind::kAccelerometer, 6}};
-  }
-
   Eigen::VectorXd Scales(const FreeData& data, const Eigen::VectorXd&) const override {
     Eigen::VectorXd s = Eigen::VectorXd::Ones(9);
     s.tail<3>().setConstant(data.context.gravity_mps2);
@@ -50,8 +43,7 @@ class Accel9 final : public free::NormFreeModel {
   }
 
   bool Start(const FreeData& data, Eigen::VectorXd* theta, std::string* error) const override {
-    std::vector<Eigen::Vector3d> means;
-    free::Means(data, SensorKind::kAccelerometer, 0, &means, nullptr, nullptr);
+    const std::vector<Eigen::Vector3d> means = RawMeans(data);
     if (means.size() < 3) {
       if (error) {
         *error = fmt::format("accel9 needs static intervals with the accelerometer: {} found",
@@ -63,7 +55,7 @@ class Accel9 final : public free::NormFreeModel {
     theta->head<3>().setOnes();
     // |f| = g: (a - b)^T E (a - b) = 1 with E = C^T C / g^2, C = T K upper triangular.
     if (auto e = free::FitEllipsoid(means)) {
-      const Eigen::Matrix3d E = e->E * context_.gravity_mps2 * context_.gravity_mps2;
+      const Eigen::Matrix3d E = e->E * magnitude() * magnitude();
       Eigen::LLT<Eigen::Matrix3d> llt(E);
       if (llt.info() == Eigen::Success) {
         const Eigen::Matrix3d C = llt.matrixL().transpose();
@@ -78,24 +70,12 @@ class Accel9 final : public free::NormFreeModel {
   }
 
   std::vector<FreeTerm> Terms(const FreeData& data, const Eigen::VectorXd& theta) const override {
-    std::vector<Eigen::Vector3d> means;
-    std::vector<Eigen::Matrix3d> covariances;
-    std::vector<int> index;
-    free::Means(data, SensorKind::kAccelerometer, data.context.acc_offset_sigma, &means,
-                &covariances, &index);
     const Eigen::Matrix3d L = free::UpperTK(theta.data());
-    std::vector<FreeTerm> terms;
-    for (std::size_t i = 0; i < means.size(); ++i) {
-      const Eigen::Vector3d f = L * (means[i] - theta.tail<3>());
-      FreeTerm t;
-      t.cost = free::MakeNormCost<Accel9Correction, 9>(means[i], context_.gravity_mps2,
-                                                       free::NormSigma(L, f, covariances[i]));
-      t.interval = index[i];
-      t.kind = "norm";
-      t.window = free::Window(data.intervals[index[i]]);
-      terms.push_back(std::move(t));
-    }
-    return terms;
+    return NormTerms(data, [&](const Eigen::Vector3d& mean, const Eigen::Matrix3d& covariance) {
+      const Eigen::Vector3d f = L * (mean - theta.tail<3>());
+      return free::MakeNormCost<Accel9Correction, 9>(mean, magnitude(),
+                                                     free::NormSigma(L, f, covariance));
+    });
   }
 
   Eigen::VectorXd Identity(const FreeData&) const override {
@@ -106,13 +86,6 @@ class Accel9 final : public free::NormFreeModel {
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
     return Accel9Correction::Apply(theta.data(), raw);
   }
-
- private:
-  double NormMagnitude() const override { return context_.gravity_mps2; }
-
-  FreeContext context_;
-  std::string name_ = "accel9";
-  std::vector<ParameterInfo> params_;
 };
 
 }  // namespace

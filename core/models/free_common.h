@@ -12,6 +12,8 @@
 #include <cmath>
 #include <memory>
 #include <optional>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "core/frames/rotations.h"
@@ -167,15 +169,23 @@ inline double FieldMagnitude(const FreeContext& context) {
 }
 
 // A free model of one triad whose corrected mean has a known magnitude in every still interval
-// (accel9: gravity; magellipsoid, magsphere: the field): its misfits are the corrected means'
-// norms less that magnitude, its direction the corrected mean.
+// (accel9: gravity; magellipsoid, magsphere: the field): one "norm" term per interval, its misfits
+// the corrected means' norms less that magnitude, its direction the corrected mean. A model names
+// itself, its triad, where its bias starts in theta and the magnitude; it fills params_.
 class NormFreeModel : public FreeModel {
  public:
+  const std::string& name() const override { return name_; }
+  SensorKind sensor() const override { return sensor_; }
+  bool Needs(SensorKind t) const override { return t == sensor_; }
+  const std::vector<ParameterInfo>& parameters() const override { return params_; }
+  std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
+    return {{sensor_, bias_column_}};
+  }
   std::vector<Misfit> Misfits(const FreeData& data, const Eigen::VectorXd& theta) const override {
     std::vector<Misfit> out;
     for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
       if (const TriadStats* t = Triad(data.intervals[static_cast<std::size_t>(k)])) {
-        out.push_back({"norm", k, Correct(theta, t->mean).norm() - NormMagnitude()});
+        out.push_back({"norm", k, Correct(theta, t->mean).norm() - magnitude_});
       }
     }
     return out;
@@ -187,15 +197,55 @@ class NormFreeModel : public FreeModel {
   }
 
  protected:
+  NormFreeModel(std::string name, SensorKind sensor, int bias_column, double magnitude)
+      : name_(std::move(name)), sensor_(sensor), bias_column_(bias_column), magnitude_(magnitude) {}
+
   // |Correct(mean)| in every still interval: gravity, or the field's magnitude.
-  virtual double NormMagnitude() const = 0;
+  double magnitude() const { return magnitude_; }
   // The model's triad over `interval` (null when the interval has none).
   const TriadStats* Triad(const FreeInterval& interval) const {
-    const std::optional<TriadStats>& t = sensor() == SensorKind::kAccelerometer ? interval.acc
-                                         : sensor() == SensorKind::kGyroscope   ? interval.gyr
-                                                                                : interval.mag;
+    const std::optional<TriadStats>& t = sensor_ == SensorKind::kAccelerometer ? interval.acc
+                                         : sensor_ == SensorKind::kGyroscope   ? interval.gyr
+                                                                               : interval.mag;
     return t ? &*t : nullptr;
   }
+  // The means of the intervals that carry the triad (for a start).
+  std::vector<Eigen::Vector3d> RawMeans(const FreeData& data) const {
+    std::vector<Eigen::Vector3d> means;
+    Means(data, sensor_, 0, &means, nullptr, nullptr);
+    return means;
+  }
+  // One "norm" term per interval that carries the triad, its cost `make(mean, covariance)` (the
+  // mean's covariance with the triad's offset sigma).
+  template <class MakeCost>
+  std::vector<FreeTerm> NormTerms(const FreeData& data, MakeCost make) const {
+    const double offset_sigma = sensor_ == SensorKind::kAccelerometer
+                                    ? data.context.acc_offset_sigma
+                                : sensor_ == SensorKind::kGyroscope ? data.context.gyr_offset_sigma
+                                                                    : data.context.mag_offset_sigma;
+    std::vector<Eigen::Vector3d> means;
+    std::vector<Eigen::Matrix3d> covariances;
+    std::vector<int> index;
+    Means(data, sensor_, offset_sigma, &means, &covariances, &index);
+    std::vector<FreeTerm> terms;
+    for (std::size_t i = 0; i < means.size(); ++i) {
+      FreeTerm t;
+      t.cost = make(means[i], covariances[i]);
+      t.interval = index[i];
+      t.kind = "norm";
+      t.window = Window(data.intervals[index[i]]);
+      terms.push_back(std::move(t));
+    }
+    return terms;
+  }
+
+  std::vector<ParameterInfo> params_;
+
+ private:
+  std::string name_;
+  SensorKind sensor_;
+  int bias_column_;
+  double magnitude_;
 };
 
 }  // namespace turncal::free

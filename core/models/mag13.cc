@@ -10,7 +10,7 @@
 namespace turncal {
 namespace {
 
-struct Mag13 {
+struct Mag13 : mag::CorrectedWithG<Mag13> {
   static constexpr std::string_view kName = "mag13";
   static constexpr int kNumParams = 13;
   static constexpr SensorKind kSensor = SensorKind::kMagnetometer;
@@ -30,11 +30,6 @@ struct Mag13 {
     return mag::MatrixRowMajor(theta) * (C_p_q * (C_ned_p(theta[kBeta]) * B_ned)) +
            mag::Vector(theta + kBias);
   }
-  static Eigen::Vector3d Correct(const double* theta, const Eigen::Vector3d& raw,
-                                 const ModelContext&) {
-    return mag::CorrectWithG(theta, theta + kBias, raw);
-  }
-  static OutputFrame CorrectedFrame(const ModelContext&) { return OutputFrame::kTable; }
   static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
                          const ModelContext&, double* theta, std::string* error) {
     return mag::FromLinearG(G, beta, b, kBeta, kBias, theta, error);

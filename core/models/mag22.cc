@@ -14,7 +14,7 @@
 namespace turncal {
 namespace {
 
-struct Mag22 {
+struct Mag22 : mag::CorrectedWithG<Mag22> {
   static constexpr std::string_view kName = "mag22";
   static constexpr int kNumParams = 22;
   static constexpr SensorKind kSensor = SensorKind::kMagnetometer;
@@ -38,12 +38,6 @@ struct Mag22 {
            G * (mag::Symmetric(theta + kK) * (C_p_q * mag::Vector(theta + kDeltaB))) +
            mag::Vector(theta + kBias);
   }
-  // dB belongs to the table, not to the sensor: the correction is G^-1 (B_m - b).
-  static Eigen::Vector3d Correct(const double* theta, const Eigen::Vector3d& raw,
-                                 const ModelContext&) {
-    return mag::CorrectWithG(theta, theta + kBias, raw);
-  }
-  static OutputFrame CorrectedFrame(const ModelContext&) { return OutputFrame::kTable; }
   // Starting values: G, beta, b from the linear form (mag13's shape), K_ = I, dB = 0.
   static bool FromLinear(const Mat3<double>& G, double beta, const Eigen::Vector3d& b,
                          const ModelContext&, double* theta, std::string* error) {

@@ -44,6 +44,18 @@ inline Eigen::Vector3d CorrectWithG(const double* g, const double* b, const Eige
   return MatrixRowMajor(g).partialPivLu().solve(raw - Vector(b));
 }
 
+// The correction mag13 and mag22 share as model definitions (core/modeling/model_adapter.h):
+// G^-1 (B_m - b), the field in the table's frame, with G the first nine parameters and b at
+// Def::kBias (mag22's dB belongs to the table, not to the sensor).
+template <class Def>
+struct CorrectedWithG {
+  static Eigen::Vector3d Correct(const double* theta, const Eigen::Vector3d& raw,
+                                 const ModelContext&) {
+    return CorrectWithG(theta, theta + Def::kBias, raw);
+  }
+  static OutputFrame CorrectedFrame(const ModelContext&) { return OutputFrame::kTable; }
+};
+
 inline void SetG(const Mat3<double>& G, double* theta) {
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c) theta[3 * r + c] = G(r, c);

@@ -22,27 +22,18 @@ struct EllipsoidCorrection {
 
 class MagEllipsoid final : public free::NormFreeModel {
  public:
-  explicit MagEllipsoid(const FreeContext& context) : context_(context) {
+  explicit MagEllipsoid(const FreeContext& context)
+      : NormFreeModel("magellipsoid", SensorKind::kMagnetometer, 0, free::FieldMagnitude(context)) {
     const auto S = ParameterKind::kSensor;
     for (const char* b : {"bx", "by", "bz"}) params_.push_back({b, S, ParameterUnit::kField, 0.0});
     for (const char* s : {"s11", "s12", "s13", "s22", "s23", "s33"}) {
       params_.push_back({s, S, ParameterUnit::kGain, s[1] == s[2] ? 1.0 : 0.0});
     }
   }
-  const std::string& name() const override { return name_; }
   std::string description() const override {
     return "magnetometer without poses: hard iron and symmetric soft iron from a constant field "
            "magnitude (an ellipsoid fit)";
   }
-  SensorKind sensor() const override { return SensorKind::kMagnetometer; }
-  bool Needs(SensorKind t) const override { return t == SensorKind::kMagnetometer; }
-  const std::vector<ParameterInfo>& parameters() const override { return params_; }
-  std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
-    return {{SensorKind::kMagnetometer, 0}};
-  }
-
-  double magnitude() const { return free::FieldMagnitude(context_); }
-
   Eigen::VectorXd Scales(const FreeData&, const Eigen::VectorXd& theta) const override {
     const double gain = free::Symmetric(theta.data() + 3).norm() / std::sqrt(3.0);
     Eigen::VectorXd s(9);
@@ -52,8 +43,7 @@ class MagEllipsoid final : public free::NormFreeModel {
   }
 
   bool Start(const FreeData& data, Eigen::VectorXd* theta, std::string* error) const override {
-    std::vector<Eigen::Vector3d> means;
-    free::Means(data, SensorKind::kMagnetometer, 0, &means, nullptr, nullptr);
+    const std::vector<Eigen::Vector3d> means = RawMeans(data);
     *theta = Eigen::VectorXd::Zero(9);
     if (auto e = free::FitEllipsoid(means)) {
       const Eigen::Matrix3d S = magnitude() * free::SqrtSymmetric(e->E);
@@ -77,24 +67,12 @@ class MagEllipsoid final : public free::NormFreeModel {
   }
 
   std::vector<FreeTerm> Terms(const FreeData& data, const Eigen::VectorXd& theta) const override {
-    std::vector<Eigen::Vector3d> means;
-    std::vector<Eigen::Matrix3d> covariances;
-    std::vector<int> index;
-    free::Means(data, SensorKind::kMagnetometer, data.context.mag_offset_sigma, &means,
-                &covariances, &index);
     const Eigen::Matrix3d L = free::Symmetric(theta.data() + 3);
-    std::vector<FreeTerm> terms;
-    for (std::size_t i = 0; i < means.size(); ++i) {
-      const Eigen::Vector3d h = L * (means[i] - theta.head<3>());
-      FreeTerm t;
-      t.cost = free::MakeNormCost<EllipsoidCorrection, 9>(means[i], magnitude(),
-                                                          free::NormSigma(L, h, covariances[i]));
-      t.interval = index[i];
-      t.kind = "norm";
-      t.window = free::Window(data.intervals[index[i]]);
-      terms.push_back(std::move(t));
-    }
-    return terms;
+    return NormTerms(data, [&](const Eigen::Vector3d& mean, const Eigen::Matrix3d& covariance) {
+      const Eigen::Vector3d h = L * (mean - theta.head<3>());
+      return free::MakeNormCost<EllipsoidCorrection, 9>(mean, magnitude(),
+                                                        free::NormSigma(L, h, covariance));
+    });
   }
 
   Eigen::VectorXd Identity(const FreeData&) const override {
@@ -105,13 +83,6 @@ class MagEllipsoid final : public free::NormFreeModel {
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
     return EllipsoidCorrection::Apply(theta.data(), raw);
   }
-
- private:
-  double NormMagnitude() const override { return magnitude(); }
-
-  FreeContext context_;
-  std::string name_ = "magellipsoid";
-  std::vector<ParameterInfo> params_;
 };
 
 }  // namespace

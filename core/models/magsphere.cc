@@ -30,32 +30,23 @@ struct SphereFunctor {
 
 class MagSphere final : public free::NormFreeModel {
  public:
-  explicit MagSphere(const FreeContext& context) : context_(context) {
+  explicit MagSphere(const FreeContext& context)
+      : NormFreeModel("magsphere", SensorKind::kMagnetometer, 0, free::FieldMagnitude(context)) {
     const auto S = ParameterKind::kSensor;
     for (const char* b : {"bx", "by", "bz", "r"}) {
       params_.push_back({b, S, ParameterUnit::kField, 0.0});
     }
   }
-  const std::string& name() const override { return name_; }
   std::string description() const override {
     return "magnetometer without poses: hard iron and one gain (a sphere fit), for data that "
            "cannot carry an ellipsoid";
   }
-  SensorKind sensor() const override { return SensorKind::kMagnetometer; }
-  bool Needs(SensorKind t) const override { return t == SensorKind::kMagnetometer; }
-  const std::vector<ParameterInfo>& parameters() const override { return params_; }
-  std::vector<std::pair<SensorKind, int>> BiasColumns() const override {
-    return {{SensorKind::kMagnetometer, 0}};
-  }
-  double magnitude() const { return free::FieldMagnitude(context_); }
-
   Eigen::VectorXd Scales(const FreeData&, const Eigen::VectorXd& theta) const override {
     return Eigen::VectorXd::Constant(4, std::max(std::abs(theta[3]), 1e-300));
   }
 
   bool Start(const FreeData& data, Eigen::VectorXd* theta, std::string* error) const override {
-    std::vector<Eigen::Vector3d> means;
-    free::Means(data, SensorKind::kMagnetometer, 0, &means, nullptr, nullptr);
+    const std::vector<Eigen::Vector3d> means = RawMeans(data);
     *theta = Eigen::VectorXd::Zero(4);
     if (auto s = free::FitSphere(means)) {
       theta->head<3>() = s->center;
@@ -75,24 +66,13 @@ class MagSphere final : public free::NormFreeModel {
   }
 
   std::vector<FreeTerm> Terms(const FreeData& data, const Eigen::VectorXd& theta) const override {
-    std::vector<Eigen::Vector3d> means;
-    std::vector<Eigen::Matrix3d> covariances;
-    std::vector<int> index;
-    free::Means(data, SensorKind::kMagnetometer, data.context.mag_offset_sigma, &means,
-                &covariances, &index);
-    std::vector<FreeTerm> terms;
-    for (std::size_t i = 0; i < means.size(); ++i) {
-      const Eigen::Vector3d d = means[i] - theta.head<3>();
+    return NormTerms(data, [&](const Eigen::Vector3d& mean, const Eigen::Matrix3d& covariance) {
+      const Eigen::Vector3d d = mean - theta.head<3>();
       auto* f = new SphereFunctor{
-          means[i], 1.0 / free::NormSigma(Eigen::Matrix3d::Identity(), d, covariances[i])};
-      FreeTerm t;
-      t.cost = std::make_unique<ceres::AutoDiffCostFunction<SphereFunctor, 1, 4>>(f);
-      t.interval = index[i];
-      t.kind = "norm";
-      t.window = free::Window(data.intervals[index[i]]);
-      terms.push_back(std::move(t));
-    }
-    return terms;
+          mean, 1.0 / free::NormSigma(Eigen::Matrix3d::Identity(), d, covariance)};
+      return std::unique_ptr<ceres::CostFunction>(
+          new ceres::AutoDiffCostFunction<SphereFunctor, 1, 4>(f));
+    });
   }
 
   // No hard iron and the radius that leaves the raw magnitude as it is.
@@ -104,13 +84,6 @@ class MagSphere final : public free::NormFreeModel {
   Eigen::Vector3d Correct(const Eigen::VectorXd& theta, const Eigen::Vector3d& raw) const override {
     return SphereDistance::Apply(theta.data(), raw) * (magnitude() / theta[3]);
   }
-
- private:
-  double NormMagnitude() const override { return magnitude(); }
-
-  FreeContext context_;
-  std::string name_ = "magsphere";
-  std::vector<ParameterInfo> params_;
 };
 
 }  // namespace

@@ -237,13 +237,7 @@ void Sequencer::NextScheduled(double t_s) {
   counts_ = SampleCounts{};
   needed_ = 0;
   if (free_) {
-    index_ = static_cast<int>(next_scheduled_);
-    pose_ = TablePose{};
-    has_pose_ = true;
-    t_announce_ns_ = std::numeric_limits<std::int64_t>::min();
-    announced_ = false;
-    dwell_s_ = options_.dwell_s;
-    state_ = State::kWaiting;
+    WaitForPose(TablePose{});
     Emit(SequencerEventKind::kPoseStarted, t_s,
          fmt::format("free: interval {}, at least {:.2f} s still", index_ + 1, dwell_s_));
     return;
@@ -252,15 +246,19 @@ void Sequencer::NextScheduled(double t_s) {
     state_ = State::kScheduleDone;
     return;
   }
+  WaitForPose(schedule_[next_scheduled_]);
+  Emit(SequencerEventKind::kPoseStarted, t_s,
+       fmt::format("scheduled {} of {}, dwell {:.2f} s", index_ + 1, schedule_.size(), dwell_s_));
+}
+
+void Sequencer::WaitForPose(const TablePose& pose) {
   index_ = static_cast<int>(next_scheduled_);
-  pose_ = schedule_[next_scheduled_];
+  pose_ = pose;
   has_pose_ = true;
   t_announce_ns_ = std::numeric_limits<std::int64_t>::min();
   announced_ = false;
   dwell_s_ = options_.dwell_s;
   state_ = State::kWaiting;
-  Emit(SequencerEventKind::kPoseStarted, t_s,
-       fmt::format("scheduled {} of {}, dwell {:.2f} s", index_ + 1, schedule_.size(), dwell_s_));
 }
 
 void Sequencer::Interrupt(double t_s, const std::string& why) {

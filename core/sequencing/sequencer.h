@@ -187,6 +187,9 @@ class Sequencer {
   void Reject(double t_s, std::string reason);
   void SkipSegment(double t_s, std::string reason);
   void NextScheduled(double t_s);
+  // Waits for the table at `pose` (a free interval: an unknown one), schedule entry
+  // next_scheduled_.
+  void WaitForPose(const TablePose& pose);
   void Accept(StillSample s);
   // Sample periods from the last sample to `s` by the device's counter or clock (negative:
   // backwards); nullopt when neither tells.
