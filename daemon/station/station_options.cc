@@ -3,6 +3,8 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include <algorithm>
+
 #include "core/estimation/sensor_class.h"
 #include "core/modeling/free_model.h"
 #include "daemon/station/station.h"
@@ -49,6 +51,22 @@ bool StationOptions::IsValid(std::string* error) const {
     }
     return false;
   };
+  // A device has one calibration of each model (one calibrations/DEVICE.MODEL.json).
+  auto once = [&](const std::vector<std::string>& list, const std::string& where) {
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      if (std::find(list.begin(), list.begin() + static_cast<std::ptrdiff_t>(i), list[i]) !=
+          list.begin() + static_cast<std::ptrdiff_t>(i)) {
+        if (error) {
+          *error = fmt::format(
+              "{}model '{}' is listed twice: a device has one calibration of "
+              "each model",
+              where, list[i]);
+        }
+        return false;
+      }
+    }
+    return true;
+  };
   if (models.empty() && !free_source) {
     if (error) *error = "no model to estimate";
     return false;
@@ -56,6 +74,7 @@ bool StationOptions::IsValid(std::string* error) const {
   for (const auto& m : models) {
     if (!known(m)) return false;
   }
+  if (!once(models, "")) return false;
   for (const auto& [name, own] : per_device) {
     if (own.models && own.models->empty() && !free_source) {
       if (error) *error = "device '" + name + "': no model to estimate";
@@ -64,6 +83,7 @@ bool StationOptions::IsValid(std::string* error) const {
     for (const auto& m : own.models.value_or(std::vector<std::string>{})) {
       if (!known(m)) return false;
     }
+    if (own.models && !once(*own.models, "device '" + name + "': ")) return false;
     if (own.gate && !own.gate->IsValid(error)) return false;
   }
   return true;

@@ -236,5 +236,26 @@ TEST(Config, APortKeepsItsAtSign) {
   }
 }
 
+// A device has one calibration of each model (one calibrations/DEVICE.MODEL.json, one entry in
+// status and RESULT): a model named twice is refused with its name, for the station, for one
+// device, and with the free pose source.
+TEST(Config, AModelListedTwiceIsRefused) {
+  Config c;
+  std::string error;
+  EXPECT_FALSE(ParseConfig("[station]\nmodels = [\"accel13\", \"mag13\", \"accel13\"]\n", "t.toml",
+                           &c, &error));
+  EXPECT_NE(error.find("model 'accel13' is listed twice"), std::string::npos) << error;
+  EXPECT_FALSE(ParseConfig("[station]\npose_source = \"free\"\nmodels = [\"accel9\", \"accel9\"]\n",
+                           "t.toml", &c, &error));
+  EXPECT_NE(error.find("model 'accel9' is listed twice"), std::string::npos) << error;
+  EXPECT_FALSE(
+      ParseConfig("[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/ttyUSB0\"\n"
+                  "models = [\"mag13\", \"mag13\"]\n",
+                  "t.toml", &c, &error));
+  EXPECT_NE(error.find("device 'a': model 'mag13' is listed twice"), std::string::npos) << error;
+  ASSERT_TRUE(ParseConfig("[station]\nmodels = [\"accel13\", \"mag13\"]\n", "t.toml", &c, &error))
+      << error;
+}
+
 }  // namespace
 }  // namespace turncal::daemon
