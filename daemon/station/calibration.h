@@ -137,8 +137,8 @@ class CalibrationSet {
   // A captured record is the device's latest (d.records_used holds it): the estimates it
   // changes are computed on the host's worker and gated; one whose gate passes is activated
   // unless `resuming` (a journal replayed at start: the versions stored are applied again).
-  virtual void OnRecord(std::size_t device, DevicePipeline& d, const PoseRecord& record, double t_s,
-                        bool resuming, CalibrationHost& host) = 0;
+  virtual void OnRecord(DevicePipeline& d, const PoseRecord& record, double t_s, bool resuming,
+                        CalibrationHost& host) = 0;
   // The journal's records are all in (work deferred while resuming may be done now).
   virtual void OnResumed(DevicePipeline& d, CalibrationHost& host) { (void)d, (void)host; }
   // The sequencer's other events (a free set counts the segments it skipped).

@@ -59,9 +59,8 @@ FreeModelState& FreeCalibrations::Get(const std::string& requested) {
   return *models_.back();
 }
 
-void FreeCalibrations::OnRecord(std::size_t /*device*/, DevicePipeline& d,
-                                const PoseRecord& /*record*/, double t_s, bool resuming,
-                                CalibrationHost& host) {
+void FreeCalibrations::OnRecord(DevicePipeline& d, const PoseRecord& /*record*/, double t_s,
+                                bool resuming, CalibrationHost& host) {
   if (resuming) {
     refit_due_ = true;  // once, at the end of the resume
   } else {

@@ -128,8 +128,8 @@ class FreeCalibrations : public CalibrationSet {
   Calibration& Restore(const std::string& name) override { return Get(name); }
   bool NeedsMoves() const override;
   void Start(Sequencer& sequencer) override;  // free mode: it announces the first interval
-  void OnRecord(std::size_t device, DevicePipeline& d, const PoseRecord& record, double t_s,
-                bool resuming, CalibrationHost& host) override;
+  void OnRecord(DevicePipeline& d, const PoseRecord& record, double t_s, bool resuming,
+                CalibrationHost& host) override;
   void OnResumed(DevicePipeline& d, CalibrationHost& host) override;
   void OnSequencerEvent(const SequencerEvent& event) override;  // counts skipped segments
   // The orientation to add per model, and the gates.

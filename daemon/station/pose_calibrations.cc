@@ -27,8 +27,8 @@ bool PoseCalibrations::NeedsMoves() const {
   return false;
 }
 
-void PoseCalibrations::OnRecord(std::size_t /*device*/, DevicePipeline& d, const PoseRecord& record,
-                                double t_s, bool resuming, CalibrationHost& host) {
+void PoseCalibrations::OnRecord(DevicePipeline& d, const PoseRecord& record, double t_s,
+                                bool resuming, CalibrationHost& host) {
   for (ModelPipeline& m : models_) {
     if (!m.TriadOf(record)) continue;  // e.g. a rate segment holds the gyro only
     auto job = std::make_shared<ModelUpdate>();

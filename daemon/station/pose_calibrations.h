@@ -29,8 +29,8 @@ class PoseCalibrations : public CalibrationSet {
   std::vector<std::string> StoredNames() const override;
   Calibration& Restore(const std::string& name) override { return *Find(name); }
   bool NeedsMoves() const override;
-  void OnRecord(std::size_t device, DevicePipeline& d, const PoseRecord& record, double t_s,
-                bool resuming, CalibrationHost& host) override;
+  void OnRecord(DevicePipeline& d, const PoseRecord& record, double t_s, bool resuming,
+                CalibrationHost& host) override;
   // D-optimal over every model of the device (core/planning/pose_planner.h).
   nlohmann::json NextPose(const DevicePipeline& d, const StationOptions& options) const override;
   const char* pose_source() const override { return "announced"; }

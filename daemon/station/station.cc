@@ -310,7 +310,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   ++d.poses;
   d.poses_used.push_back(record.pose);
   d.records_used.push_back(record);
-  d.calibrations->OnRecord(device, d, record, t_s, resuming_, *this);
+  d.calibrations->OnRecord(d, record, t_s, resuming_, *this);
 }
 
 void Station::SaveNoiseProfile(DeviceState& d) {

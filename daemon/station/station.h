@@ -198,7 +198,6 @@ class Station : public ReplayTarget, private CalibrationHost {
   // POSE_CAPTURED / CALIBRATION_ACTIVE carry "saved": false.
   nlohmann::json PersistenceStatus() const;
 
-  using ModelState = ModelPipeline;
   using DeviceState = DevicePipeline;
 
  private:
