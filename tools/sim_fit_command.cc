@@ -13,6 +13,7 @@
 #include "sim/synthetic.h"
 #include "tools/help_text.h"
 #include "tools/pipeline_montecarlo_command.h"
+#include "tools/thermal_montecarlo_command.h"
 
 namespace turncal::tools {
 
@@ -169,7 +170,9 @@ constexpr Manual kMonteCarloManual = {
     "turncal montecarlo --model mag13 --noise session --runs 200\n"
     "turncal montecarlo --pipeline --model accel13 --class consumer --protocol xbus --plan "
     "shuffled --runs 200   # sessions as bytes through the station, as turncald --replay "
-    "--once runs them",
+    "--once runs them\n"
+    "turncal montecarlo --thermal -20,5,25,45,70 --model accel13 --class consumer --runs 200"
+    "   # calibration over temperature, in memory",
     "0 every criterion holds; 1 one does not (a parameter's std z outside [0.9, 1.1] or "
     "|mean z| > 0.15, chi^2 p-values not uniform, a run without an estimate); 2 a "
     "command-line mistake",
@@ -277,7 +280,22 @@ void AddSimFitCommands(CLI::App* app) {
                "through the station as turncald --replay --once does, with only --model "
                "configured (options below; --poses, --design and --noise do not apply)");
   AddPipelineMonteCarloOptions(mc, pipe.get());
-  mc->callback([mc_args, pipe, pipeline] {
+  auto thermal = std::make_shared<ThermalMonteCarloArgs>();
+  AddThermalMonteCarloOptions(mc, thermal.get());
+  mc->callback([mc_args, pipe, pipeline, thermal] {
+    if (!thermal->soaks.empty()) {
+      if (*pipeline) {
+        fmt::print(stderr, "turncal montecarlo: --thermal runs in memory; not with --pipeline\n");
+        throw CLI::RuntimeError(2);
+      }
+      thermal->engine.model = mc_args->model;
+      thermal->engine.sensor_class = mc_args->sensor_class;
+      thermal->engine.runs = mc_args->runs;
+      thermal->engine.seed = mc_args->seed;
+      thermal->engine.dwell_s = mc_args->dwell_s;
+      thermal->json = mc_args->json;
+      throw CLI::RuntimeError(RunThermalMonteCarloCommand(*thermal));
+    }
     if (*pipeline) {
       pipe->engine.model = mc_args->model;
       pipe->engine.sensor_class = mc_args->sensor_class;

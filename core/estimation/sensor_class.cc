@@ -26,6 +26,14 @@ SensorClass IndustrialClass() {
   c.gyr_bias_instability = 10 * kRadPerDeg / 3600;  // MTi-300: 10 deg/h
   c.gyr_scale_sigma = 500e-6;
   c.gyr_g_sensitivity = 0.003 * kRadPerDeg / 9.80665;  // MTi-300: 0.003 deg/s/g
+  // SENSORS.md "Temperature": the residual after the factory's model.
+  c.acc_bias_tempco = 0.03e-3 * 9.80665;   // 0.01-0.05 mg/degC
+  c.acc_scale_tempco = 30e-6;              // 10-50 ppm/degC
+  c.gyr_bias_tempco = 0.005 * kRadPerDeg;  // 0.001-0.01 deg/s/degC
+  c.gyr_scale_tempco = 50e-6;              // 20-100 ppm/degC
+  c.mag_bias_tempco = 0.02e-3;             // not in SENSORS.md: 0.02 mG/degC
+  c.mag_scale_tempco = 30e-6;              // not in SENSORS.md: as the accelerometer's scale
+  c.misalignment_tempco = 1e-6;            // not in SENSORS.md: 1 urad/degC
   return c;
 }
 
@@ -50,6 +58,14 @@ SensorClass ConsumerClass() {
   c.acc_quantum = 0.15e-3 * 9.80665;                 // 16 bits over +-5 g (SENSORS.md)
   c.gyr_quantum = 0.0092 * kRadPerDeg;               // 16 bits over +-300 deg/s
   c.mag_quantum = 2.4 / 65536;                       // 16 bits over +-1.2 G
+  // SENSORS.md "Temperature": uncompensated.
+  c.acc_bias_tempco = 1e-3 * 9.80665;     // +-1 mg/K
+  c.acc_scale_tempco = 3e-4;              // +-0.03 %/K
+  c.gyr_bias_tempco = 0.05 * kRadPerDeg;  // +-0.05 deg/s/K
+  c.gyr_scale_tempco = 2e-4;              // +-0.02 %/K
+  c.mag_bias_tempco = 0.2e-3;             // not in SENSORS.md: 0.2 mG/K
+  c.mag_scale_tempco = 3e-4;              // not in SENSORS.md: as the accelerometer's scale
+  c.misalignment_tempco = 10e-6;          // not in SENSORS.md: 10 urad/K
   return c;
 }
 

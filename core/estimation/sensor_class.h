@@ -47,6 +47,17 @@ struct SensorClass {
   double acc_quantum = 0.0;  // m/s^2
   double gyr_quantum = 0.0;  // rad/s
   double mag_quantum = 0.0;  // Gauss
+  // Temperature coefficients, 1 sigma per degree C of the die (SENSORS.md "Temperature"; issue 36):
+  // the linear term of each sensor parameter's dependence on temperature that the simulator draws
+  // (sim/thermal_truth.h; a quadratic term is drawn from the same figure). Mounting and
+  // installation parameters do not depend on temperature.
+  double acc_bias_tempco = 0.0;      // m/s^2 per degree C
+  double acc_scale_tempco = 0.0;     // relative per degree C
+  double gyr_bias_tempco = 0.0;      // rad/s per degree C
+  double gyr_scale_tempco = 0.0;     // relative per degree C
+  double mag_bias_tempco = 0.0;      // Gauss per degree C
+  double mag_scale_tempco = 0.0;     // relative (soft iron, gain entries) per degree C
+  double misalignment_tempco = 0.0;  // rad per degree C
 };
 
 // "industrial" (~3DM-GX5-25, MTi-300) and "consumer" (~3DM-GX2, MTi/MTx mark II).
