@@ -283,26 +283,25 @@ void AddSimFitCommands(CLI::App* app) {
   auto thermal = std::make_shared<ThermalMonteCarloArgs>();
   AddThermalMonteCarloOptions(mc, thermal.get());
   mc->callback([mc_args, pipe, pipeline, thermal] {
+    // The options every engine shares, from the montecarlo command's own.
+    const auto shared = [&mc_args](auto* engine, bool* json) {
+      engine->model = mc_args->model;
+      engine->sensor_class = mc_args->sensor_class;
+      engine->runs = mc_args->runs;
+      engine->seed = mc_args->seed;
+      engine->dwell_s = mc_args->dwell_s;
+      *json = mc_args->json;
+    };
     if (!thermal->soaks.empty()) {
       if (*pipeline) {
         fmt::print(stderr, "turncal montecarlo: --thermal runs in memory; not with --pipeline\n");
         throw CLI::RuntimeError(2);
       }
-      thermal->engine.model = mc_args->model;
-      thermal->engine.sensor_class = mc_args->sensor_class;
-      thermal->engine.runs = mc_args->runs;
-      thermal->engine.seed = mc_args->seed;
-      thermal->engine.dwell_s = mc_args->dwell_s;
-      thermal->json = mc_args->json;
+      shared(&thermal->engine, &thermal->json);
       throw CLI::RuntimeError(RunThermalMonteCarloCommand(*thermal));
     }
     if (*pipeline) {
-      pipe->engine.model = mc_args->model;
-      pipe->engine.sensor_class = mc_args->sensor_class;
-      pipe->engine.runs = mc_args->runs;
-      pipe->engine.seed = mc_args->seed;
-      pipe->engine.dwell_s = mc_args->dwell_s;
-      pipe->json = mc_args->json;
+      shared(&pipe->engine, &pipe->json);
       throw CLI::RuntimeError(RunPipelineMonteCarloCommand(*pipe));
     }
     throw CLI::RuntimeError(RunMonteCarlo(*mc_args));

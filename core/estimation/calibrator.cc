@@ -14,6 +14,7 @@
 #include "core/estimation/gyro_linear_start.h"
 #include "core/estimation/linear_start.h"
 #include "core/estimation/move_residual.h"
+#include "core/estimation/scaled_svd.h"
 #include "core/modeling/accel_physical.h"
 #include "core/modeling/mag22_gauge.h"
 
@@ -425,12 +426,9 @@ Eigen::MatrixXd Calibrator::RankAndCovariance(Eigen::VectorXd* theta, Estimate* 
   ceres::Problem problem(ProblemOptions());
   for (auto* block : blocks_) problem.AddResidualBlock(block, loss_.get(), theta->data());
   const Eigen::MatrixXd J = DenseJacobian(&problem);
-  Eigen::VectorXd scale = J.colwise().norm().transpose();
-  for (int j = 0; j < N; ++j) scale[j] = scale[j] > 0 ? 1.0 / scale[j] : 1.0;
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(J * scale.asDiagonal(), Eigen::ComputeThinV);
-  const Eigen::VectorXd& s = svd.singularValues();
-  est->rank = 0;
-  for (int i = 0; i < s.size(); ++i) est->rank += s[i] > options_.rank_tolerance * s[0];
+  const ScaledSvd scaled(J, options_.rank_tolerance);
+  const Eigen::VectorXd& s = scaled.singular_values();
+  est->rank = scaled.rank;
   est->condition = s[s.size() - 1] > 0 ? s[0] / s[s.size() - 1] : INFINITY;
   const int expected_rank = identifiable;
   if (est->rank < expected_rank) {
@@ -453,10 +451,7 @@ Eigen::MatrixXd Calibrator::RankAndCovariance(Eigen::VectorXd* theta, Estimate* 
     covariance.GetCovarianceBlock(theta->data(), theta->data(), cov.data());
   } else {
     est->warnings.push_back("Ceres could not compute the covariance; using the pseudo-inverse");
-    const Eigen::MatrixXd& V = svd.matrixV();
-    Eigen::VectorXd inv = Eigen::VectorXd::Zero(s.size());
-    for (int i = 0; i < est->rank; ++i) inv[i] = 1.0 / (s[i] * s[i]);
-    cov = scale.asDiagonal() * V * inv.asDiagonal() * V.transpose() * scale.asDiagonal();
+    cov = scaled.PseudoInverseCovariance();
   }
   return cov;
 }

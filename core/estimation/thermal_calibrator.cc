@@ -13,6 +13,7 @@
 
 #include "core/estimation/bias_drift.h"
 #include "core/estimation/gls_whitening.h"
+#include "core/estimation/scaled_svd.h"
 
 namespace turncal {
 
@@ -447,17 +448,10 @@ void ThermalCalibration::Finish(const Fit& fit, ThermalEstimate* est) {
   Eigen::VectorXd r;
   Whitened(fit, &J, &r);
   // Rank and covariance of the scaled coefficients: the column-scaled Jacobian's SVD.
-  Eigen::VectorXd scale = J.colwise().norm().transpose();
-  for (int j = 0; j < N; ++j) scale[j] = scale[j] > 0 ? 1.0 / scale[j] : 1.0;
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(J * scale.asDiagonal(), Eigen::ComputeThinV);
-  const Eigen::VectorXd& s = svd.singularValues();
-  est->rank = 0;
-  for (int i = 0; i < s.size(); ++i) est->rank += s[i] > options_.rank_tolerance * s[0];
-  Eigen::VectorXd inv = Eigen::VectorXd::Zero(s.size());
-  for (int i = 0; i < est->rank; ++i) inv[i] = 1.0 / (s[i] * s[i]);
-  const Eigen::MatrixXd& V = svd.matrixV();
-  Eigen::MatrixXd cov =
-      scale.asDiagonal() * V * inv.asDiagonal() * V.transpose() * scale.asDiagonal();
+  const ScaledSvd scaled(J, options_.rank_tolerance);
+  est->rank = scaled.rank;
+  Eigen::MatrixXd cov = scaled.PseudoInverseCovariance();
+  const Eigen::MatrixXd& V = scaled.svd.matrixV();
   // Residuals per record (with drift: innovations, in time order back to the record's index).
   est->residuals.assign(static_cast<std::size_t>(n), PoseResidual{});
   std::vector<int> order(static_cast<std::size_t>(n));
