@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -29,6 +30,13 @@ double ChamberProfile::duration_s() const {
     from_c = s.setpoint_c;
   }
   return t_s;
+}
+
+double ChamberProfile::middle_c() const {
+  double lo = start_c, hi = start_c;
+  for (const ChamberStep& s : steps)
+    lo = std::min(lo, s.setpoint_c), hi = std::max(hi, s.setpoint_c);
+  return 0.5 * (lo + hi);
 }
 
 bool ChamberProfile::IsValid(std::string* error) const {

@@ -30,6 +30,8 @@ struct ChamberProfile {
   double AirAt(double t_s) const;
   // Seconds from 0 to the end of the last hold.
   double duration_s() const;
+  // The middle of the temperatures it visits (the start and every set-point).
+  double middle_c() const;
   bool IsValid(std::string* error) const;
   // "START; soak T HOLD_S; ramp T RATE_C_PER_MIN [HOLD_S]; ...", e.g. "25; ramp -20 2 1200;
   // ramp 70 2 1200; ramp 25 2" (the simulator's --chamber). False with the reason.

@@ -26,6 +26,8 @@ bool SessionSimOptions::IsValid(std::string* error) const {
   }
   if (!(warmup_tau_s > 0)) return fail("the warm-up time constant must be > 0");
   if (table && !table->IsValid(error)) return false;
+  if (chamber && !chamber->IsValid(error)) return false;
+  if (chamber && !die.IsValid(error)) return false;
   return true;
 }
 
@@ -122,12 +124,15 @@ PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& 
   TriadStats stats;
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   Eigen::Matrix3d sum2 = Eigen::Matrix3d::Zero();
+  double temp_sum = 0.0;
+  std::int64_t temp_n = 0;
   for (const auto& s : session.samples) {
     const double t = static_cast<double>(s.t_host_ns) * 1e-9;
     if (t < event.t_s || t >= event.dwell_end_s) continue;
     const auto& v = sensor == SensorKind::kAccelerometer ? s.acc_mps2
                     : sensor == SensorKind::kGyroscope   ? s.gyr_radps
                                                          : s.mag;
+    if (s.temp_c) temp_sum += *s.temp_c, ++temp_n;
     if (!v) continue;
     sum += *v;
     sum2 += *v * v->transpose();
@@ -137,6 +142,7 @@ PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& 
   r.pose = event.pose;
   r.t_start_s = event.t_s;
   r.t_end_s = event.dwell_end_s;
+  if (temp_n > 0) r.temp_c = temp_sum / static_cast<double>(temp_n);
   if (stats.count > 1) {
     const double n = static_cast<double>(stats.count);
     stats.mean = sum / n;

@@ -16,6 +16,7 @@
 // that settles exponentially after power-on, which is time 0), quantisation for classes with a
 // 16-bit ADC. The device clock runs `clock_drift_ppm` fast and starts at `clock_offset_s`.
 
+#include <limits>
 #include <optional>
 #include <random>
 #include <vector>
@@ -25,7 +26,9 @@
 #include "core/modeling/measurement_model.h"
 #include "core/planning/table_motion.h"
 #include "core/sequencing/sample.h"
+#include "sim/chamber.h"
 #include "sim/synthetic.h"
+#include "sim/thermal_truth.h"
 
 namespace turncal {
 
@@ -73,6 +76,16 @@ struct SessionSimOptions {
   // (dw/dt by the backward difference over one sample), turned by the nominal mounting; the
   // gyro does not (a rigid body turns alike everywhere). Still poses are unaffected.
   Eigen::Vector3d lever_arm_q_m = Eigen::Vector3d::Zero();
+  // A climate chamber (issue 36; sim/chamber.h): the die's temperature follows it, every sensor
+  // parameter of the models is a quadratic in that temperature (sim/thermal_truth.h; the truths
+  // at the chamber's middle temperature are DrawTruth's, the coefficients drawn from a stream of
+  // their own, so the session's other draws are unchanged) and the samples report it. Without
+  // one, the reported temperature is a line from 25 to 25.5 degC and the parameters constant.
+  std::optional<ChamberProfile> chamber;
+  DieThermal die;
+  // With a chamber: the poses again and again until the chamber's profile has run (a turntable
+  // cycling its poses through a continuous ramp).
+  bool repeat_poses_through_chamber = false;
   std::uint64_t seed = 1;
 
   bool IsValid(std::string* error) const;
@@ -92,6 +105,8 @@ struct SessionPoseEvent {
   // A rate segment: the seconds of its whole revolutions (the announcement's dwell); the hold
   // lasts two seconds more.
   double revolutions_s = 0.0;
+  // The die's true temperature averaged over the dwell (with a chamber; NaN without).
+  double die_mean_c = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct SimulatedSession {
@@ -104,6 +119,9 @@ struct SimulatedSession {
   // table's rate in its output.
   Eigen::VectorXd gyro_truth;
   double duration_s = 0.0;
+  // With a chamber: each model's parameters as functions of the die's temperature (their values
+  // at the chamber's middle temperature are accel_truth, mag_truth, gyro_truth).
+  std::optional<ThermalTruth> accel_thermal, mag_thermal, gyro_thermal;
 
   // The wander averaged over all the dwells (the bias a calibration that treats every pose's
   // offset as independent finds: turn-on bias plus this).
@@ -137,7 +155,8 @@ SimulatedSession SimulateSession(const MeasurementModel& accel_model,
 
 // The statistics of the samples inside one pose's dwell (the ideal cut, with the simulator's
 // known times; the sequencer finds windows itself): mean, sample covariance and count of the
-// accelerometer, magnetometer or gyroscope triad (a rate segment: its whole revolutions).
+// accelerometer, magnetometer or gyroscope triad (a rate segment: its whole revolutions), and the
+// mean of the temperature the samples report.
 PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& event,
                        SensorKind sensor);
 

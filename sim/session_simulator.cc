@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <random>
 
 #include "sim/session_sim.h"
@@ -128,6 +129,18 @@ class SessionSimulator {
   SimulatedSession Simulate(const std::vector<TablePose>& poses) {
     DrawTruths();
     PlanSchedule(poses);
+    if (o_.chamber && o_.repeat_poses_through_chamber && out_.duration_s > 0 &&
+        out_.duration_s < o_.chamber->duration_s()) {
+      // The poses again and again until the chamber's profile has run.
+      const auto passes =
+          static_cast<std::size_t>(std::ceil(o_.chamber->duration_s() / out_.duration_s));
+      std::vector<TablePose> repeated;
+      for (std::size_t i = 0; i < passes; ++i)
+        repeated.insert(repeated.end(), poses.begin(), poses.end());
+      segments_.clear();
+      out_.events.clear();
+      PlanSchedule(repeated);
+    }
     StartDrift();
     const auto n = static_cast<std::size_t>(std::floor(out_.duration_s * o_.rate_hz));
     out_.samples.reserve(n);
@@ -154,6 +167,20 @@ class SessionSimulator {
     if (gyro_model_) {
       out_.gyro_truth = DrawTruth(*gyro_model_, c_, &random_.rng);
       out_.gyro_bias_radps = out_.gyro_truth.segment<3>(gyro_model_->index_of("bx"));
+    }
+    if (o_.chamber) {
+      // From a stream of their own: the session's draws stay as they were.
+      std::mt19937_64 thermal_rng(o_.seed ^ 0x7e3a1c5ull);
+      const double t0 = o_.chamber->middle_c();
+      out_.accel_thermal =
+          DrawThermalTruthAbout(accel_model_, c_, out_.accel_truth, t0, &thermal_rng);
+      out_.mag_thermal = DrawThermalTruthAbout(mag_model_, c_, out_.mag_truth, t0, &thermal_rng);
+      if (gyro_model_) {
+        out_.gyro_thermal =
+            DrawThermalTruthAbout(*gyro_model_, c_, out_.gyro_truth, t0, &thermal_rng);
+      }
+      die_.emplace(*o_.chamber, o_.die);
+      die_sum_.assign(1, 0.0);
     }
   }
 
@@ -351,6 +378,19 @@ class SessionSimulator {
   // the quantisation.
   Sample SimulateSample(std::size_t k, double tk, const Angles& a) {
     const TablePose pose{a.value[0], a.value[1], a.value[2]};
+    // The parameters now: at the die's temperature with a chamber, else the constant truths.
+    const Eigen::VectorXd* acc_theta = &out_.accel_truth;
+    const Eigen::VectorXd* mag_theta = &out_.mag_truth;
+    const Eigen::VectorXd* gyr_theta = &out_.gyro_truth;
+    Eigen::VectorXd acc_at, mag_at, gyr_at;
+    double die_c = 0.0;
+    if (die_) {
+      die_c = die_->Advance(tk);
+      die_sum_.push_back(die_sum_.back() + die_c);
+      acc_at = out_.accel_thermal->ThetaAt(die_c), acc_theta = &acc_at;
+      mag_at = out_.mag_thermal->ThetaAt(die_c), mag_theta = &mag_at;
+      if (gyro_model_) gyr_at = out_.gyro_thermal->ThetaAt(die_c), gyr_theta = &gyr_at;
+    }
     const double settle = std::exp(-tk / o_.warmup_tau_s);
     Eigen::Vector3d drift_acc, drift_mag;
     StepDrift(settle, &drift_acc, &drift_mag);
@@ -362,8 +402,7 @@ class SessionSimulator {
       const Mat3<double> C = pose.C_p_q();
       Eigen::Vector3d table_q = BodyRate(a);
       table_q *= 1.0 + o_.gyr_scale_nonlinearity * table_q.norm();
-      gyr = gyro_model_->PredictRate(out_.gyro_truth, C * earth_ned_ + table_q,
-                                     C * f_ned_ + lever_q) +
+      gyr = gyro_model_->PredictRate(*gyr_theta, C * earth_ned_ + table_q, C * f_ned_ + lever_q) +
             drift_gyr;
     } else {
       gyr = accel_model_.context().mounting * BodyRate(a) + out_.gyro_bias_radps;
@@ -372,14 +411,14 @@ class SessionSimulator {
     smp.t_host_ns = static_cast<std::int64_t>(std::llround(tk * 1e9));
     smp.t_device_s = o_.clock_offset_s + tk * (1.0 + o_.clock_drift_ppm * 1e-6);
     smp.counter = static_cast<std::uint32_t>(k);
-    Eigen::Vector3d acc = accel_model_.Predict(out_.accel_truth, pose) + drift_acc;
+    Eigen::Vector3d acc = accel_model_.Predict(*acc_theta, pose) + drift_acc;
     if (!o_.lever_arm_q_m.isZero()) acc += accel_model_.context().mounting * lever_q;
-    Eigen::Vector3d mag = mag_model_.Predict(out_.mag_truth, pose) + drift_mag;
+    Eigen::Vector3d mag = mag_model_.Predict(*mag_theta, pose) + drift_mag;
     AddWhiteNoise(&acc, &gyr, &mag);
     smp.acc_mps2 = acc;
     smp.gyr_radps = gyr;
     smp.mag = mag;
-    smp.temp_c = 25.0 + 0.5 * tk / std::max(out_.duration_s, 1.0);
+    smp.temp_c = die_ ? die_->Reported(die_c) : 25.0 + 0.5 * tk / std::max(out_.duration_s, 1.0);
     return smp;
   }
 
@@ -418,6 +457,7 @@ class SessionSimulator {
       if (gyro_model_) {
         e.gyr_wander_mean = (out_.gyr_drift_sum[b] - out_.gyr_drift_sum[a]) / count;
       }
+      if (die_) e.die_mean_c = (die_sum_[b] - die_sum_[a]) / count;
     }
   }
 
@@ -434,6 +474,9 @@ class SessionSimulator {
   std::vector<Segment> segments_;
   Drift drift_;
   Eigen::Vector3d previous_rate_q_ = Eigen::Vector3d::Zero();
+  // With a chamber: the die's temperature, and its prefix sums per sample.
+  std::optional<DieTemperature> die_;
+  std::vector<double> die_sum_;
 };
 
 }  // namespace

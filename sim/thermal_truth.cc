@@ -31,8 +31,14 @@ double ClassTempco(const MeasurementModel& model, const SensorClass& sensor, int
 
 ThermalTruth DrawThermalTruth(const MeasurementModel& model, const SensorClass& sensor, double t0_c,
                               std::mt19937_64* rng) {
-  ThermalTruth truth;
   const Eigen::VectorXd theta0 = DrawTruth(model, sensor, rng);
+  return DrawThermalTruthAbout(model, sensor, theta0, t0_c, rng);
+}
+
+ThermalTruth DrawThermalTruthAbout(const MeasurementModel& model, const SensorClass& sensor,
+                                   const Eigen::VectorXd& theta0, double t0_c,
+                                   std::mt19937_64* rng) {
+  ThermalTruth truth;
   truth.basis = ThermalBasis::Constant(model.num_parameters(), t0_c);
   for (int p = 0; p < model.num_parameters(); ++p) {
     if (ClassTempco(model, sensor, p) > 0) truth.basis.orders[static_cast<std::size_t>(p)] = 2;

@@ -28,7 +28,12 @@ struct ThermalTruth {
 // g-sensitivity parameters).
 double ClassTempco(const MeasurementModel& model, const SensorClass& sensor, int parameter);
 
+// theta0 from DrawTruth, then the coefficients.
 ThermalTruth DrawThermalTruth(const MeasurementModel& model, const SensorClass& sensor, double t0_c,
                               std::mt19937_64* rng);
+// The coefficients about a given theta0 (the value at t0_c).
+ThermalTruth DrawThermalTruthAbout(const MeasurementModel& model, const SensorClass& sensor,
+                                   const Eigen::VectorXd& theta0, double t0_c,
+                                   std::mt19937_64* rng);
 
 }  // namespace turncal
