@@ -44,12 +44,12 @@ struct Setup {
   std::unique_ptr<MeasurementModel> model;
   SensorClass sensor;
   std::vector<double> held_out_c, grid_c;
+  double t0_c = 0.0;  // the middle of the soaks: the truths' and the estimates' reference
 };
 
 void OneRun(const ThermalMonteCarloOptions& o, const Setup& s, int r, ThermalRun* out) {
   std::mt19937_64 rng(o.seed * 1000003ULL + static_cast<std::uint64_t>(r));
-  const double t0 = 0.5 * (*std::min_element(o.soaks_c.begin(), o.soaks_c.end()) +
-                           *std::max_element(o.soaks_c.begin(), o.soaks_c.end()));
+  const double t0 = s.t0_c;
   const ThermalTruth truth = DrawThermalTruth(*s.model, s.sensor, t0, &rng);
   std::vector<PoseRecord> records;
   double t_s = 0.0;
@@ -129,6 +129,12 @@ ThermalMonteCarloSummary RunThermalMonteCarlo(const ThermalMonteCarloOptions& o)
     s.error = "a calibration over temperature needs at least two soak temperatures";
     return s;
   }
+  for (double t : o.soaks_c) {
+    if (!std::isfinite(t)) {
+      s.error = "the soak temperatures must be finite";
+      return s;
+    }
+  }
   if (o.orders != "truth" && o.orders != "chosen" && o.orders != "full") {
     s.error = fmt::format("orders '{}': truth, chosen or full", o.orders);
     return s;
@@ -148,12 +154,11 @@ ThermalMonteCarloSummary RunThermalMonteCarlo(const ThermalMonteCarloOptions& o)
   for (double t : setup.held_out_c) {
     for (const auto& p : params) s.held_out.push_back(fmt::format("{} at {:g} degC", p.name, t));
   }
-  std::mt19937_64 truth_rng(0);
-  const double t0 = 0.5 * (soaks.front() + soaks.back());
-  const ThermalTruth shape = DrawThermalTruth(*setup.model, setup.sensor, t0, &truth_rng);
+  setup.t0_c = 0.5 * (soaks.front() + soaks.back());
   if (o.orders == "truth") {
-    for (int j = 0; j < shape.basis.num_coefficients(); ++j) {
-      s.coefficients.push_back(shape.basis.CoefficientName(params, j));
+    const ThermalBasis shape = ThermalTruthBasis(*setup.model, setup.sensor, setup.t0_c);
+    for (int j = 0; j < shape.num_coefficients(); ++j) {
+      s.coefficients.push_back(shape.CoefficientName(params, j));
     }
   }
   const SensorKind kind = setup.model->sensor();

@@ -29,6 +29,15 @@ double ClassTempco(const MeasurementModel& model, const SensorClass& sensor, int
   return 0.0;
 }
 
+ThermalBasis ThermalTruthBasis(const MeasurementModel& model, const SensorClass& sensor,
+                               double t0_c) {
+  ThermalBasis basis = ThermalBasis::Constant(model.num_parameters(), t0_c);
+  for (int p = 0; p < model.num_parameters(); ++p) {
+    if (ClassTempco(model, sensor, p) > 0) basis.orders[static_cast<std::size_t>(p)] = 2;
+  }
+  return basis;
+}
+
 ThermalTruth DrawThermalTruth(const MeasurementModel& model, const SensorClass& sensor, double t0_c,
                               std::mt19937_64* rng) {
   const Eigen::VectorXd theta0 = DrawTruth(model, sensor, rng);
@@ -39,10 +48,7 @@ ThermalTruth DrawThermalTruthAbout(const MeasurementModel& model, const SensorCl
                                    const Eigen::VectorXd& theta0, double t0_c,
                                    std::mt19937_64* rng) {
   ThermalTruth truth;
-  truth.basis = ThermalBasis::Constant(model.num_parameters(), t0_c);
-  for (int p = 0; p < model.num_parameters(); ++p) {
-    if (ClassTempco(model, sensor, p) > 0) truth.basis.orders[static_cast<std::size_t>(p)] = 2;
-  }
+  truth.basis = ThermalTruthBasis(model, sensor, t0_c);
   truth.coefficients = Eigen::VectorXd::Zero(truth.basis.num_coefficients());
   std::normal_distribution<double> normal(0.0, 1.0);
   for (int p = 0; p < model.num_parameters(); ++p) {

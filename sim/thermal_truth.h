@@ -28,6 +28,10 @@ struct ThermalTruth {
 // g-sensitivity parameters).
 double ClassTempco(const MeasurementModel& model, const SensorClass& sensor, int parameter);
 
+// The truth's polynomials: order 2 for every parameter with a class temperature coefficient,
+// 0 for the others.
+ThermalBasis ThermalTruthBasis(const MeasurementModel& model, const SensorClass& sensor,
+                               double t0_c);
 // theta0 from DrawTruth, then the coefficients.
 ThermalTruth DrawThermalTruth(const MeasurementModel& model, const SensorClass& sensor, double t0_c,
                               std::mt19937_64* rng);

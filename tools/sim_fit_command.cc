@@ -292,7 +292,7 @@ void AddSimFitCommands(CLI::App* app) {
       engine->dwell_s = mc_args->dwell_s;
       *json = mc_args->json;
     };
-    if (!thermal->soaks.empty()) {
+    if (!thermal->soaks_c.empty()) {
       if (*pipeline) {
         fmt::print(stderr, "turncal montecarlo: --thermal runs in memory; not with --pipeline\n");
         throw CLI::RuntimeError(2);

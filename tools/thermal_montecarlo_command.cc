@@ -2,41 +2,16 @@
 
 #include <fmt/format.h>
 
-#include <cmath>
-#include <sstream>
-
 #include "tools/z_score_table.h"
 
 namespace turncal::tools {
 
-namespace {
-
-// "-20,5,25" -> {-20, 5, 25}; false on anything that is not a comma-separated list of numbers.
-bool ParseTemperatures(const std::string& text, std::vector<double>* out) {
-  out->clear();
-  std::stringstream in(text);
-  std::string item;
-  while (std::getline(in, item, ',')) {
-    std::size_t used = 0;
-    try {
-      out->push_back(std::stod(item, &used));
-    } catch (const std::exception&) {
-      return false;
-    }
-    if (item.find_first_not_of(" ", used) != std::string::npos || !std::isfinite(out->back())) {
-      return false;
-    }
-  }
-  return !out->empty();
-}
-
-}  // namespace
-
 void AddThermalMonteCarloOptions(CLI::App* mc, ThermalMonteCarloArgs* args) {
-  mc->add_option("--thermal", args->soaks,
+  mc->add_option("--thermal", args->soaks_c,
                  "calibration over temperature, in memory: the soak temperatures, degC, comma "
                  "separated (e.g. -20,5,25,45,70); the 26 cube poses at each (--model accel13, "
-                 "accel12, mag13, gyro12, gyro21)");
+                 "accel12, mag13, gyro12, gyro21)")
+      ->delimiter(',');
   mc->add_option("--thermal-orders", args->engine.orders,
                  "with --thermal: each parameter's order as the truth's (the coefficients' z "
                  "comparable across runs) or chosen from the data")
@@ -47,9 +22,10 @@ void AddThermalMonteCarloOptions(CLI::App* mc, ThermalMonteCarloArgs* args) {
                  "is dropped")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  mc->add_option("--held-out", args->held_out,
+  mc->add_option("--held-out", args->held_out_c,
                  "with --thermal: temperatures where every parameter is checked, degC, comma "
-                 "separated (default: the midpoints between the soaks)");
+                 "separated (default: the midpoints between the soaks)")
+      ->delimiter(',');
   mc->add_option("--thermal-jobs", args->engine.jobs, "with --thermal: runs in parallel")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
@@ -57,16 +33,8 @@ void AddThermalMonteCarloOptions(CLI::App* mc, ThermalMonteCarloArgs* args) {
 
 int RunThermalMonteCarloCommand(const ThermalMonteCarloArgs& args) {
   montecarlo::ThermalMonteCarloOptions o = args.engine;
-  if (!ParseTemperatures(args.soaks, &o.soaks_c)) {
-    fmt::print(stderr, "turncal montecarlo: --thermal '{}': a comma-separated list of degC\n",
-               args.soaks);
-    return 2;
-  }
-  if (!args.held_out.empty() && !ParseTemperatures(args.held_out, &o.held_out_c)) {
-    fmt::print(stderr, "turncal montecarlo: --held-out '{}': a comma-separated list of degC\n",
-               args.held_out);
-    return 2;
-  }
+  o.soaks_c = args.soaks_c;
+  o.held_out_c = args.held_out_c;
   const montecarlo::ThermalMonteCarloSummary s = montecarlo::RunThermalMonteCarlo(o);
   if (!s.error.empty()) {
     fmt::print(stderr, "turncal montecarlo: {}\n", s.error);

@@ -4,6 +4,7 @@
 
 #include <CLI/CLI.hpp>
 #include <string>
+#include <vector>
 
 #include "montecarlo/thermal_montecarlo.h"
 
@@ -11,8 +12,8 @@ namespace turncal::tools {
 
 struct ThermalMonteCarloArgs {
   montecarlo::ThermalMonteCarloOptions engine;
-  std::string soaks;     // "-20,5,25,45,70": --thermal's value; empty: not asked
-  std::string held_out;  // "-5,15,35,57.5"
+  std::vector<double> soaks_c;     // --thermal -20,5,25,45,70; empty: not asked
+  std::vector<double> held_out_c;  // --held-out -5,15,35,57.5
   bool json = false;
 };
 
