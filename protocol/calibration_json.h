@@ -55,6 +55,8 @@ nlohmann::json TolerancesJson(const MeasurementModel& model, const GateOptions& 
 // undetermined; empty while the solve is refused), and the drift's identified strength with the
 // scale the solve used ("used": 1 while the poses do not reject the prior).
 nlohmann::json ParamsJson(const Estimate& e);
+// A covariance matrix as rows of numbers (null where not finite).
+nlohmann::json CovarianceJson(const Eigen::MatrixXd& covariance);
 nlohmann::json DriftScaleJson(const Estimate& e);
 
 // What a pose model's activation writes (daemon/station/model_pipeline.h): the document the

@@ -33,8 +33,6 @@ nlohmann::json ParamsJson(const Estimate& e) {
   return params;
 }
 
-namespace {
-
 nlohmann::json CovarianceJson(const Eigen::MatrixXd& covariance) {
   nlohmann::json rows = nlohmann::json::array();
   for (Eigen::Index r = 0; r < covariance.rows(); ++r) {
@@ -47,6 +45,8 @@ nlohmann::json CovarianceJson(const Eigen::MatrixXd& covariance) {
   }
   return rows;
 }
+
+namespace {
 
 // The poses and records that hold the model's triad (an accelerometer's leave out rate
 // segments), each record with that triad only: the document can be re-evaluated (the report's

@@ -166,6 +166,17 @@ void AppendCorrectedLine(std::string* out, const Sample& sample, const Corrected
     AppendInteger(out, c.versions[k].second);
   }
   *out += "}";
+  if (!c.temperature_flags.empty()) {
+    *out += ",\"temp_flags\":{";
+    for (std::size_t k = 0; k < c.temperature_flags.size(); ++k) {
+      if (k) *out += ',';
+      AppendString(out, c.temperature_flags[k].first);
+      *out += ":\"";
+      *out += c.temperature_flags[k].second;
+      *out += '"';
+    }
+    *out += "}";
+  }
   if (with_raw) {
     *out += ",\"raw\":{\"class\":\"SAMPLE\"";
     AppendRaw(out, sample);

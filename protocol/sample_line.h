@@ -26,6 +26,9 @@ struct CorrectedSample {
   const char* mag_frame = nullptr;
   const char* gyr_frame = nullptr;
   std::vector<std::pair<std::string, int>> versions;  // model, active version
+  // A calibration over temperature that corrected this sample at another temperature than the
+  // sample's: model, "below_range" | "above_range" | "no_temperature" (docs/THERMAL.md).
+  std::vector<std::pair<std::string, const char*>> temperature_flags;
 };
 
 // Appends {"class":"SAMPLE","device":...,"t_host_ns":...,"t_device":...,"counter":...,"acc":[...],

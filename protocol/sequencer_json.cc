@@ -80,6 +80,11 @@ nlohmann::json ToJson(const PoseRecord& r, bool move_blocks) {
   if (r.gyr) j["gyr"] = Triad(*r.gyr);
   if (r.mag) j["mag"] = Triad(*r.mag);
   if (r.temp_c) j["temp"] = *r.temp_c;
+  if (r.temp_spread) {
+    j["temp_spread"] = {{"std", r.temp_spread->std_c},
+                        {"min", r.temp_spread->min_c},
+                        {"max", r.temp_spread->max_c}};
+  }
   if (r.has_sensor_window()) {
     j["t_sensor_start"] = r.sensor_t_start_s;
     j["t_sensor_end"] = r.sensor_t_end_s;
@@ -141,6 +146,16 @@ bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* erro
   if (j.contains("temp")) {
     if (!j["temp"].is_number()) return fail("temp is not a number");
     r.temp_c = j["temp"].get<double>();
+  }
+  if (j.contains("temp_spread")) {
+    const nlohmann::json& t = j["temp_spread"];
+    if (!t.is_object() || !t.value("std", nlohmann::json()).is_number() ||
+        !t.value("min", nlohmann::json()).is_number() ||
+        !t.value("max", nlohmann::json()).is_number()) {
+      return fail("temp_spread is not {std, min, max}");
+    }
+    r.temp_spread =
+        TemperatureSpread{t["std"].get<double>(), t["min"].get<double>(), t["max"].get<double>()};
   }
   // A move without its blocks (an event's summary) is left out: nothing to calibrate from.
   if (j.contains("move_in") && j["move_in"].contains("increment_rad")) {

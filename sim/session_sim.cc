@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "core/estimation/move_integrator.h"
 
@@ -124,7 +125,8 @@ PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& 
   TriadStats stats;
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   Eigen::Matrix3d sum2 = Eigen::Matrix3d::Zero();
-  double temp_sum = 0.0;
+  double temp_sum = 0.0, temp_sum2 = 0.0;
+  double temp_min = std::numeric_limits<double>::infinity(), temp_max = -temp_min;
   std::int64_t temp_n = 0;
   for (const auto& s : session.samples) {
     const double t = static_cast<double>(s.t_host_ns) * 1e-9;
@@ -132,7 +134,13 @@ PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& 
     const auto& v = sensor == SensorKind::kAccelerometer ? s.acc_mps2
                     : sensor == SensorKind::kGyroscope   ? s.gyr_radps
                                                          : s.mag;
-    if (s.temp_c) temp_sum += *s.temp_c, ++temp_n;
+    if (s.temp_c) {
+      temp_sum += *s.temp_c;
+      temp_sum2 += *s.temp_c * *s.temp_c;
+      temp_min = std::min(temp_min, *s.temp_c);
+      temp_max = std::max(temp_max, *s.temp_c);
+      ++temp_n;
+    }
     if (!v) continue;
     sum += *v;
     sum2 += *v * v->transpose();
@@ -142,7 +150,13 @@ PoseRecord DwellRecord(const SimulatedSession& session, const SessionPoseEvent& 
   r.pose = event.pose;
   r.t_start_s = event.t_s;
   r.t_end_s = event.dwell_end_s;
-  if (temp_n > 0) r.temp_c = temp_sum / static_cast<double>(temp_n);
+  if (temp_n > 0) {
+    const double n = static_cast<double>(temp_n);
+    r.temp_c = temp_sum / n;
+    const double var =
+        temp_n > 1 ? std::max(0.0, (temp_sum2 - n * *r.temp_c * *r.temp_c) / (n - 1)) : 0.0;
+    r.temp_spread = TemperatureSpread{std::sqrt(var), temp_min, temp_max};
+  }
   if (stats.count > 1) {
     const double n = static_cast<double>(stats.count);
     stats.mean = sum / n;

@@ -30,6 +30,7 @@
 #include "sim/session_sim.h"
 #include "tools/help_text.h"
 #include "tools/sim_options.h"
+#include "tools/sim_thermal.h"
 
 namespace turncal::tools {
 
@@ -164,7 +165,7 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
     models[capture.gyro_model] = TruthJson(*gyro, gyro_truth);
     turn_on[capture.gyro_model] = triad(session.gyro_truth.segment<3>(b));
   }
-  return {
+  nlohmann::json truth = {
       {"acc_bias_instability", so.sensor.acc_bias_instability},
       {"mag_bias_instability", so.sensor.mag_bias_instability},
       {"bias_tau_s", so.sensor.bias_tau_s},
@@ -195,6 +196,8 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
       {"duration_s", session.duration_s},
       {"samples", session.samples.size()},
       {"poses", pose_list}};
+  if (so.chamber) truth["thermal"] = ThermalTruthJson(capture);
+  return truth;
 }
 
 // The codes RunController and RunSim return.
@@ -489,6 +492,10 @@ int RunSim(const SimCommandArgs& args) {
   options.protocol = *protocol;
   if (const int code = ReadModelsAndPoses(args, &options); code != 0) return code;
   SetSessionOptions(args, &options);
+  if (std::string error; !ApplyChamberArgs(args, &options.session, &error)) {
+    fmt::print(stderr, "turncal sim: {}\n", error);
+    return 2;
+  }
   if (!args.controller.empty()) return RunController(args, options);
   return WriteCapture(args, options);
 }

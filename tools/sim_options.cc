@@ -95,6 +95,23 @@ void AddNoiseAndTableOptions(CLI::App* cmd, SimCommandArgs* args) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_flag("--no-quantisation", args->no_quantisation, "floats without ADC steps");
+  cmd->add_option("--chamber", args->chamber,
+                  "a climate chamber's profile: \"START; soak SETPOINT HOLD_S; ramp SETPOINT "
+                  "DEGC_PER_MIN HOLD_S; ...\" (every sensor parameter then a quadratic in the "
+                  "die's temperature, in the truth file; docs/THERMAL.md)")
+      ->type_name("PROFILE");
+  cmd->add_option("--die-tau", args->die_tau_s, "with --chamber: the die's lag behind the air, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--self-heating", args->self_heating_c,
+                  "with --chamber: the die's rise above the air after power-on, degC")
+      ->capture_default_str();
+  cmd->add_option("--temp-quantum", args->temp_quantum_c,
+                  "with --chamber: the reported temperature's step, degC (0: none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_flag("--repeat-poses", args->repeat_poses,
+                "with --chamber: cycle the poses until the chamber's profile has run");
   cmd->add_flag("--no-rate-segments", args->no_rate_segments,
                 "with a gyro model: a table without a rate mode, static poses only (the gyro model "
                 "then learns from the moves between them)");

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/planning/table_motion.h"
+#include "sim/chamber.h"
 
 namespace turncal::tools {
 
@@ -49,6 +50,13 @@ struct SimCommandArgs {
   std::vector<std::string> unplugs;  // POSE:mid|between[:DEVICE]
   double unplug_s = 2.0;
   std::string device_state;
+  // A climate chamber (issue 36; docs/THERMAL.md): its profile ("25; ramp -20 2 1200; soak 70
+  // 600"), the die's lag, self-heating and reported step, and the poses cycled until it has run.
+  std::string chamber;
+  double die_tau_s = DieThermal{}.tau_s;
+  double self_heating_c = DieThermal{}.self_heating_c;
+  double temp_quantum_c = DieThermal{}.quantum_c;
+  bool repeat_poses = false;
 };
 
 // Registers `turncal sim`'s options on `cmd`, filling `args`, in the order --help lists them.

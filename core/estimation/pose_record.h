@@ -29,6 +29,13 @@ struct TriadStats {
   std::int64_t count = 0;
 };
 
+// How the sensor's reported temperature moved over a record's window (deg C).
+struct TemperatureSpread {
+  double std_c = 0.0;  // sample standard deviation about the mean
+  double min_c = 0.0;
+  double max_c = 0.0;
+};
+
 struct PoseRecord {
   TablePose pose;
   std::optional<TriadStats> acc;  // specific force, m/s^2
@@ -40,7 +47,10 @@ struct PoseRecord {
   // across resets), which bias drift evolves in; NaN when not known (then the host's is used).
   double sensor_t_start_s = std::numeric_limits<double>::quiet_NaN();
   double sensor_t_end_s = std::numeric_limits<double>::quiet_NaN();
+  // The sensor's temperature over the window: its mean (deg C), and how much it moved (absent
+  // when the device reports none).
   std::optional<double> temp_c;
+  std::optional<TemperatureSpread> temp_spread;
   // The move from the previous captured static pose to this one as the gyro saw it (issue 21;
   // core/sequencing/move_tracker.h): absent for the first pose, a rate segment, or a move the
   // sequencer dropped.

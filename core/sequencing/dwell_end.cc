@@ -86,7 +86,13 @@ void Sequencer::Complete(double t_s) {
     record.sensor_t_end_s =
         t_last_sensor_s_ + (prof.device_period_s ? *prof.device_period_s : 1.0 / prof.rate_hz);
   }
-  if (temp_n_ > 0) record.temp_c = temp_sum_ / static_cast<double>(temp_n_);
+  if (temp_n_ > 0) {
+    const double n = static_cast<double>(temp_n_);
+    const double mean = temp_sum_ / n;
+    record.temp_c = temp_ref_ + mean;
+    const double var = temp_n_ > 1 ? std::max(0.0, (temp_sum2_ - n * mean * mean) / (n - 1)) : 0.0;
+    record.temp_spread = TemperatureSpread{std::sqrt(var), temp_min_, temp_max_};
+  }
   if (!rate_mode_) record.move_in = moves_.TakeEnded();
 
   if (predictor_) {

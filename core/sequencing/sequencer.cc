@@ -387,7 +387,7 @@ void Sequencer::FeedRate(const StillSample& s) {
 void Sequencer::StartCollecting(const StillSample& first) {
   for (auto& a : acc_) a.Reset();
   for (auto& a : first_half_) a.Reset();
-  temp_sum_ = 0;
+  temp_sum_ = temp_sum2_ = 0;
   temp_n_ = 0;
   counts_ = SampleCounts{};
   needed_ = std::max<std::int64_t>(
@@ -434,7 +434,12 @@ void Sequencer::Commit(const StillSample& s) {
     }
   }
   if (std::isfinite(s.temp_c)) {
-    temp_sum_ += s.temp_c;
+    // Sums about the first sample's temperature: the spread keeps its digits at any level.
+    if (temp_n_ == 0) temp_ref_ = temp_min_ = temp_max_ = s.temp_c;
+    temp_min_ = std::min(temp_min_, s.temp_c);
+    temp_max_ = std::max(temp_max_, s.temp_c);
+    temp_sum_ += s.temp_c - temp_ref_;
+    temp_sum2_ += (s.temp_c - temp_ref_) * (s.temp_c - temp_ref_);
     ++temp_n_;
   }
   t_last_ns_ = s.t_host_ns;

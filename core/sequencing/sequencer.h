@@ -229,7 +229,8 @@ class Sequencer {
   std::int64_t next_progress_ = 0;
   std::array<TriadAccumulator, 3> acc_;
   std::array<TriadAccumulator, 3> first_half_;  // of the dwell, for the creep check
-  double temp_sum_ = 0.0;
+  // The temperature over the dwell: sums about the first sample's (temp_ref_), and the extremes.
+  double temp_ref_ = 0.0, temp_sum_ = 0.0, temp_sum2_ = 0.0, temp_min_ = 0.0, temp_max_ = 0.0;
   std::int64_t temp_n_ = 0;
   std::int64_t t_first_ns_ = 0, t_last_ns_ = 0;
   double t_first_sensor_s_ = 0.0, t_last_sensor_s_ = 0.0;

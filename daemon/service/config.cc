@@ -251,6 +251,22 @@ bool ParseFree(const toml::table* t, const std::string& source, StationOptions* 
   return true;
 }
 
+// [thermal]: calibrations over temperature ("MODEL@T" in the models; docs/THERMAL.md).
+bool ParseThermal(const toml::table* t, const std::string& source, StationOptions* out,
+                  std::string* error) {
+  ThermalStationOptions& th = out->thermal;
+  return OnlyKeys(*t,
+                  {"max_order", "t0_c", "drop_below_sigmas", "distinct_resolution_c", "min_span_c",
+                   "grid_points"},
+                  "[thermal]", source, error) &&
+         GetInt(*t, "max_order", &th.fit.max_order, source, error) &&
+         GetNumber(*t, "t0_c", &th.fit.t0_c, source, error) &&
+         GetNumber(*t, "drop_below_sigmas", &th.fit.drop_below_sigmas, source, error) &&
+         GetNumber(*t, "distinct_resolution_c", &th.fit.distinct_resolution_c, source, error) &&
+         GetNumber(*t, "min_span_c", &th.gate.min_span_c, source, error) &&
+         GetInt(*t, "grid_points", &th.gate.grid_points, source, error);
+}
+
 // [reference]: gravity, the field and the latitude.
 bool ParseReference(const toml::table* t, const std::string& source, StationOptions* out,
                     std::string* error) {
@@ -426,7 +442,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   Config c;
   if (!OnlyKeys(root,
                 {"socket", "socket_group", "control_users", "state_dir", "station", "sequencer",
-                 "table", "free", "gate", "reference", "device", "registry"},
+                 "table", "free", "thermal", "gate", "reference", "device", "registry"},
                 "the file", source, error) ||
       !ParseTopLevel(root, source, &c, error)) {
     return false;
@@ -443,6 +459,10 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
     return false;
   }
   if (const toml::table* t = root["free"].as_table(); t && !ParseFree(t, source, &st, error)) {
+    return false;
+  }
+  if (const toml::table* t = root["thermal"].as_table();
+      t && !ParseThermal(t, source, &st, error)) {
     return false;
   }
   if (st.pose_source == PoseSource::kFree) ApplyPoseSource(PoseSource::kFree, c, &st);

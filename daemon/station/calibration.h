@@ -7,8 +7,9 @@
 //   free models  (daemon/station/free_pipeline.h): accel9, magellipsoid, gyro9, accmag, ...
 //                fitted together to every static interval the sequencer found itself.
 //
-// A calibration over temperature is a third implementation of both classes below, not a third
-// set of forks: the station (station*.cc, device_pipeline.cc) only ever talks to these.
+// A calibration over temperature ("accel13@T", daemon/station/thermal_pipeline.h) is a pose model
+// with its own solve, document and correction: the station (station*.cc, device_pipeline.cc)
+// only ever talks to these.
 //
 //   Calibration     one model of one device: apply it to a sample, restore its stored document,
 //                   its estimate and gate, activate it (the document and the event), report it,
@@ -74,6 +75,12 @@ class Calibration {
   // output is in. False when nothing is applied. The sample holds the triad.
   virtual bool Correct(const Sample& sample, double t_s, Eigen::Vector3d* value,
                        std::optional<Eigen::Vector3d>* sigma, const char** frame) const = 0;
+  // A calibration over temperature's flag for a sample it corrects at another temperature than
+  // the sample's ("below_range", "above_range", "no_temperature"); nullptr otherwise.
+  virtual const char* TemperatureFlag(const Sample& sample) const {
+    (void)sample;
+    return nullptr;
+  }
 
   // The document: restores the calibration stored in the state directory (applied to live
   // samples; versions go on from it). False with a message when it is unreadable.
@@ -141,6 +148,8 @@ class CalibrationSet {
                         CalibrationHost& host) = 0;
   // The journal's records are all in (work deferred while resuming may be done now).
   virtual void OnResumed(DevicePipeline& d, CalibrationHost& host) { (void)d, (void)host; }
+  // The input has ended (a replay's capture): estimates deferred are computed now.
+  virtual void OnFinish(DevicePipeline& d, CalibrationHost& host) { (void)d, (void)host; }
   // The sequencer's other events (a free set counts the segments it skipped).
   virtual void OnSequencerEvent(const SequencerEvent& event) { (void)event; }
 

@@ -131,13 +131,27 @@ void ModelPipeline::AddAndSolve(const PoseRecord& record, const GateOptions& gat
   }
 }
 
-namespace {
+void ModelPipeline::TakeUpdate(const ModelUpdate& job) {
+  moves_refused = job.moves_refused;
+  last_move_refusal = job.last_move_refusal;
+  estimate = job.estimate;
+  estimate_poses = job.device_poses;
+  rank = job.rank;
+  gate = job.gate;
+}
 
-// 1 sigma per axis of model.Correct(theta, raw) from cov(theta): J cov J^T with J by central
-// differences (steps of 1e-6 of each parameter's scale); nullopt without a usable covariance.
-// `bias_drift_var`, per axis, is added to the bias parameters' variance: how far the bias may
-// have wandered since the calibration. With `f_q` a g-sensitivity (gyro21's B_g) comes off the
-// raw rate first, so its covariance counts too.
+nlohmann::json ModelPipeline::EstimateEventJson(const GateOptions& gate_options) const {
+  return {{"poses", estimate.poses},
+          {"moves", estimate.moves},
+          {"summary", estimate.BriefReport()},
+          {"precision", PrecisionJson(gate_options)}};
+}
+
+void ModelPipeline::ApplyCurrentEstimate() {
+  active = estimate;
+  Apply(active_version_, estimate.theta, estimate.covariance, estimate.bias_window, estimate.drift);
+}
+
 std::optional<Eigen::Vector3d> CorrectionSigma(
     const MeasurementModel& model, const Eigen::VectorXd& theta, Eigen::MatrixXd covariance,
     const Eigen::Vector3d& raw, const Eigen::Vector3d& bias_drift_var, const Eigen::Vector3d* f_q) {
@@ -163,8 +177,6 @@ std::optional<Eigen::Vector3d> CorrectionSigma(
   };
   return PropagatedSigma(corrected, theta, covariance);
 }
-
-}  // namespace
 
 Eigen::Vector3d PropagatedSigma(
     const std::function<Eigen::Vector3d(const Eigen::VectorXd&)>& corrected,
@@ -205,19 +217,24 @@ Eigen::Vector3d ModelPipeline::Correct(const Eigen::Vector3d& raw_in, double t_s
   const Eigen::Vector3d value = applied_affine ? Eigen::Vector3d(applied_A * raw + applied_c)
                                                : model->Correct(applied_theta, raw);
   if (sigma) {
-    Eigen::Vector3d drift_var = Eigen::Vector3d::Zero();
-    if (applied_bias_window && applied_drift.enabled()) {
-      const TimeWindow& w = *applied_bias_window;
-      // A clock before the calibration's (the host restarted since): the time since is
-      // unknown, so the wander's long-term limit (infinite for a random walk).
-      const double since_s = t_s >= w.t0_s ? t_s : w.t1_s + 1e9;
-      for (int axis = 0; axis < 3; ++axis) {
-        drift_var[axis] = applied_drift.VarianceSince(axis, w, since_s);
-      }
-    }
+    const Eigen::Vector3d drift_var = DriftVarianceSince(t_s);
     *sigma = CorrectionSigma(*model, applied_theta, applied_covariance, raw_in, drift_var, f_q);
   }
   return value;
+}
+
+Eigen::Vector3d ModelPipeline::DriftVarianceSince(double t_s) const {
+  Eigen::Vector3d drift_var = Eigen::Vector3d::Zero();
+  if (applied_bias_window && applied_drift.enabled()) {
+    const TimeWindow& w = *applied_bias_window;
+    // A clock before the calibration's (the host restarted since): the time since is unknown,
+    // so the wander's long-term limit (infinite for a random walk).
+    const double since_s = t_s >= w.t0_s ? t_s : w.t1_s + 1e9;
+    for (int axis = 0; axis < 3; ++axis) {
+      drift_var[axis] = applied_drift.VarianceSince(axis, w, since_s);
+    }
+  }
+  return drift_var;
 }
 
 bool ModelPipeline::Correct(const Sample& sample, double t_s, Eigen::Vector3d* value,

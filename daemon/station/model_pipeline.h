@@ -15,6 +15,7 @@
 #include "core/analysis/publish_gate.h"
 #include "core/estimation/calibrator.h"
 #include "core/estimation/sensor_class.h"
+#include "core/estimation/thermal_calibrator.h"
 #include "core/modeling/measurement_model.h"
 #include "core/sequencing/sample.h"
 #include "daemon/station/calibration.h"
@@ -29,6 +30,14 @@ Eigen::Vector3d PropagatedSigma(
     const std::function<Eigen::Vector3d(const Eigen::VectorXd&)>& corrected,
     const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance);
 
+// 1 sigma per axis of model.Correct(theta, raw) from cov(theta) (PropagatedSigma); nullopt
+// without a usable covariance. `bias_drift_var`, per axis, is added to the bias parameters'
+// variance: how far the bias may have wandered since the calibration. With `f_q` a
+// g-sensitivity (gyro21's B_g) comes off the raw rate first, so its covariance counts too.
+std::optional<Eigen::Vector3d> CorrectionSigma(
+    const MeasurementModel& model, const Eigen::VectorXd& theta, Eigen::MatrixXd covariance,
+    const Eigen::Vector3d& raw, const Eigen::Vector3d& bias_drift_var, const Eigen::Vector3d* f_q);
+
 // What one pose's update computes (on the solve worker when there is one).
 struct ModelUpdate {
   std::size_t device_poses = 0;  // the device's poses when the update was queued, this one included
@@ -40,9 +49,16 @@ struct ModelUpdate {
   // A gyroscope's moves the calibrator could not use, and why the latest was refused.
   int moves_refused = 0;
   std::string last_move_refusal;
+  // False when the pose was added but the estimate not recomputed (a calibration over
+  // temperature refits as its poses grow by a tenth): nothing to announce or activate.
+  bool solved = true;
+  // A calibration over temperature's (daemon/station/thermal_pipeline.h): its fit, and `gate` the
+  // gate over its range.
+  ThermalEstimate thermal;
 };
 
-// One pose model of a device: a Calibration (daemon/station/calibration.h).
+// One pose model of a device: a Calibration (daemon/station/calibration.h). A calibration over
+// temperature (ThermalModelPipeline) is one too, with its own solve, document and correction.
 struct ModelPipeline : Calibration {
   std::unique_ptr<MeasurementModel> model;
   std::unique_ptr<Calibrator> calibrator;
@@ -84,7 +100,18 @@ struct ModelPipeline : Calibration {
   void Apply(int version, const Eigen::VectorXd& theta, const Eigen::MatrixXd& covariance,
              const std::optional<TimeWindow>& bias_window, const BiasDrift& drift);
   // Adds the pose and solves, analyses and gates (under the calibrator's lock).
-  void AddAndSolve(const PoseRecord& record, const GateOptions& gate, ModelUpdate* job);
+  virtual void AddAndSolve(const PoseRecord& record, const GateOptions& gate, ModelUpdate* job);
+  // Poses added but not yet solved for (SolvePending solves them).
+  virtual bool HasPending() const { return false; }
+  virtual void SolvePending(const GateOptions& gate_options, ModelUpdate* job) {
+    (void)gate_options, (void)job;
+  }
+  // The update back on the loop: the estimate, its gate and rank become the current ones.
+  virtual void TakeUpdate(const ModelUpdate& job);
+  // The ESTIMATE event's "poses", "moves", "summary" and "precision".
+  virtual nlohmann::json EstimateEventJson(const GateOptions& gate) const;
+  // While resuming: the current estimate is applied under the stored version (its gate passed).
+  virtual void ApplyCurrentEstimate();
   // The applied calibration's correction of one raw triad sample, and with `sigma` its 1 sigma
   // (the covariance plus the bias's wander since the calibration, at host time t_s).
   // A gyroscope model's g-sensitivity needs the specific force in the table frame, `f_q` (the
@@ -93,8 +120,12 @@ struct ModelPipeline : Calibration {
                           std::optional<Eigen::Vector3d>* sigma,
                           const Eigen::Vector3d* f_q = nullptr) const;
 
+  // Per axis, the variance the applied bias may have wandered by since its window, at host time
+  // t_s (zero without a drift model).
+  Eigen::Vector3d DriftVarianceSince(double t_s) const;
+
   // Every gated parameter's sigma against its tolerance (ESTIMATE's precision).
-  nlohmann::json PrecisionJson(const GateOptions& gate) const;
+  virtual nlohmann::json PrecisionJson(const GateOptions& gate) const;
 
   // Calibration:
   const std::string& name() const override { return model->name(); }

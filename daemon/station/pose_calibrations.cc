@@ -4,6 +4,7 @@
 
 #include "daemon/station/device_pipeline.h"
 #include "daemon/station/station.h"
+#include "daemon/station/thermal_pipeline.h"
 #include "protocol/observability_json.h"
 
 namespace turncal::daemon {
@@ -11,25 +12,26 @@ namespace turncal::daemon {
 PoseCalibrations::PoseCalibrations(const std::vector<std::string>& models,
                                    const StationOptions& options, const SensorClass& sensor) {
   models_.reserve(models.size());
-  for (const auto& name : models) models_.push_back(ModelPipeline::Make(name, options, sensor));
+  for (const auto& name : models) models_.push_back(MakePoseModel(name, options, sensor));
 }
 
 std::vector<std::string> PoseCalibrations::StoredNames() const {
   std::vector<std::string> names;
-  for (const ModelPipeline& m : models_) names.push_back(m.name());
+  for (const auto& m : models_) names.push_back(m->name());
   return names;
 }
 
 bool PoseCalibrations::NeedsMoves() const {
-  for (const ModelPipeline& m : models_) {
-    if (m.model && m.model->sensor() == SensorKind::kGyroscope) return true;
+  for (const auto& m : models_) {
+    if (m->model && m->model->sensor() == SensorKind::kGyroscope) return true;
   }
   return false;
 }
 
 void PoseCalibrations::OnRecord(DevicePipeline& d, const PoseRecord& record, double t_s,
                                 bool resuming, CalibrationHost& host) {
-  for (ModelPipeline& m : models_) {
+  for (auto& owned : models_) {
+    ModelPipeline& m = *owned;
     if (!m.TriadOf(record)) continue;  // e.g. a rate segment holds the gyro only
     auto job = std::make_shared<ModelUpdate>();
     job->device_poses = d.records_used.size();
@@ -51,43 +53,57 @@ void PoseCalibrations::Apply(DevicePipeline& d, ModelPipeline& m, double t_s,
                   {"message", "pose not used: " + job.error}});
     return;
   }
-  m.moves_refused = job.moves_refused;
-  m.last_move_refusal = job.last_move_refusal;
-  m.estimate = job.estimate;
-  m.estimate_poses = job.device_poses;
+  m.TakeUpdate(job);
+  if (!job.solved) return;
   // The drift a calibrator identified goes to the device's noise profile: the sequencer's
   // stillness tests allow for it, and noise/DEVICE.json keeps it (rewritten when the scale moves
   // by more than 1 %, or the triad had none).
   if (m.estimate.ok && m.calibrator->options().identify_drift && d.RecordIdentifiedDrift(m)) {
     host.SaveNoiseProfile(d);
   }
-  m.rank = job.rank;
-  m.gate = job.gate;
   if (!resuming) {
     // Every gated parameter's sigma against its tolerance (the watch view's bars).
-    host.Publish({{"class", "ESTIMATE"},
-                  {"t", t_s},
-                  {"device", d.name},
-                  {"model", m.name()},
-                  {"poses", m.estimate.poses},
-                  {"moves", m.estimate.moves},
-                  {"summary", m.estimate.BriefReport()},
-                  {"precision", m.PrecisionJson(d.gate)},
-                  {"gate", ToJson(m.gate)}});
+    nlohmann::json event = {
+        {"class", "ESTIMATE"}, {"t", t_s}, {"device", d.name}, {"model", m.name()}};
+    event.update(m.EstimateEventJson(d.gate));
+    event["gate"] = ToJson(m.gate);
+    host.Publish(event);
   }
   if (m.gate.pass && !resuming) {
     host.Activate(d, m, t_s, nullptr);
   } else if (m.gate.pass) {
-    m.active = m.estimate;
-    m.Apply(m.active_version(), m.estimate.theta, m.estimate.covariance, m.estimate.bias_window,
-            m.estimate.drift);
+    m.ApplyCurrentEstimate();
+  }
+}
+
+void PoseCalibrations::OnFinish(DevicePipeline& d, CalibrationHost& host) {
+  SolvePending(d, host, /*resuming=*/false);
+}
+
+void PoseCalibrations::OnResumed(DevicePipeline& d, CalibrationHost& host) {
+  SolvePending(d, host, /*resuming=*/true);
+}
+
+void PoseCalibrations::SolvePending(DevicePipeline& d, CalibrationHost& host, bool resuming) {
+  for (auto& owned : models_) {
+    ModelPipeline& m = *owned;
+    if (!m.HasPending()) continue;
+    auto job = std::make_shared<ModelUpdate>();
+    job->device_poses = d.records_used.size();
+    job->added = true;
+    auto work = [&m, job, gate = d.gate] { m.SolvePending(gate, job.get()); };
+    host.Defer(std::move(work), [this, &d, &m, job, resuming, &host] {
+      const double t_s = d.records_used.empty() ? 0.0 : d.records_used.back().t_end_s;
+      Apply(d, m, t_s, *job, resuming, host);
+    });
   }
 }
 
 std::vector<PlanningTarget> PoseCalibrations::PlanningTargets(const DevicePipeline& d,
                                                               double dwell_s) const {
   std::vector<PlanningTarget> targets;
-  for (const ModelPipeline& m : models_) {
+  for (const auto& owned : models_) {
+    const ModelPipeline& m = *owned;
     // The drift model and the poses' times: a new pose is weighed by what it adds given every
     // earlier one at the time the table would reach it (core/planning/pose_planner.h).
     // A new pose's white noise from the device's own noise profile when it has one.

@@ -4,6 +4,7 @@
 // (daemon/station/model_pipeline.h), solved on the worker after every pose that holds its triad,
 // gated, and activated when its gate passes; the next pose is D-optimal over all of them.
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -24,13 +25,16 @@ class PoseCalibrations : public CalibrationSet {
 
   // CalibrationSet:
   std::size_t size() const override { return models_.size(); }
-  Calibration& at(std::size_t i) override { return models_[i]; }
-  const Calibration& at(std::size_t i) const override { return models_[i]; }
+  Calibration& at(std::size_t i) override { return *models_[i]; }
+  const Calibration& at(std::size_t i) const override { return *models_[i]; }
   std::vector<std::string> StoredNames() const override;
   Calibration& Restore(const std::string& name) override { return *Find(name); }
   bool NeedsMoves() const override;
   void OnRecord(DevicePipeline& d, const PoseRecord& record, double t_s, bool resuming,
                 CalibrationHost& host) override;
+  // Solves what was deferred (a calibration over temperature's latest poses).
+  void OnFinish(DevicePipeline& d, CalibrationHost& host) override;
+  void OnResumed(DevicePipeline& d, CalibrationHost& host) override;
   // D-optimal over every model of the device (core/planning/pose_planner.h).
   nlohmann::json NextPose(const DevicePipeline& d, const StationOptions& options) const override;
   const char* pose_source() const override { return "announced"; }
@@ -42,7 +46,12 @@ class PoseCalibrations : public CalibrationSet {
   void Apply(DevicePipeline& d, ModelPipeline& m, double t_s, const ModelUpdate& job, bool resuming,
              CalibrationHost& host);
 
-  std::vector<ModelPipeline> models_;  // made once: queued updates hold their addresses
+  // Made once: queued updates hold their addresses. A name with "@T" is a calibration over
+  // temperature (daemon/station/thermal_pipeline.h).
+  std::vector<std::unique_ptr<ModelPipeline>> models_;
+
+  // The models' deferred solves (OnFinish, OnResumed).
+  void SolvePending(DevicePipeline& d, CalibrationHost& host, bool resuming);
 };
 
 }  // namespace turncal::daemon

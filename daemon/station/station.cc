@@ -228,6 +228,7 @@ void Station::OnTick(std::int64_t now_ns) {
 
 void Station::OnFinish(std::int64_t now_ns) {
   for (auto& d : devices_) d->sequencer->Finish(now_ns);
+  for (auto& d : devices_) d->calibrations->OnFinish(*d, *this);
   WriteDueReports();
 }
 

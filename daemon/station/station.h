@@ -21,8 +21,10 @@
 
 #include "core/analysis/observability.h"
 #include "core/analysis/publish_gate.h"
+#include "core/analysis/thermal_gate.h"
 #include "core/estimation/calibrator.h"
 #include "core/estimation/sensor_class.h"
+#include "core/estimation/thermal_calibrator.h"
 #include "core/planning/pose_planner.h"
 #include "core/sequencing/sequencer.h"
 #include "daemon/station/calibration.h"
@@ -50,6 +52,13 @@ const char* ToString(PoseSource source);
 bool ParsePoseSource(const std::string& text, PoseSource* out);
 
 // [free]: the free pose source's own settings.
+// Calibrations over temperature ("MODEL@T" in the models; [thermal]): the fit's orders and
+// reference temperature, and the gate's range (docs/THERMAL.md).
+struct ThermalStationOptions {
+  ThermalOptions fit;
+  ThermalGateOptions gate;
+};
+
 struct FreeStationOptions {
   // The gate: the share of MicroStrain's 576 latitude-longitude bins the corrected triad's
   // directions must fill, percent (0: not checked).
@@ -63,6 +72,7 @@ struct StationOptions {
   SequencerOptions sequencer;
   PoseSource pose_source = PoseSource::kAnnounced;
   FreeStationOptions free;
+  ThermalStationOptions thermal;
   // Models to estimate per device; a magnetometer model only where the records carry mag. With
   // the free pose source these are free models, and an empty list means what the data carry
   // (DefaultFreeModels: accel9, gyro9 with moves, magellipsoid, accmag).

@@ -8,6 +8,7 @@
 #include "core/estimation/sensor_class.h"
 #include "core/modeling/free_model.h"
 #include "daemon/station/station.h"
+#include "daemon/station/thermal_pipeline.h"
 
 namespace turncal::daemon {
 
@@ -36,12 +37,40 @@ bool StationOptions::IsValid(std::string* error) const {
     }
   }
   const bool free_source = pose_source == PoseSource::kFree;
+  if (!thermal.fit.IsValid(error)) {
+    if (error) *error = "[thermal] " + *error;
+    return false;
+  }
+  if (!thermal.gate.IsValid(error)) return false;
   if (!(free.min_coverage_percent >= 0 && free.min_coverage_percent <= 100)) {
     if (error) *error = "[free] min_coverage_percent must be in [0, 100]";
     return false;
   }
   // A model of the pose source: a free model without poses, a pose model with them.
   auto known = [&](const std::string& m) {
+    std::string base;
+    if (IsThermalModelName(m, &base)) {
+      if (free_source) {
+        if (error) {
+          *error = fmt::format(
+              "'{}' is a calibration over temperature, which needs known poses (pose_source = "
+              "\"announced\")",
+              m);
+        }
+        return false;
+      }
+      const auto model = MakeModel(base, context, error);
+      if (!model) return false;
+      if (model->gauge_dimension() > 0) {
+        if (error) {
+          *error = fmt::format(
+              "'{}': {} has a gauge, which is not defined over temperature; calibrate mag13@T", m,
+              base);
+        }
+        return false;
+      }
+      return true;
+    }
     if (!free_source) return MakeModel(m, context, error) != nullptr;
     if (MakeFreeModel(m, FreeContext{}, error)) return true;
     if (error && MakeModel(m, context, nullptr)) {

@@ -39,6 +39,9 @@ bool Station::Correct(int device, const Sample& sample, Corrected* out, bool wit
     if (!c.Correct(sample, t_s, &value, with_sigma ? &sigma : nullptr, &frame)) continue;
     target = value;
     out->versions.emplace_back(c.name(), c.applied_version());
+    if (const char* flag = c.TemperatureFlag(sample)) {
+      out->temperature_flags.emplace_back(c.name(), flag);
+    }
   }
   return !out->versions.empty();
 }

@@ -66,6 +66,28 @@ TEST(Config, TheGatesRedundancyFollowsTheClassUnlessSet) {
   EXPECT_EQ(c.station.gate.min_dof, 3);
 }
 
+TEST(Config, CalibrationsOverTemperature) {
+  Config c;
+  std::string error;
+  ASSERT_TRUE(ParseConfig(
+      "[station]\nmodels = [\"accel13@T\", \"mag13\"]\n[thermal]\nmax_order = 2\nt0_c = 20\n"
+      "drop_below_sigmas = 0.5\nmin_span_c = 15\ngrid_points = 11\n",
+      "t.toml", &c, &error))
+      << error;
+  EXPECT_EQ(c.station.models, (std::vector<std::string>{"accel13@T", "mag13"}));
+  EXPECT_EQ(c.station.thermal.fit.max_order, 2);
+  EXPECT_EQ(c.station.thermal.fit.t0_c, 20.0);
+  EXPECT_EQ(c.station.thermal.fit.drop_below_sigmas, 0.5);
+  EXPECT_EQ(c.station.thermal.gate.min_span_c, 15.0);
+  EXPECT_EQ(c.station.thermal.gate.grid_points, 11);
+  EXPECT_FALSE(ParseConfig("[thermal]\nmax_oder = 2\n", "t.toml", &c, &error));
+  EXPECT_NE(error.find("max_oder"), std::string::npos) << error;
+  EXPECT_FALSE(ParseConfig("[station]\nmodels = [\"mag22@T\"]\n", "t.toml", &c, &error));
+  EXPECT_NE(error.find("gauge"), std::string::npos) << error;
+  EXPECT_FALSE(ParseConfig("[thermal]\nmin_span_c = -1\n", "t.toml", &c, &error));
+  EXPECT_NE(error.find("min_span_c"), std::string::npos) << error;
+}
+
 TEST(Config, TheDriftModelsSettings) {
   Config c;
   std::string error;
