@@ -21,6 +21,7 @@
 #include "daemon/station/replay_once.h"
 #include "montecarlo/nominal_target.h"
 #include "montecarlo/parallel_runs.h"
+#include "montecarlo/pipeline_thermal.h"
 #include "protocol/calibration_json.h"
 #include "sim/capture.h"
 #include "sim/session_sim.h"
@@ -84,7 +85,12 @@ class PipelineMonteCarlo {
     gyro_ = model_->sensor() == SensorKind::kGyroscope;
     s->gyro = gyro_;
     bias_ = model_->index_of("bx");
-    for (const auto& p : model_->parameters()) s->parameters.push_back(p.name);
+    station_model_ = o_.model;
+    if (!o_.chamber.empty()) {
+      if (!PrepareChamber(s)) return false;
+    } else {
+      for (const auto& p : model_->parameters()) s->parameters.push_back(p.name);
+    }
     if (o_.table_rate_dps > 0) {
       table_.emplace();
       table_->rate_dps.setConstant(o_.table_rate_dps);
@@ -97,6 +103,30 @@ class PipelineMonteCarlo {
       if (plan_.empty()) return false;
     }
     if (!(gyro_ && o_.plan == "planner")) plan_ = WithRateSegments(plan_);
+    return true;
+  }
+
+  // In a chamber: the profile, the truth's orders, the temperatures judged and the names scored.
+  bool PrepareChamber(PipelineMonteCarloSummary* s) {
+    chamber_.emplace();
+    if (!ChamberProfile::Parse(o_.chamber, &*chamber_, &s->error)) {
+      s->error = "--chamber: " + s->error;
+      s->bad_options = true;
+      return false;
+    }
+    if (model_->gauge_dimension() > 0 ||
+        (o_.thermal_orders != "chosen" && o_.thermal_orders != "truth")) {
+      s->error = model_->gauge_dimension() > 0
+                     ? o_.model + " has a gauge: not calibrated over temperature (use mag13)"
+                     : "--thermal-orders must be truth or chosen with --pipeline";
+      s->bad_options = true;
+      return false;
+    }
+    station_model_ = o_.model + "@T";
+    truth_basis_ = ThermalTruthBasis(*model_, sensor_, chamber_->middle_c());
+    held_out_c_ = o_.held_out_c.empty() ? DefaultHeldOutTemperatures(*chamber_) : o_.held_out_c;
+    s->parameters = ThermalScoredNames(
+        *model_, o_.thermal_orders == "truth" ? &truth_basis_ : nullptr, held_out_c_);
     return true;
   }
 
@@ -202,7 +232,11 @@ class PipelineMonteCarlo {
     if (!JudgedEstimate(&replay.result, state_dir.path, device, &m, &out->error)) return;
     Eigen::VectorXd truth;
     if (!Truth(capture, m, offset_s, &truth, &out->error)) return;
-    Score(m, truth, out);
+    if (chamber_) {
+      if (!ScoreInChamber(capture, m, truth, out)) return;
+    } else {
+      Score(m, truth, out);
+    }
     if (!o_.keep_dir.empty() && !(out->z.cwiseAbs().maxCoeff() <= 4.0))
       KeepCapture(path.path, *out);
     out->session_s = capture.session.duration_s;
@@ -243,13 +277,22 @@ class PipelineMonteCarlo {
     }
     session.acc_random_walk = o_.random_walk * sensor_.acc_bias_instability / 10.0;
     session.mag_random_walk = o_.random_walk * sensor_.mag_bias_instability / 10.0;
+    if (chamber_) {
+      session.chamber = chamber_;
+      session.repeat_poses_through_chamber = true;
+    }
+    if (o_.rate_hz > 0) session.rate_hz = o_.rate_hz;
     return o;
   }
 
   // The station `turncald --replay --once` runs, with only the model under test.
   daemon::StationOptions StationFor(const std::string& state_dir) const {
     daemon::StationOptions station;
-    station.models = {o_.model};
+    station.models = {station_model_};
+    if (chamber_) {
+      station.thermal.fit.t0_c = chamber_->middle_c();
+      if (o_.thermal_orders == "truth") station.thermal.fit.orders = truth_basis_.orders;
+    }
     station.rate_accuracy = kSimulatedRateAccuracy;
     // The moves between static poses count for "moves" and "all" only (a rate segment between
     // two static poses drops the move anyway).
@@ -289,11 +332,12 @@ class PipelineMonteCarlo {
   bool JudgedEstimate(nlohmann::json* result, const std::string& state_dir,
                       const std::string& device, nlohmann::json* m, std::string* error) const {
     if (o_.at == "first-gate") {
-      std::ifstream history(fmt::format("{}/history/{}.{}.v1.json", state_dir, device, o_.model));
+      std::ifstream history(
+          fmt::format("{}/history/{}.{}.v1.json", state_dir, device, station_model_));
       if (history) {
         *m = nlohmann::json::parse(history, nullptr, false);
       } else {
-        daemon::ReadActiveCalibration(state_dir, device, o_.model, m);
+        daemon::ReadActiveCalibration(state_dir, device, station_model_, m);
       }
       if (!m->is_object() || m->value("version", 0) != 1) {
         *error = "the gate never passed";
@@ -301,7 +345,7 @@ class PipelineMonteCarlo {
       }
       (*m)["ok"] = true;
     } else {
-      *m = (*result)["devices"][device]["models"][o_.model];
+      *m = (*result)["devices"][device]["models"][station_model_];
     }
     if (!m->value("ok", false)) {
       *error = "no estimate";
@@ -352,6 +396,35 @@ class PipelineMonteCarlo {
     out->poses = m.value("poses", o_.at == "first-gate" ? out->gate_poses : 0);
   }
 
+  // In a chamber: z per scored name (ThermalScoredNames), against the session's truth over
+  // temperature with the biases' wander over the calibration's bias window (`truth`'s biases
+  // minus the turn-on ones).
+  bool ScoreInChamber(const sim::SimCapture& capture, const nlohmann::json& m,
+                      const Eigen::VectorXd& truth, PipelineRun* out) const {
+    const SimulatedSession& session = capture.session;
+    const std::optional<ThermalTruth>& thermal = accel_  ? session.accel_thermal
+                                                 : gyro_ ? session.gyro_thermal
+                                                         : session.mag_thermal;
+    const Eigen::VectorXd& turn_on = accel_  ? session.accel_truth
+                                     : gyro_ ? session.gyro_truth
+                                             : session.mag_truth;
+    if (!thermal) {
+      out->error = "the session has no truth over temperature";
+      return false;
+    }
+    const Eigen::Vector3d wander = truth.segment<3>(bias_) - turn_on.segment<3>(bias_);
+    if (!ScoreThermalRun(*model_, m, *thermal, wander, o_.thermal_orders == "truth", held_out_c_,
+                         &out->z, &out->error)) {
+      return false;
+    }
+    out->ok = out->z.allFinite();
+    out->p_value = m.contains("temperature") ? m["temperature"].value("p_value", 1.0) : 1.0;
+    out->gate_pass = m["gate"].value("pass", false);
+    if (m["gate"].contains("reasons")) out->gate_reasons = m["gate"]["reasons"];
+    out->poses = m.value("poses", 0);
+    return true;
+  }
+
   // A run with a parameter beyond 4 sigma keeps its capture, for turncald --replay.
   void KeepCapture(const std::string& path, const PipelineRun& run) const {
     std::error_code ec;
@@ -362,7 +435,7 @@ class PipelineMonteCarlo {
 
   // The z-scores, p-values, gate and session figures over the runs with an estimate.
   void Summarise(PipelineMonteCarloSummary* s) const {
-    s->z = ZScoreSummary(model_->num_parameters());
+    s->z = ZScoreSummary(static_cast<int>(s->parameters.size()));
     double poses = 0, session_s = 0, gate_poses = 0, gate_s = 0;
     const std::vector<double> p_values = AddSolvedRuns(s, [&](const PipelineRun& r) {
       s->gate_pass += r.gate_pass;
@@ -393,6 +466,10 @@ class PipelineMonteCarlo {
   int bias_ = -1;  // where the triad's bias starts in the model's parameters
   std::optional<TableMotion> table_;
   std::vector<TablePose> plan_;
+  std::string station_model_;  // o_.model, or MODEL@T in a chamber
+  std::optional<ChamberProfile> chamber_;
+  ThermalBasis truth_basis_;
+  std::vector<double> held_out_c_;
   std::filesystem::path dir_;
   std::atomic<int> done_{0};
   std::mutex progress_mutex_;

@@ -68,6 +68,15 @@ struct PipelineMonteCarloOptions {
   // model ("gauss-markov") or independent poses ("independent": the planner before issue 19).
   std::string planner_objective = "time";
   std::string planner_drift = "gauss-markov";
+  // A climate chamber (issue 36; docs/THERMAL.md): its profile (sim/chamber.h's text form; empty:
+  // none). The poses are then cycled until it has run, the station calibrates MODEL@T, and each
+  // parameter is judged at the held-out temperatures (empty: DefaultHeldOutTemperatures) and,
+  // with thermal_orders "truth" (the station fits the truth's orders about its t0), each
+  // coefficient too.
+  std::string chamber;
+  std::vector<double> held_out_c;
+  std::string thermal_orders = "chosen";
+  double rate_hz = 0.0;  // the simulated device's output rate (0: the protocol's default)
   std::string keep_dir;  // when set: the captures of runs with a parameter beyond 4 sigma go here
   // Called after each run that gave an estimate with the number of such runs so far, one call at
   // a time (the runs run on `jobs` threads).
@@ -95,9 +104,11 @@ struct PipelineMonteCarloSummary {
   // (exit 2), else the planner's refusal (exit 1).
   std::string error;
   bool bad_options = false;
-  std::vector<std::string> parameters;  // the model's, in order
-  bool gyro = false;                    // a gyroscope model
-  int predicted_poses = -1;             // --plan planner: the planner's prediction of the gate
+  // What each run's z holds: the model's parameters in order, or in a chamber
+  // montecarlo/pipeline_thermal.h's ThermalScoredNames.
+  std::vector<std::string> parameters;
+  bool gyro = false;         // a gyroscope model
+  int predicted_poses = -1;  // --plan planner: the planner's prediction of the gate
   std::vector<PipelineRun> runs;
   double wall_s = 0.0;
   // Over the runs that gave an estimate (`solved`), when at least two did:

@@ -229,6 +229,16 @@ void AddPipelineMonteCarloOptions(CLI::App* mc, PipelineMonteCarloArgs* args) {
       "--runs-out", args->runs_out,
       "with --pipeline: one JSON line per run (seed, z per parameter, chi^2 p-value, "
       "the gate and its reasons, the poses the sequencer rejected and why) to this file");
+  mc->add_option("--chamber", pipe->chamber,
+                 "with --pipeline: a climate chamber's profile (as turncal sim --chamber); the "
+                 "station calibrates MODEL@T and each parameter is judged at --held-out "
+                 "temperatures (default: between the set-points), each coefficient too with "
+                 "--thermal-orders truth")
+      ->type_name("PROFILE");
+  mc->add_option("--device-rate", pipe->rate_hz,
+                 "with --pipeline: the simulated device's output rate, Hz (default: the "
+                 "protocol's)")
+      ->check(CLI::NonNegativeNumber);
   mc->add_option("--keep", pipe->keep_dir,
                  "with --pipeline: keep the captures of runs with a parameter beyond 4 sigma in "
                  "this folder (run-SEED.tcap), for turncald --replay");

@@ -172,7 +172,9 @@ constexpr Manual kMonteCarloManual = {
     "shuffled --runs 200   # sessions as bytes through the station, as turncald --replay "
     "--once runs them\n"
     "turncal montecarlo --thermal -20,5,25,45,70 --model accel13 --class consumer --runs 200"
-    "   # calibration over temperature, in memory",
+    "   # calibration over temperature, in memory\n"
+    "turncal montecarlo --pipeline --model mag13 --class consumer --chamber \"0; ramp 40 4 300\" "
+    "--device-rate 100 --dwell 4 --runs 200   # over temperature through the station (MODEL@T)",
     "0 every criterion holds; 1 one does not (a parameter's std z outside [0.9, 1.1] or "
     "|mean z| > 0.15, chi^2 p-values not uniform, a run without an estimate); 2 a "
     "command-line mistake",
@@ -292,6 +294,10 @@ void AddSimFitCommands(CLI::App* app) {
       engine->dwell_s = mc_args->dwell_s;
       *json = mc_args->json;
     };
+    if (!pipe->engine.chamber.empty() && !*pipeline) {
+      fmt::print(stderr, "turncal montecarlo: --chamber needs --pipeline\n");
+      throw CLI::RuntimeError(2);
+    }
     if (!thermal->soaks_c.empty()) {
       if (*pipeline) {
         fmt::print(stderr, "turncal montecarlo: --thermal runs in memory; not with --pipeline\n");
@@ -302,6 +308,9 @@ void AddSimFitCommands(CLI::App* app) {
     }
     if (*pipeline) {
       shared(&pipe->engine, &pipe->json);
+      // In a chamber the thermal options apply to the pipeline's calibration over temperature.
+      pipe->engine.held_out_c = thermal->held_out_c;
+      pipe->engine.thermal_orders = thermal->engine.orders;
       throw CLI::RuntimeError(RunPipelineMonteCarloCommand(*pipe));
     }
     throw CLI::RuntimeError(RunMonteCarlo(*mc_args));

@@ -286,6 +286,8 @@ nlohmann::json ThermalModelPipeline::ResultJson() const {
           {"base_model", model->name()},
           {"poses", thermal.poses},
           {"rank", thermal.rank},
+          {"bias_window",
+           estimate.bias_window ? protocol::ToJson(*estimate.bias_window) : nlohmann::json()},
           {"temperature", protocol::ToJson(thermal)},
           {"gate", ToJson(gate)},
           {"active_version", active_version_}};
