@@ -12,6 +12,7 @@
 #include "core/modeling/free_model.h"
 #include "protocol/calibration_json.h"
 #include "protocol/free_json.h"
+#include "protocol/thermal_json.h"
 #include "report/certificate.h"
 #include "turncal/version.h"
 
@@ -240,6 +241,12 @@ bool CertificateContent(const CertificateSource& source, Json* content, std::str
   const Json& c = source.calibration;
   if (!c.is_object()) {
     *error = "the calibration is not a JSON object";
+    return false;
+  }
+  if (protocol::IsThermalCalibration(c)) {
+    *error = c.value("model", std::string("this")) +
+             " is a calibration over temperature: its certificate (the range, the coefficients "
+             "and U at the range's ends and at T0) is not written yet; the report shows it";
     return false;
   }
   const bool free = protocol::IsFreeCalibration(c);

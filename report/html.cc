@@ -7,12 +7,14 @@
 
 #include "protocol/calibration_json.h"
 #include "protocol/free_json.h"
+#include "protocol/thermal_json.h"
 #include "report/analysis.h"
 #include "report/device_writes.h"
 #include "report/free_report.h"
 #include "report/plots.h"
 #include "report/sections.h"
 #include "report/svg.h"
+#include "report/thermal_report.h"
 #include "turncal/version.h"
 
 namespace turncal::report {
@@ -227,6 +229,19 @@ std::string TriadAngleHtml(const std::vector<protocol::CalibrationDocument>& doc
   return o + "</section>\n";
 }
 
+// The page up to the header's generation line (the header left open).
+std::string PageStart(const std::string& device, const ReportOptions& options) {
+  std::string o = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n";
+  o += "<title>Calibration report: " + Escape(device) + "</title>\n";
+  o += "<style>" + std::string(kStyle) + "</style>\n</head>\n<body>\n";
+  o += "<header><h1>Calibration report: " + Escape(device) + "</h1>";
+  o += "<p class=\"small\">turncal " + Escape(kVersion) + " report";
+  if (!options.generated_utc.empty()) o += ", generated " + Escape(options.generated_utc);
+  if (!options.source.empty()) o += ", from " + Escape(options.source);
+  o += ".</p>";
+  return o;
+}
+
 }  // namespace
 
 bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const ReportOptions& options,
@@ -237,9 +252,36 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   }
   // Calibrations without a turntable (protocol/free_json.h) are re-fitted and shown as `turncal
   // free` shows them: alone, or after the turntable's.
-  std::vector<nlohmann::json> pose_docs, free_docs;
+  std::vector<nlohmann::json> pose_docs, free_docs, thermal_docs;
   for (const auto& c : calibrations) {
-    (protocol::IsFreeCalibration(c) ? free_docs : pose_docs).push_back(c);
+    (protocol::IsThermalCalibration(c) ? thermal_docs
+     : protocol::IsFreeCalibration(c)  ? free_docs
+                                       : pose_docs)
+        .push_back(c);
+  }
+  // Calibrations over temperature: a section each, after the others (or alone).
+  std::string thermal_body;
+  for (const auto& c : thermal_docs) {
+    const std::string device = calibrations[0].value("device", "");
+    if (c.value("device", "") != device) {
+      if (error) {
+        *error = fmt::format(
+            "the calibrations are of two devices, '{}' and '{}': one report is for one device",
+            device, c.value("device", ""));
+      }
+      return false;
+    }
+    std::string section;
+    if (!ThermalSectionHtml(c, &section, error)) return false;
+    thermal_body += section;
+  }
+  if (pose_docs.empty() && free_docs.empty()) {
+    const std::string device = thermal_docs[0].value("device", "");
+    std::string o = PageStart(device, options);
+    o += "</header>\n" + thermal_body + DeviceWritesHtml(options.device_writes);
+    o += "</body>\n</html>\n";
+    *html = std::move(o);
+    return true;
   }
   std::string free_body;
   if (!free_docs.empty()) {
@@ -266,6 +308,10 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
         in.lines.insert(in.lines.begin(), "generated " + options.generated_utc);
       }
       *html = FreeReportHtml(in);
+      if (!thermal_body.empty()) {
+        const std::size_t end = html->rfind("</body>");
+        html->insert(end == std::string::npos ? html->size() : end, thermal_body);
+      }
       return true;
     }
     free_body =
@@ -293,14 +339,7 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   std::sort(docs.begin(), docs.end(),
             [](const auto& a, const auto& b) { return ModelRank(a.model) < ModelRank(b.model); });
   const std::string& device = docs[0].device;
-  std::string o = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n";
-  o += "<title>Calibration report: " + Escape(device) + "</title>\n";
-  o += "<style>" + std::string(kStyle) + "</style>\n</head>\n<body>\n";
-  o += "<header><h1>Calibration report: " + Escape(device) + "</h1>";
-  o += "<p class=\"small\">turncal " + Escape(kVersion) + " report";
-  if (!options.generated_utc.empty()) o += ", generated " + Escape(options.generated_utc);
-  if (!options.source.empty()) o += ", from " + Escape(options.source);
-  o += ".</p>";
+  std::string o = PageStart(device, options);
   nlohmann::json identity;
   for (const auto& d : docs) {
     if (d.identity.is_object() && !d.identity.empty()) identity = d.identity;
@@ -312,6 +351,7 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   o += TriadAngleHtml(docs);
   o += DeviceWritesHtml(options.device_writes);
   o += free_body;
+  o += thermal_body;
   o += "</body>\n</html>\n";
   *html = std::move(o);
   return true;

@@ -122,6 +122,32 @@ std::vector<std::string> PrecisionShortfalls(const MeasurementModel& model,
   return out;
 }
 
+void AddFitReasons(double chi2, int dof, double p_value, const FitCheck& fit,
+                   const std::vector<PoseResidual>& residuals, SensorKind sensor,
+                   const GateOptions& options, const std::string& cause, GateResult* result) {
+  if (dof < options.min_dof) {
+    result->reasons.push_back(fmt::format(
+        "{} degrees of freedom: chi^2 cannot test the noise model until there are {} (add poses)",
+        dof, options.min_dof));
+  } else if (p_value < options.min_p_value) {
+    result->reasons.push_back(fmt::format(
+        "chi^2 = {:.1f} on {} dof (p = {:.2g} < {:.2g}): the noise model does not "
+        "explain the data ({})",
+        chi2, dof, p_value, options.min_p_value, fit.cause.empty() ? cause : fit.cause));
+  } else if (fit.verdict != FitVerdict::kOk) {
+    // The other tail, or an upper tail between the fit check's level and the gate's: a note,
+    // since the sigma are then too large (the gate errs towards waiting), not too small.
+    result->notes.push_back("fit check: " + fit.Message(ToString(sensor)));
+  }
+  for (std::size_t i = 0; i < residuals.size(); ++i) {
+    const double r = residuals[i].normalized;
+    if (r > options.max_normalized_residual) {
+      result->reasons.push_back(fmt::format("pose {} has normalised residual {:.1f} > {:.1f}", i, r,
+                                            options.max_normalized_residual));
+    }
+  }
+}
+
 GateResult EvaluateGate(const MeasurementModel& model, const Estimate& estimate,
                         const DataReport& data, const GateOptions& options) {
   GateResult result;
@@ -189,33 +215,12 @@ GateResult EvaluateGate(const MeasurementModel& model, const Estimate& estimate,
     reasons.push_back(std::move(r));
   }
 
-  // 3. chi^2 consistent with the noise.
-  if (estimate.dof < options.min_dof) {
-    reasons.push_back(fmt::format(
-        "{} degrees of freedom: chi^2 cannot test the noise model until there are {} (add poses)",
-        estimate.dof, options.min_dof));
-  } else if (estimate.p_value < options.min_p_value) {
-    reasons.push_back(fmt::format(
-        "chi^2 = {:.1f} on {} dof (p = {:.2g} < {:.2g}): the noise model does not explain the "
-        "data ({})",
-        estimate.chi2, estimate.dof, estimate.p_value, options.min_p_value,
-        estimate.fit.cause.empty() ? "bias drift between poses, a pose that is not what was "
-                                     "commanded, or the wrong model"
-                                   : estimate.fit.cause));
-  } else if (estimate.fit.verdict != FitVerdict::kOk) {
-    // The other tail, or an upper tail between the fit check's level and the gate's: a note,
-    // since the sigma are then too large (the gate errs towards waiting), not too small.
-    result.notes.push_back("fit check: " + estimate.fit.Message(ToString(model.sensor())));
-  }
-
-  // 4. No extreme pose.
-  for (std::size_t i = 0; i < estimate.residuals.size(); ++i) {
-    const double r = estimate.residuals[i].normalized;
-    if (r > options.max_normalized_residual) {
-      reasons.push_back(fmt::format("pose {} has normalised residual {:.1f} > {:.1f}", i, r,
-                                    options.max_normalized_residual));
-    }
-  }
+  // 3. chi^2 consistent with the noise; 4. no extreme pose.
+  AddFitReasons(estimate.chi2, estimate.dof, estimate.p_value, estimate.fit, estimate.residuals,
+                model.sensor(), options,
+                "bias drift between poses, a pose that is not what was commanded, or the wrong "
+                "model",
+                &result);
 
   // Installation parameters: reported, not gated.
   for (int j = 0; j < static_cast<int>(params.size()); ++j) {

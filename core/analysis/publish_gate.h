@@ -81,6 +81,14 @@ struct GateResult {
   std::vector<std::string> notes;    // installation parameters and caveats; never a failure
 };
 
+// The gate's fit part, shared by the isothermal and the thermal gate: chi^2 consistent with the
+// noise (enough redundancy, p at least min_p_value, else a note when the fit check is not ok) and
+// no pose with an extreme normalised residual; reasons and notes appended to `result`. `cause`
+// names what a rejected chi^2 likely means when the fit check has no cause of its own.
+void AddFitReasons(double chi2, int dof, double p_value, const FitCheck& fit,
+                   const std::vector<PoseResidual>& residuals, SensorKind sensor,
+                   const GateOptions& options, const std::string& cause, GateResult* result);
+
 // The gate on an estimate and the data analysis at that estimate over the same poses.
 GateResult EvaluateGate(const MeasurementModel& model, const Estimate& estimate,
                         const DataReport& data, const GateOptions& options);

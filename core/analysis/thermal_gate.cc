@@ -126,30 +126,11 @@ GateResult EvaluateThermalGate(const MeasurementModel& model, const ThermalEstim
                                   p.name, FormatSigma(p, worst), worst_at,
                                   FormatSigma(p, tolerance), where));
   }
-  // 4. chi^2 consistent with the noise.
-  if (e.dof < options.min_dof) {
-    reasons.push_back(fmt::format(
-        "{} degrees of freedom: chi^2 cannot test the noise model until there are {} (add poses)",
-        e.dof, options.min_dof));
-  } else if (e.p_value < options.min_p_value) {
-    reasons.push_back(fmt::format(
-        "chi^2 = {:.1f} on {} dof (p = {:.2g} < {:.2g}): the noise model does not explain the "
-        "data ({})",
-        e.chi2, e.dof, e.p_value, options.min_p_value,
-        e.fit.cause.empty() ? "bias drift between poses, a temperature dependence of higher order "
-                              "than the data carry, or the wrong model"
-                            : e.fit.cause));
-  } else if (e.fit.verdict != FitVerdict::kOk) {
-    result.notes.push_back("fit check: " + e.fit.Message(ToString(model.sensor())));
-  }
-  // 5. No extreme pose.
-  for (std::size_t i = 0; i < e.residuals.size(); ++i) {
-    const double r = e.residuals[i].normalized;
-    if (r > options.max_normalized_residual) {
-      reasons.push_back(fmt::format("pose {} has normalised residual {:.1f} > {:.1f}", i, r,
-                                    options.max_normalized_residual));
-    }
-  }
+  // 4. chi^2 consistent with the noise; 5. no extreme pose.
+  AddFitReasons(e.chi2, e.dof, e.p_value, e.fit, e.residuals, model.sensor(), options,
+                "bias drift between poses, a temperature dependence of higher order than the data "
+                "carry, or the wrong model",
+                &result);
   result.notes.push_back(fmt::format("calibrated range {:.1f} to {:.1f} degC ({} temperatures)",
                                      e.t_min_c, e.t_max_c, e.distinct_temperatures));
   result.pass = reasons.empty();

@@ -76,17 +76,21 @@ RETURNING id)sql";
 constexpr const char* kInsertCalibration = R"sql(
 INSERT INTO calibrations (idempotency_key, station_id, device_id, device_name, model, version,
   passed, gate, parameters, parameter_order, covariance, observability, chi2, dof, p_value,
-  tolerances, reference, calibrator, provenance, software, calibrated_at, document)
+  tolerances, reference, calibrator, provenance, software, calibrated_at, document, temperature)
 SELECT $1, $2::bigint, $3::bigint, d->>'device', d->>'model', (d->>'version')::integer,
-  COALESCE((d->'gate'->>'pass')::boolean, false), d->'gate', d->'params', d->'parameter_order',
+  COALESCE((d->'gate'->>'pass')::boolean, false), d->'gate',
+  COALESCE(d->'params', d->'temperature'->'at'->'t0'), d->'parameter_order',
   d->'covariance',
-  jsonb_strip_nulls(jsonb_build_object('rank', d->'rank', 'gauge', d->'gauge',
+  jsonb_strip_nulls(jsonb_build_object('rank', COALESCE(d->'rank', d->'temperature'->'rank'),
+                                       'gauge', d->'gauge',
                                        'fit_check', d->'fit_check',
                                        'observability', d->'observability')),
-  (d->>'chi2')::double precision, round((d->>'dof')::double precision)::integer,
-  (d->>'p_value')::double precision, d->'tolerances', d->'context', d->'calibrator',
+  COALESCE(d->>'chi2', d->'temperature'->>'chi2')::double precision,
+  round(COALESCE(d->>'dof', d->'temperature'->>'dof')::double precision)::integer,
+  COALESCE(d->>'p_value', d->'temperature'->>'p_value')::double precision, d->'tolerances',
+  d->'context', d->'calibrator',
   CASE WHEN jsonb_typeof(d->'provenance') = 'object' THEN (d->'provenance') - 'records' END,
-  d->>'software', (d->>'time')::timestamptz, d
+  d->>'software', (d->>'time')::timestamptz, d, d->'temperature'
 FROM (SELECT $4::jsonb AS d) AS s
 ON CONFLICT (idempotency_key) DO NOTHING
 RETURNING id)sql";

@@ -32,7 +32,7 @@ struct pg_cancel;
 
 namespace turncal::daemon {
 
-inline constexpr int kRegistrySchemaVersion = 2;
+inline constexpr int kRegistrySchemaVersion = 3;
 
 // A query's answer: column names and rows of text (null: SQL NULL).
 struct RegistryRows {

@@ -88,6 +88,9 @@ CREATE TABLE certificates (
 );
 CREATE INDEX certificates_by_calibration ON certificates (calibration_id);
 )sql"},
+      {"calibrations over temperature (issue 36): their polynomials", R"sql(
+ALTER TABLE calibrations ADD COLUMN temperature jsonb;
+)sql"},
   };
   return migrations;
 }

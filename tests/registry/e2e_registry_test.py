@@ -346,6 +346,39 @@ def registry_certificate(d, db):
           f"registry verify refuses the forgery: {r.stdout.strip()}")
 
 
+def line_t(d, pg):
+    """6. line-t: a consumer magnetometer calibrated over temperature (mag13@T) in a simulated
+    chamber ramping 0 -> 40 degC; its calibrations reach the registry with their polynomials
+    (migration 3, the temperature column) and the parameters at t0 as the parameters."""
+    t = Station(f"{d}/t", "line-t", pg.conninfo())
+    with open(f"{t.d}/turncald.toml", "w") as f:
+        f.write('[station]\nmodels = ["mag13@T"]\nsensor_class = "consumer"\n'
+                f'[registry]\nconninfo = "{pg.conninfo()}"\npassword_file = "{t.d}/password"\n'
+                'station = "line-t"\nretry_max_s = 1\n')
+    t.start()
+    sim = t.simulate(["6251.00077", "03A00077"], 31, f"{d}/poses.csv", "--class", "consumer",
+                     "--chamber", "0; ramp 40 6 120", "--die-tau", "30", "--repeat-poses",
+                     "--hold-end", "3000")
+    check(wait_until(lambda: '"holding_end"' in open(f"{t.d}/sim31.out").read(), 400, 0.2),
+          "line-t: the chamber's poses were answered; the table holds")
+    sim.terminate()
+    sim.wait()
+    check(wait_until(lambda: (t.registry() or {}).get("depth", 1) == 0 and not t.outbox(), 60),
+          f"line-t: the outbox drained: {t.registry()}")
+    files = check_all_once(pg, t, "line-t")
+    rows = pg.psql("SELECT c.model, c.temperature->>'t_min_c', c.temperature->>'t_max_c', "
+                   "c.parameters->'bx'->>'value', c.passed, c.document FROM calibrations c "
+                   "JOIN stations s ON s.id = c.station_id WHERE s.name = 'line-t'")
+    check(rows and all(r[0] == "mag13@T" and r[1] and r[2] and r[3] for r in rows),
+          f"line-t: {len(rows)} calibrations over temperature with their range and parameters "
+          f"at t0: {[r[:5] for r in rows][:2]}")
+    check(rows and float(rows[-1][2]) - float(rows[-1][1]) >= 10.0,
+          f"line-t: the calibrated range spans at least 10 degC: {rows[-1][1:3] if rows else ''}")
+    check(rows and all(json.loads(r[5]) in files.values() for r in rows),
+          "line-t: the registry's documents are the station's files")
+    t.stop()
+
+
 def main(d):
     if not pg_server.available():
         print("SKIP: PostgreSQL (initdb, pg_ctl, psql) is not installed: apt-get install postgresql")
@@ -361,6 +394,7 @@ def main(d):
     line_b_restarts(pg, b, waiting, lost_key)
     moved_imu(d, pg, b, db)
     registry_certificate(d, db)
+    line_t(d, pg)
     dup = pg.psql("SELECT count(*) - count(DISTINCT document) FROM calibrations")[0][0]
     check(dup == "0", "no calibration document is in the registry twice")
     b.stop()
