@@ -1,5 +1,7 @@
 #include "protocol/messages.h"
 
+#include <cmath>
+
 #include <algorithm>
 
 #include <fmt/format.h>
@@ -42,7 +44,7 @@ bool StringArgument(const nlohmann::json& request, const char* key, std::string*
 
 bool IsMutatingCommand(const std::string& cmd) {
   return cmd == "pose" || cmd == "rate" || cmd == "reset" || cmd == "publish" ||
-         cmd == "device_write";
+         cmd == "device_write" || cmd == "chamber";
 }
 
 bool RequestFramer::Push(std::string_view bytes, const LineHandler& on_line,
@@ -140,7 +142,7 @@ bool ParseCommand(const nlohmann::json& request, std::string* cmd, std::string* 
   }
   *cmd = request["cmd"].get<std::string>();
   for (const char* known : {"status", "devices", "pose", "rate", "watch", "result", "next_pose",
-                            "reset", "publish", "device_write", "version"}) {
+                            "reset", "publish", "device_write", "version", "chamber"}) {
     if (*cmd == known) return true;
   }
   *error = fmt::format("unknown command '{}' (commands: {})", *cmd, kCommands);
@@ -219,6 +221,21 @@ bool ParseNextPoseRequest(const nlohmann::json& request, std::string* device, st
     *error = "next_pose: 'device' must be a device name";
     return false;
   }
+  return true;
+}
+
+bool ParseChamberRequest(const nlohmann::json& request, std::optional<double>* setpoint_c,
+                         std::string* error) {
+  const auto it = request.find("setpoint_c");
+  if (it == request.end() || it->is_null()) {
+    setpoint_c->reset();
+    return true;
+  }
+  if (!it->is_number() || !std::isfinite(it->get<double>()) || it->get<double>() < -273.15) {
+    *error = "chamber: 'setpoint_c' must be a temperature in degC, or null (a ramp: no soak)";
+    return false;
+  }
+  *setpoint_c = it->get<double>();
   return true;
 }
 

@@ -34,8 +34,9 @@ nlohmann::json ErrorMessage(const std::string& message);
 // The commands, as an ERROR lists them.
 inline constexpr const char* kCommands =
     "status, devices, pose, rate, watch, result, next_pose, reset, publish, device_write, "
-    "version";
-// pose, rate, reset, publish and device_write change the session or a device: only control peers
+    "version, chamber";
+// pose, rate, reset, publish, device_write and chamber change the session or a device: only
+// control peers
 // may send them.
 bool IsMutatingCommand(const std::string& cmd);
 
@@ -98,6 +99,10 @@ bool ParsePoseRequest(const nlohmann::json& request, std::int64_t t_host_ns, Ann
 
 // next_pose: the device asked about (empty: none named).
 bool ParseNextPoseRequest(const nlohmann::json& request, std::string* device, std::string* error);
+// {"cmd":"chamber","setpoint_c":40}: the chamber soaks at 40 degC (announced poses wait for the
+// sensor's temperature to settle); "setpoint_c": null or absent: a ramp, or no chamber.
+bool ParseChamberRequest(const nlohmann::json& request, std::optional<double>* setpoint_c,
+                         std::string* error);
 
 // reset: its note (empty: none).
 bool ParseResetRequest(const nlohmann::json& request, std::string* note, std::string* error);

@@ -72,6 +72,8 @@ const char* ToString(SequencerEventKind kind) {
       return "POSE_CAPTURED";
     case SequencerEventKind::kRejected:
       return "POSE_REJECTED";
+    case SequencerEventKind::kSoakWaiting:
+      return "POSE_WAITING";
     case SequencerEventKind::kSegmentSkipped:
       return "SEGMENT_SKIPPED";
     case SequencerEventKind::kScheduleEnd:
@@ -156,6 +158,8 @@ bool Sequencer::Announce(const Announcement& a, std::string* error) {
     if (error) *error = "the sequencer follows a schedule; announcements are not taken";
     return false;
   }
+  soak_why_.clear();
+  soak_event_t_s_ = -1e9;
   const double dwell = a.dwell_s.value_or(options_.dwell_s);
   if (!(dwell > 0) || dwell > 3600) {
     if (error) *error = fmt::format("dwell {} s out of range (0, 3600]", dwell);
@@ -293,6 +297,9 @@ void Sequencer::Feed(const StillSample& in) {
   bool has_evicted = false;
   const bool still = detector_->Push(s, &evicted, &has_evicted);
   const double t_s = s.t_s();
+  if (std::isfinite(s.temp_c)) {
+    soak_tracker_.Add(t_s, s.temp_c, soak_ ? soak_->window_s : SoakOptions{}.window_s);
+  }
   if (!still && detector_->finding().kind != StillFinding::kFilling) {
     last_motion_ = detector_->finding();
     last_motion_t_s_ = t_s;
@@ -324,7 +331,7 @@ void Sequencer::Feed(const StillSample& in) {
       break;
     case State::kWaiting:
       if (still && has_evicted && detector_->still_run() >= required_run_ &&
-          evicted.t_host_ns > t_announce_ns_) {
+          evicted.t_host_ns > t_announce_ns_ && SoakSettled(t_s)) {
         StartCollecting(evicted);
       }
       break;
@@ -350,6 +357,20 @@ void Sequencer::Feed(const StillSample& in) {
       if (moving) state_ = State::kWaiting;
       break;
   }
+}
+
+bool Sequencer::SoakSettled(double t_s) {
+  if (!soak_ || !announced_) return true;
+  if (soak_tracker_.Settled(*soak_, &soak_why_)) {
+    soak_why_.clear();
+    return true;
+  }
+  // Said again every 10 s while the pose waits.
+  if (t_s - soak_event_t_s_ >= 10.0) {
+    soak_event_t_s_ = t_s;
+    Emit(SequencerEventKind::kSoakWaiting, t_s, soak_why_);
+  }
+  return false;
 }
 
 void Sequencer::FeedRate(const StillSample& s) {
@@ -470,6 +491,14 @@ void Sequencer::CheckTimeout(std::int64_t now_ns) {
   }
   if (state_ != State::kWaiting || !announced_) return;
   const double waited = (static_cast<double>(now_ns) - static_cast<double>(t_announce_ns_)) * 1e-9;
+  if (soak_ && !soak_why_.empty()) {
+    // Waiting for the chamber, not for stillness: the soak's own timeout.
+    if (waited <= soak_->timeout_s) return;
+    Reject(static_cast<double>(now_ns) * 1e-9,
+           fmt::format("the soak did not settle within {:.0f} s of the announcement; {}",
+                       soak_->timeout_s, soak_why_));
+    return;
+  }
   if (waited <= options_.still_timeout_s) return;
   std::string why;
   const double t_announce_s = static_cast<double>(t_announce_ns_) * 1e-9;

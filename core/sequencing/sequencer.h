@@ -49,6 +49,7 @@
 #include "core/sequencing/pose_check.h"
 #include "core/sequencing/rate_steady.h"
 #include "core/sequencing/sample.h"
+#include "core/sequencing/soak.h"
 #include "core/sequencing/stillness.h"
 #include "core/sequencing/triad_accumulator.h"
 
@@ -85,6 +86,7 @@ enum class SequencerEventKind {
   kRejected,        // reason
   kSegmentSkipped,  // schedule mode: a still segment not used (reason)
   kScheduleEnd,     // schedule mode, at Finish: whether the count fitted (reason)
+  kSoakWaiting,     // announced in a soak: the pose waits for the temperature to settle (reason)
 };
 const char* ToString(SequencerEventKind kind);  // "POSE_CAPTURED", ...
 
@@ -144,6 +146,11 @@ class Sequencer {
   // before the first announcement.
   bool SetFree(std::string* error);
   bool free_mode() const { return free_; }
+  // A climate chamber's soak (core/sequencing/soak.h): announced poses wait until the sensor's
+  // temperature has settled (nullopt: a ramp, or no chamber; poses are taken at once).
+  void SetSoak(std::optional<SoakOptions> soak) { soak_ = std::move(soak); }
+  const std::optional<SoakOptions>& soak() const { return soak_; }
+  const SoakTracker& soak_tracker() const { return soak_tracker_; }
   void SetPredictor(PosePredictor predictor) { predictor_ = std::move(predictor); }
   void SetExclusionObserver(ExclusionObserver observer) { excluded_ = std::move(observer); }
 
@@ -182,6 +189,9 @@ class Sequencer {
   void Feed(const StillSample& s);
   void FeedRate(const StillSample& s);
   void StartCollecting(const StillSample& first);
+  // In a soak: whether the announced pose may start collecting (else a kSoakWaiting event now
+  // and then, and soak_why_ says why).
+  bool SoakSettled(double t_s);
   void Commit(const StillSample& s);
   void Complete(double t_s);
   void Reject(double t_s, std::string reason);
@@ -254,6 +264,10 @@ class Sequencer {
   HostClock clock_;  // device time -> host time of sending
   StillFinding last_motion_;
   double last_motion_t_s_ = -1.0;
+  std::optional<SoakOptions> soak_;
+  SoakTracker soak_tracker_;
+  std::string soak_why_;          // why the pending pose waits for the soak (empty: it does not)
+  double soak_event_t_s_ = -1e9;  // the latest kSoakWaiting event
   std::string last_noise_failure_;
   SampleCounts totals_;
   std::int64_t captured_ = 0, rejected_ = 0;

@@ -257,14 +257,17 @@ bool ParseThermal(const toml::table* t, const std::string& source, StationOption
   ThermalStationOptions& th = out->thermal;
   return OnlyKeys(*t,
                   {"max_order", "t0_c", "drop_below_sigmas", "distinct_resolution_c", "min_span_c",
-                   "grid_points"},
+                   "grid_points", "soak_rate_c_per_min", "soak_window_s", "soak_timeout_s"},
                   "[thermal]", source, error) &&
          GetInt(*t, "max_order", &th.fit.max_order, source, error) &&
          GetNumber(*t, "t0_c", &th.fit.t0_c, source, error) &&
          GetNumber(*t, "drop_below_sigmas", &th.fit.drop_below_sigmas, source, error) &&
          GetNumber(*t, "distinct_resolution_c", &th.fit.distinct_resolution_c, source, error) &&
          GetNumber(*t, "min_span_c", &th.gate.min_span_c, source, error) &&
-         GetInt(*t, "grid_points", &th.gate.grid_points, source, error);
+         GetInt(*t, "grid_points", &th.gate.grid_points, source, error) &&
+         GetNumber(*t, "soak_rate_c_per_min", &th.soak.max_rate_c_per_min, source, error) &&
+         GetNumber(*t, "soak_window_s", &th.soak.window_s, source, error) &&
+         GetNumber(*t, "soak_timeout_s", &th.soak.timeout_s, source, error);
 }
 
 // [reference]: gravity, the field and the latitude.

@@ -111,6 +111,20 @@ void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
     HandlePublish(client, request, id);
   } else if (cmd == "device_write") {
     HandleDeviceWrite(client, request, id);
+  } else if (cmd == "chamber") {
+    std::optional<double> setpoint_c;
+    if (!protocol::ParseChamberRequest(request, &setpoint_c, &why)) {
+      error(why);
+      return;
+    }
+    station_->SetChamber(setpoint_c);
+    const nlohmann::json event = {
+        {"class", "CHAMBER"},
+        {"setpoint_c", setpoint_c ? nlohmann::json(*setpoint_c) : nlohmann::json()},
+        {"soak", setpoint_c ? "announced poses wait for the sensor's temperature to settle"
+                            : "no soak: poses are taken at once, at the temperature they see"}};
+    spdlog::info("{}", event.dump());
+    reply(event);
   }
 }
 

@@ -79,7 +79,25 @@ nlohmann::json DevicePipeline::StatusJson() const {
           {"samples",
            {{"used", t.used}, {"flagged", t.flagged}, {"outliers", t.outliers}, {"lost", t.lost}}},
           {"moves", MovesJson()},
+          {"temperature", TemperatureJson()},
           {"models", model_status}};
+}
+
+nlohmann::json DevicePipeline::TemperatureJson() const {
+  const SoakTracker& t = sequencer->soak_tracker();
+  const double window_s = sequencer->soak() ? sequencer->soak()->window_s : SoakOptions{}.window_s;
+  const std::optional<double> now = t.latest_c(), rate = t.RateCPerMin(window_s);
+  nlohmann::json j = {{"temp_c", now ? nlohmann::json(*now) : nlohmann::json()},
+                      {"rate_c_per_min", rate ? nlohmann::json(*rate) : nlohmann::json()},
+                      {"soak", nullptr}};
+  if (const auto& soak = sequencer->soak()) {
+    std::string why;
+    const bool settled = t.Settled(*soak, &why);
+    j["soak"] = {{"setpoint_c", soak->setpoint_c},
+                 {"settled", settled},
+                 {"waiting", settled ? nlohmann::json() : nlohmann::json(why)}};
+  }
+  return j;
 }
 
 nlohmann::json DevicePipeline::ResultJson() const {

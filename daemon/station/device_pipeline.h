@@ -51,6 +51,8 @@ struct DevicePipeline {
   double MoveRestSeconds(const TableMotion& motion, double fallback) const;
 
   // The device's entry in `status` and in RESULT.
+  // The sensor's temperature, its rate of change and the chamber's soak (status "temperature").
+  nlohmann::json TemperatureJson() const;
   nlohmann::json StatusJson() const;
   nlohmann::json ResultJson() const;
   // The sequencer's moves between static poses: enabled, taken (handed to a record), dropped and

@@ -204,6 +204,19 @@ void Station::WriteReport(std::size_t device, std::int64_t now_ns, bool now) {
         });
 }
 
+void Station::SetChamber(std::optional<double> setpoint_c) {
+  chamber_setpoint_c_ = setpoint_c;
+  for (auto& d : devices_) {
+    if (!setpoint_c) {
+      d->sequencer->SetSoak(std::nullopt);
+      continue;
+    }
+    SoakOptions soak = options_.thermal.soak;
+    soak.setpoint_c = *setpoint_c;
+    d->sequencer->SetSoak(soak);
+  }
+}
+
 bool Station::AnnounceTo(int device, const Announcement& a, std::string* error) {
   return devices_[static_cast<std::size_t>(device)]->sequencer->Announce(a, error);
 }

@@ -57,6 +57,7 @@ bool ParsePoseSource(const std::string& text, PoseSource* out);
 struct ThermalStationOptions {
   ThermalOptions fit;
   ThermalGateOptions gate;
+  SoakOptions soak;  // its set-point comes from the controller's chamber command
 };
 
 struct FreeStationOptions {
@@ -147,6 +148,11 @@ class Station : public ReplayTarget, private CalibrationHost {
   void TickDevice(int device, std::int64_t now_ns);
   // A pose for one device only (`turncal pose --device D`).
   bool AnnounceTo(int device, const Announcement& announcement, std::string* error);
+  // The controller's chamber set-point (`{"cmd":"chamber","setpoint_c":...}`; nullopt: a ramp or
+  // no chamber): every device's announced poses then wait for the soak to settle
+  // (core/sequencing/soak.h, [thermal] soak_*).
+  void SetChamber(std::optional<double> setpoint_c);
+  std::optional<double> chamber_setpoint_c() const { return chamber_setpoint_c_; }
   void OnTick(std::int64_t now_ns) override;
   void OnFinish(std::int64_t now_ns) override;
 
@@ -237,6 +243,7 @@ class Station : public ReplayTarget, private CalibrationHost {
   bool journal_wanted_ = false;  // the session has a state directory: keep trying to open it
   std::uint64_t writes_ok_ = 0, writes_failed_ = 0;
   std::string write_error_;
+  std::optional<double> chamber_setpoint_c_;
   bool resuming_ = false;
   Executor executor_;
   std::shared_ptr<bool> alive_ = std::make_shared<bool>(true);

@@ -41,7 +41,7 @@ bool StationOptions::IsValid(std::string* error) const {
     if (error) *error = "[thermal] " + *error;
     return false;
   }
-  if (!thermal.gate.IsValid(error)) return false;
+  if (!thermal.gate.IsValid(error) || !thermal.soak.IsValid(error)) return false;
   if (!(free.min_coverage_percent >= 0 && free.min_coverage_percent <= 100)) {
     if (error) *error = "[free] min_coverage_percent must be in [0, 100]";
     return false;

@@ -71,7 +71,8 @@ TEST(Config, CalibrationsOverTemperature) {
   std::string error;
   ASSERT_TRUE(ParseConfig(
       "[station]\nmodels = [\"accel13@T\", \"mag13\"]\n[thermal]\nmax_order = 2\nt0_c = 20\n"
-      "drop_below_sigmas = 0.5\nmin_span_c = 15\ngrid_points = 11\n",
+      "drop_below_sigmas = 0.5\nmin_span_c = 15\ngrid_points = 11\nsoak_rate_c_per_min = 0.1\n"
+      "soak_window_s = 120\nsoak_timeout_s = 1800\n",
       "t.toml", &c, &error))
       << error;
   EXPECT_EQ(c.station.models, (std::vector<std::string>{"accel13@T", "mag13"}));
@@ -80,6 +81,11 @@ TEST(Config, CalibrationsOverTemperature) {
   EXPECT_EQ(c.station.thermal.fit.drop_below_sigmas, 0.5);
   EXPECT_EQ(c.station.thermal.gate.min_span_c, 15.0);
   EXPECT_EQ(c.station.thermal.gate.grid_points, 11);
+  EXPECT_EQ(c.station.thermal.soak.max_rate_c_per_min, 0.1);
+  EXPECT_EQ(c.station.thermal.soak.window_s, 120.0);
+  EXPECT_EQ(c.station.thermal.soak.timeout_s, 1800.0);
+  EXPECT_FALSE(ParseConfig("[thermal]\nsoak_rate_c_per_min = 0\n", "t.toml", &c, &error));
+  EXPECT_NE(error.find("soak_rate_c_per_min"), std::string::npos) << error;
   EXPECT_FALSE(ParseConfig("[thermal]\nmax_oder = 2\n", "t.toml", &c, &error));
   EXPECT_NE(error.find("max_oder"), std::string::npos) << error;
   EXPECT_FALSE(ParseConfig("[station]\nmodels = [\"mag22@T\"]\n", "t.toml", &c, &error));

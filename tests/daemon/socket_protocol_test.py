@@ -105,6 +105,22 @@ try:
     r = a.reply()
     check(r.get("class") == "STATUS" and r.get("id") == 42,
           "the same connection still answers status (id echoed)")
+    # The chamber's set-point (issue 36): a soak every device's poses wait for; null ends it.
+    a.send({"cmd": "chamber", "setpoint_c": "hot"})
+    r = a.reply()
+    check(r.get("class") == "ERROR" and "setpoint_c" in r.get("message", ""),
+          f"chamber with a set-point that is not a number -> ERROR: {r.get('message', r)}")
+    a.send({"cmd": "chamber", "setpoint_c": 40})
+    r = a.reply(want="CHAMBER")
+    check(r.get("setpoint_c") == 40, f"chamber 40 degC -> CHAMBER: {r}")
+    a.send({"cmd": "status"})
+    r = a.reply(want="STATUS")
+    soaks = [d["station"]["temperature"]["soak"] for d in r["devices"].values()]
+    check(soaks and all(x and x["setpoint_c"] == 40 for x in soaks),
+          f"status shows every device's soak at 40 degC: {soaks}")
+    a.send({"cmd": "chamber", "setpoint_c": None})
+    r = a.reply(want="CHAMBER")
+    check(r.get("setpoint_c") is None, f"chamber null ends the soak: {r}")
 
     # Other clients are served promptly while the slow one is not reading.
     b = Client(sock)
