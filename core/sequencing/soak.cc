@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 
 namespace turncal {
@@ -52,7 +53,21 @@ std::optional<double> SoakTracker::latest_c() const {
 bool SoakTracker::Settled(const SoakOptions& soak, std::string* why) const {
   const std::optional<double> rate = RateCPerMin(soak.window_s);
   const std::optional<double> now = latest_c();
-  if (rate && std::abs(*rate) < soak.max_rate_c_per_min) return true;
+  // A channel that reads exactly the same for the whole window while the set-point is degrees
+  // away has most likely stuck: a settled die still shows its noise or its last digit moving.
+  bool stuck = false;
+  if (rate && now && std::abs(*now - soak.setpoint_c) > 2.0) {
+    stuck = std::all_of(points_.begin(), points_.end(),
+                        [&](const Point& p) { return p.temp_c == points_.front().temp_c; });
+  }
+  if (rate && !stuck && std::abs(*rate) < soak.max_rate_c_per_min) return true;
+  if (why && stuck) {
+    *why = fmt::format(
+        "waiting for the soak at {:.1f} degC: the sensor's temperature reads exactly {:.2f} degC "
+        "for {:.0f} s, {:.1f} degC from the set-point (a stuck temperature channel?)",
+        soak.setpoint_c, *now, soak.window_s, std::abs(*now - soak.setpoint_c));
+    return false;
+  }
   if (why) {
     if (!now) {
       *why =

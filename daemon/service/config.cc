@@ -257,7 +257,8 @@ bool ParseThermal(const toml::table* t, const std::string& source, StationOption
   ThermalStationOptions& th = out->thermal;
   return OnlyKeys(*t,
                   {"max_order", "t0_c", "drop_below_sigmas", "distinct_resolution_c", "min_span_c",
-                   "grid_points", "soak_rate_c_per_min", "soak_window_s", "soak_timeout_s"},
+                   "grid_points", "soak_rate_c_per_min", "soak_window_s", "soak_timeout_s",
+                   "max_pose_span_c"},
                   "[thermal]", source, error) &&
          GetInt(*t, "max_order", &th.fit.max_order, source, error) &&
          GetNumber(*t, "t0_c", &th.fit.t0_c, source, error) &&
@@ -267,7 +268,8 @@ bool ParseThermal(const toml::table* t, const std::string& source, StationOption
          GetInt(*t, "grid_points", &th.gate.grid_points, source, error) &&
          GetNumber(*t, "soak_rate_c_per_min", &th.soak.max_rate_c_per_min, source, error) &&
          GetNumber(*t, "soak_window_s", &th.soak.window_s, source, error) &&
-         GetNumber(*t, "soak_timeout_s", &th.soak.timeout_s, source, error);
+         GetNumber(*t, "soak_timeout_s", &th.soak.timeout_s, source, error) &&
+         GetNumber(*t, "max_pose_span_c", &th.max_pose_span_c, source, error);
 }
 
 // [reference]: gravity, the field and the latitude.

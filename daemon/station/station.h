@@ -58,6 +58,9 @@ struct ThermalStationOptions {
   ThermalOptions fit;
   ThermalGateOptions gate;
   SoakOptions soak;  // its set-point comes from the controller's chamber command
+  // A pose whose temperature moved more than this within its window is refused (a jump in the
+  // temperature channel; a 4 degC/min ramp moves 0.3 degC in a 5 s dwell).
+  double max_pose_span_c = 5.0;
 };
 
 struct FreeStationOptions {

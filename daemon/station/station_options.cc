@@ -42,6 +42,10 @@ bool StationOptions::IsValid(std::string* error) const {
     return false;
   }
   if (!thermal.gate.IsValid(error) || !thermal.soak.IsValid(error)) return false;
+  if (!(thermal.max_pose_span_c > 0)) {
+    if (error) *error = "[thermal] max_pose_span_c must be > 0 degC";
+    return false;
+  }
   if (!(free.min_coverage_percent >= 0 && free.min_coverage_percent <= 100)) {
     if (error) *error = "[free] min_coverage_percent must be in [0, 100]";
     return false;

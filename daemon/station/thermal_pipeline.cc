@@ -40,6 +40,7 @@ ThermalModelPipeline::ThermalModelPipeline(ModelPipeline base, const StationOpti
   thermal_name = model->name() + kSuffix;
   fit_options = options.thermal.fit;
   gate_options = options.thermal.gate;
+  max_pose_span_c = options.thermal.max_pose_span_c;
   // Over temperature an isothermal fit's residuals hold the temperature dependence: it would
   // take that for drift. The class's drift (or the one configured) is the thermal fit's.
   fit_calibrator = calibrator->options();
@@ -55,6 +56,17 @@ void ThermalModelPipeline::AddAndSolve(const PoseRecord& record, const GateOptio
         "the pose has no temperature: a calibration over temperature needs the device's "
         "temperature channel (MIP temperature statistics, Xbus 0x0810); the pose stays in the "
         "journal";
+    return;
+  }
+  // A temperature that jumped within the window (a glitch of the channel) makes the pose's mean
+  // temperature meaningless: refused, with the reason.
+  if (record.temp_spread &&
+      record.temp_spread->max_c - record.temp_spread->min_c > max_pose_span_c) {
+    job->added = false;
+    job->error = fmt::format(
+        "the pose's temperature spans {:.2f} .. {:.2f} degC within its window (more than {:.1f} "
+        "degC: a jump in the temperature channel?); the pose stays in the journal",
+        record.temp_spread->min_c, record.temp_spread->max_c, max_pose_span_c);
     return;
   }
   std::lock_guard lock(*calibrator_mutex);

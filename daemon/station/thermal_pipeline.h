@@ -38,6 +38,7 @@ struct ThermalModelPipeline : ModelPipeline {
   std::string thermal_name;  // "accel13@T"
   ThermalOptions fit_options;
   ThermalGateOptions gate_options;
+  double max_pose_span_c = 5.0;      // a pose's temperature may move this much in its window
   CalibratorOptions fit_calibrator;  // the thermal fit's weighting and drift
   std::vector<PoseRecord> records;   // every pose fitted (under calibrator_mutex)
   ThermalEstimate thermal;           // the latest

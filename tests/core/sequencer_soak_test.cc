@@ -95,6 +95,15 @@ TEST(SequencerSoak, TheTrackersSlopeIsTheLeastSquaresLine) {
   soak.max_rate_c_per_min = 0.6;
   EXPECT_TRUE(t.Settled(soak, &why));
   EXPECT_FALSE(SoakOptions{.setpoint_c = NAN}.IsValid(&why));
+
+  // A channel stuck at one reading, degrees from the set-point, is not a settled soak.
+  SoakTracker stuck;
+  for (int i = 0; i <= 700; ++i) stuck.Add(i * 0.1, 23.0, 60.0);
+  soak.setpoint_c = 40.0;
+  EXPECT_FALSE(stuck.Settled(soak, &why));
+  EXPECT_NE(why.find("a stuck temperature channel?"), std::string::npos) << why;
+  soak.setpoint_c = 23.5;  // close to the set-point: a settled die that reports 0.1 degC steps
+  EXPECT_TRUE(stuck.Settled(soak, &why));
 }
 
 }  // namespace

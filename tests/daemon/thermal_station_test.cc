@@ -222,7 +222,13 @@ TEST(ThermalStation, WhatCannotBeCalibratedOverTemperatureIsRefusedWithTheReason
   m->AddAndSolve(record, options.gate, &job);
   EXPECT_FALSE(job.added);
   EXPECT_NE(job.error.find("no temperature"), std::string::npos) << job.error;
+  // A temperature that jumped within the window: refused too.
   record.temp_c = 25.0;
+  record.temp_spread = TemperatureSpread{3.0, 24.9, 125.0};
+  m->AddAndSolve(record, options.gate, &job);
+  EXPECT_FALSE(job.added);
+  EXPECT_NE(job.error.find("a jump in the temperature channel?"), std::string::npos) << job.error;
+  record.temp_spread = TemperatureSpread{0.01, 24.98, 25.02};
   m->AddAndSolve(record, options.gate, &job);
   EXPECT_TRUE(job.added) << job.error;
   // One pose at one temperature: no estimate yet, and the gate says why.
