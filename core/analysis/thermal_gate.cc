@@ -118,7 +118,9 @@ GateResult EvaluateThermalGate(const MeasurementModel& model, const ThermalEstim
       where = "over the whole range";
     } else {
       for (const auto& [from, to] : failing) {
-        where += fmt::format("{}from {:.1f} to {:.1f}", where.empty() ? "" : " and ", from, to);
+        where += where.empty() ? "" : " and ";
+        where += from == to ? fmt::format("at {:.1f}", from)
+                            : fmt::format("from {:.1f} to {:.1f}", from, to);
       }
       where += " degC";
     }
