@@ -16,7 +16,10 @@ struct ScaledSvd {
   ScaledSvd(const Eigen::MatrixXd& J, double rank_tolerance) {
     scale = J.colwise().norm().transpose();
     for (Eigen::Index j = 0; j < scale.size(); ++j) scale[j] = scale[j] > 0 ? 1.0 / scale[j] : 1.0;
-    svd.compute(J * scale.asDiagonal(), Eigen::ComputeThinV);
+    // The full V: with fewer equations than parameters (a calibration over temperature early in
+    // a session) the thin V lacks the null space's directions, which callers take from its
+    // right columns.
+    svd.compute(J * scale.asDiagonal(), Eigen::ComputeFullV);
     const Eigen::VectorXd& s = svd.singularValues();
     for (Eigen::Index i = 0; i < s.size(); ++i) rank += s[i] > rank_tolerance * s[0];
   }
@@ -24,9 +27,9 @@ struct ScaledSvd {
   // (J^T J)^+ over the first `rank` singular directions, in the unscaled parameters.
   Eigen::MatrixXd PseudoInverseCovariance() const {
     const Eigen::VectorXd& s = svd.singularValues();
-    Eigen::VectorXd inv = Eigen::VectorXd::Zero(s.size());
+    Eigen::VectorXd inv(rank);
     for (int i = 0; i < rank; ++i) inv[i] = 1.0 / (s[i] * s[i]);
-    const Eigen::MatrixXd& V = svd.matrixV();
+    const auto V = svd.matrixV().leftCols(rank);
     return scale.asDiagonal() * V * inv.asDiagonal() * V.transpose() * scale.asDiagonal();
   }
 };

@@ -213,6 +213,25 @@ TEST(ThermalCalibrator, TooFewTemperaturesLowerTheOrderAndSaySo) {
   EXPECT_TRUE(est.coefficients.allFinite());
 }
 
+// Early in a ramp: six poses at six temperatures give 18 equations for mag13's 45 coefficients of
+// order 3. The fit neither crashes (a turncald under CI load aborted on it: the null space was
+// taken from a thin V) nor claims what it cannot know: the undetermined coefficients have an
+// infinite sigma and the rank says so.
+TEST(ThermalCalibrator, FewerEquationsThanCoefficientsLeaveThemUndetermined) {
+  ThermalRun run = Simulate("mag13", ConsumerClass(), {0.0, 8.0, 16.0, 24.0, 32.0, 40.0}, 6);
+  std::vector<PoseRecord> early;
+  for (std::size_t k = 0; k < run.records.size(); k += 26) early.push_back(run.records[k + k / 26]);
+  ASSERT_EQ(early.size(), 6u);
+  const ThermalEstimate est = CalibrateOverTemperature(run.options, early, ThermalOptions{});
+  if (est.ok) {
+    EXPECT_LT(est.rank, est.coefficients.size());
+    EXPECT_LE(est.rank, 18);
+    EXPECT_FALSE(est.sigma.allFinite());
+  } else {
+    EXPECT_FALSE(est.error.empty());
+  }
+}
+
 TEST(ThermalCalibrator, RefusesWhatItCannotCalibrateWithTheReason) {
   ThermalRun run = Simulate("accel13", IndustrialClass(), {0.0, 40.0}, 5);
   run.records[3].temp_c.reset();
