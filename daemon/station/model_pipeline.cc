@@ -56,11 +56,7 @@ bool ModelPipeline::ApplyStored(const nlohmann::json& stored, std::string* error
     error->clear();
     return false;
   }
-  std::optional<TimeWindow> window;
-  TimeWindow w;
-  if (stored.contains("bias_window") && protocol::ParseTimeWindow(stored["bias_window"], &w)) {
-    window = w;
-  }
+  const std::optional<TimeWindow> window = StoredBiasWindow(stored);
   BiasDrift drift;
   if (stored.contains("calibrator") && stored["calibrator"].is_object() &&
       stored["calibrator"].contains("drift")) {
@@ -165,17 +161,33 @@ std::optional<Eigen::Vector3d> CorrectionSigma(
     if (name == "bx" || name == "by" || name == "bz")
       covariance(k, k) += bias_drift_var[name[1] - 'x'];
   }
-  const int g = f_q ? model.index_of("Bg_xx") : -1;
   const auto corrected = [&](const Eigen::VectorXd& at) {
-    Eigen::Vector3d r = raw;
-    if (g >= 0) {
-      Eigen::Matrix3d B;
-      for (int e = 0; e < 9; ++e) B(e / 3, e % 3) = at[g + e];
-      r -= B * *f_q;
-    }
-    return model.Correct(at, r);
+    return model.Correct(at, WithoutGSensitivity(model, at, raw, f_q));
   };
   return PropagatedSigma(corrected, theta, covariance);
+}
+
+Eigen::Vector3d WithoutGSensitivity(const MeasurementModel& model, const Eigen::VectorXd& theta,
+                                    const Eigen::Vector3d& raw, const Eigen::Vector3d* f_q) {
+  const int g = f_q ? model.index_of("Bg_xx") : -1;
+  if (g < 0) return raw;
+  Eigen::Matrix3d B;
+  for (int k = 0; k < 9; ++k) B(k / 3, k % 3) = theta[g + k];
+  return raw - B * *f_q;
+}
+
+std::optional<Eigen::Vector3d> GyroSpecificForce(const MeasurementModel& model, int triad,
+                                                 const Sample& sample) {
+  if (triad != kTriadGyr || !sample.acc_mps2) return std::nullopt;
+  return Eigen::Vector3d(model.context().mounting.transpose() * *sample.acc_mps2);
+}
+
+std::optional<TimeWindow> StoredBiasWindow(const nlohmann::json& stored) {
+  TimeWindow w;
+  if (stored.contains("bias_window") && protocol::ParseTimeWindow(stored["bias_window"], &w)) {
+    return w;
+  }
+  return std::nullopt;
 }
 
 Eigen::Vector3d PropagatedSigma(
@@ -208,12 +220,7 @@ Eigen::Vector3d ModelPipeline::Correct(const Eigen::Vector3d& raw_in, double t_s
                                        const Eigen::Vector3d* f_q) const {
   // The g-sensitivity's share comes off the raw rate first; the rest of the correction is the
   // model's affine map (Correct with no force).
-  Eigen::Vector3d raw = raw_in;
-  if (const int g = model->index_of("Bg_xx"); g >= 0 && f_q) {
-    Eigen::Matrix3d B;
-    for (int k = 0; k < 9; ++k) B(k / 3, k % 3) = applied_theta[g + k];
-    raw -= B * *f_q;
-  }
+  const Eigen::Vector3d raw = WithoutGSensitivity(*model, applied_theta, raw_in, f_q);
   const Eigen::Vector3d value = applied_affine ? Eigen::Vector3d(applied_A * raw + applied_c)
                                                : model->Correct(applied_theta, raw);
   if (sigma) {
@@ -242,10 +249,7 @@ bool ModelPipeline::Correct(const Sample& sample, double t_s, Eigen::Vector3d* v
   if (applied_version_ <= 0) return false;
   const int t = triad();
   const Eigen::Vector3d& raw = *RawTriad(sample, t);
-  std::optional<Eigen::Vector3d> f_q;
-  if (t == kTriadGyr && sample.acc_mps2) {
-    f_q = model->context().mounting.transpose() * *sample.acc_mps2;
-  }
+  const std::optional<Eigen::Vector3d> f_q = GyroSpecificForce(*model, t, sample);
   *value = Correct(raw, t_s, sigma, f_q ? &*f_q : nullptr);
   *frame = ToString(model->corrected_frame());
   return true;

@@ -38,6 +38,19 @@ std::optional<Eigen::Vector3d> CorrectionSigma(
     const MeasurementModel& model, const Eigen::VectorXd& theta, Eigen::MatrixXd covariance,
     const Eigen::Vector3d& raw, const Eigen::Vector3d& bias_drift_var, const Eigen::Vector3d* f_q);
 
+// The raw rate with the g-sensitivity's share removed: raw - B_g f_q, B_g read row-major from
+// theta at model.index_of("Bg_xx"). Unchanged when the model has no B_g or `f_q` is null.
+Eigen::Vector3d WithoutGSensitivity(const MeasurementModel& model, const Eigen::VectorXd& theta,
+                                    const Eigen::Vector3d& raw, const Eigen::Vector3d* f_q);
+
+// The specific force in the sensor's frame (mounting^T acc) that a gyroscope's g-sensitivity
+// multiplies; nullopt unless the model is a gyroscope's and the sample carries acceleration.
+std::optional<Eigen::Vector3d> GyroSpecificForce(const MeasurementModel& model, int triad,
+                                                 const Sample& sample);
+
+// The `bias_window` of a stored calibration document, when it has a valid one.
+std::optional<TimeWindow> StoredBiasWindow(const nlohmann::json& stored);
+
 // What one pose's update computes (on the solve worker when there is one).
 struct ModelUpdate {
   std::size_t device_poses = 0;  // the device's poses when the update was queued, this one included

@@ -187,18 +187,9 @@ bool ThermalModelPipeline::Correct(const Sample& sample, double t_s, Eigen::Vect
   }
   const int t = triad();
   const Eigen::Vector3d& raw_in = *RawTriad(sample, t);
-  std::optional<Eigen::Vector3d> f_q;
-  if (t == kTriadGyr && sample.acc_mps2) {
-    f_q = model->context().mounting.transpose() * *sample.acc_mps2;
-  }
+  const std::optional<Eigen::Vector3d> f_q = GyroSpecificForce(*model, t, sample);
   const Eigen::VectorXd theta = applied.ThetaAt(temp_c);
-  Eigen::Vector3d raw = raw_in;
-  if (const int g = model->index_of("Bg_xx"); g >= 0 && f_q) {
-    Eigen::Matrix3d B;
-    for (int k = 0; k < 9; ++k) B(k / 3, k % 3) = theta[g + k];
-    raw -= B * *f_q;
-  }
-  *value = model->Correct(theta, raw);
+  *value = model->Correct(theta, WithoutGSensitivity(*model, theta, raw_in, f_q ? &*f_q : nullptr));
   if (sigma) {
     *sigma = applied.covariance.size() > 0
                  ? CorrectionSigma(*model, theta, applied.CovarianceAt(temp_c), raw_in,
@@ -217,12 +208,7 @@ bool ThermalModelPipeline::ApplyStored(const nlohmann::json& stored, std::string
   active_version_ = stored["version"].get<int>();
   ThermalEstimate e;
   if (!protocol::ReadThermalEstimate(*model, stored, &e, error)) return false;
-  std::optional<TimeWindow> window;
-  TimeWindow w;
-  if (stored.contains("bias_window") && protocol::ParseTimeWindow(stored["bias_window"], &w)) {
-    window = w;
-  }
-  ApplyThermal(active_version_, e, window);
+  ApplyThermal(active_version_, e, StoredBiasWindow(stored));
   return true;
 }
 
