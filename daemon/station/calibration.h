@@ -150,6 +150,9 @@ class CalibrationSet {
   virtual void OnResumed(DevicePipeline& d, CalibrationHost& host) { (void)d, (void)host; }
   // The input has ended (a replay's capture): estimates deferred are computed now.
   virtual void OnFinish(DevicePipeline& d, CalibrationHost& host) { (void)d, (void)host; }
+  // No pose has been captured for a while on a live device (the table or the chamber waits, or
+  // the session has ended): estimates deferred are computed now.
+  virtual void OnIdle(DevicePipeline& d, CalibrationHost& host) { (void)d, (void)host; }
   // The sequencer's other events (a free set counts the segments it skipped).
   virtual void OnSequencerEvent(const SequencerEvent& event) { (void)event; }
 

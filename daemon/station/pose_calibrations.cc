@@ -84,6 +84,12 @@ void PoseCalibrations::OnResumed(DevicePipeline& d, CalibrationHost& host) {
   SolvePending(d, host, /*resuming=*/true);
 }
 
+void PoseCalibrations::OnIdle(DevicePipeline& d, CalibrationHost& host) {
+  if (d.records_used.size() == idle_solved_at_) return;
+  idle_solved_at_ = d.records_used.size();
+  SolvePending(d, host, /*resuming=*/false);
+}
+
 void PoseCalibrations::SolvePending(DevicePipeline& d, CalibrationHost& host, bool resuming) {
   for (auto& owned : models_) {
     ModelPipeline& m = *owned;

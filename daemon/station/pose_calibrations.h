@@ -35,6 +35,8 @@ class PoseCalibrations : public CalibrationSet {
   // Solves what was deferred (a calibration over temperature's latest poses).
   void OnFinish(DevicePipeline& d, CalibrationHost& host) override;
   void OnResumed(DevicePipeline& d, CalibrationHost& host) override;
+  // Once per record count: a calibration over temperature's deferred fit.
+  void OnIdle(DevicePipeline& d, CalibrationHost& host) override;
   // D-optimal over every model of the device (core/planning/pose_planner.h).
   nlohmann::json NextPose(const DevicePipeline& d, const StationOptions& options) const override;
   const char* pose_source() const override { return "announced"; }
@@ -52,6 +54,7 @@ class PoseCalibrations : public CalibrationSet {
 
   // The models' deferred solves (OnFinish, OnResumed).
   void SolvePending(DevicePipeline& d, CalibrationHost& host, bool resuming);
+  std::size_t idle_solved_at_ = 0;  // d.records_used.size() at the latest OnIdle solve
 };
 
 }  // namespace turncal::daemon

@@ -177,7 +177,15 @@ void Station::OnSample(int device, const Sample& sample) {
 }
 
 void Station::TickDevice(int device, std::int64_t now_ns) {
-  devices_[static_cast<std::size_t>(device)]->sequencer->Tick(now_ns);
+  DeviceState& d = *devices_[static_cast<std::size_t>(device)];
+  d.sequencer->Tick(now_ns);
+  // A live device whose latest pose is kIdleSolveS old: what its calibrations deferred (a fit
+  // over temperature thins its refits) is solved now, so the session's last poses count without
+  // waiting for another.
+  if (!d.records_used.empty() &&
+      1e-9 * static_cast<double>(now_ns) - d.records_used.back().t_end_s > kIdleSolveS) {
+    d.calibrations->OnIdle(d, *this);
+  }
   WriteReport(static_cast<std::size_t>(device), now_ns, false);
 }
 

@@ -204,6 +204,8 @@ class Station : public ReplayTarget, private CalibrationHost {
   // written from TickDevice/OnTick, at most every kReportIntervalNs per device.
   void WriteDueReports();
   static constexpr std::int64_t kReportIntervalNs = 60'000'000'000;
+  // A live device idle this long after its latest pose solves what its calibrations deferred.
+  static constexpr double kIdleSolveS = 5.0;
 
   // CPU time of this thread (ms) that the loop spent handling a captured pose (its answer, the
   // journal append queued, the update queued; with no executor also the solve): the last one and

@@ -65,7 +65,8 @@ void ThermalModelPipeline::AddAndSolve(const PoseRecord& record, const GateOptio
     job->added = false;
     job->error = fmt::format(
         "the pose's temperature spans {:.2f} .. {:.2f} degC within its window (more than {:.1f} "
-        "degC: a jump in the temperature channel?); the pose stays in the journal",
+        "degC: the die still moving after a step of the chamber, or a jump in the temperature "
+        "channel?); the pose stays in the journal",
         record.temp_spread->min_c, record.temp_spread->max_c, max_pose_span_c);
     return;
   }
@@ -80,6 +81,7 @@ void ThermalModelPipeline::AddAndSolve(const PoseRecord& record, const GateOptio
   const std::size_t n = records.size();
   if (n > 30 && n < next_fit_at_) {
     job->solved = false;
+    pending_ = true;
     return;
   }
   Fit(gate_opts, job);
@@ -89,20 +91,22 @@ void ThermalModelPipeline::Fit(const GateOptions& gate_opts, ModelUpdate* job) {
   const std::size_t n = records.size();
   next_fit_at_ = std::max(n + 1, static_cast<std::size_t>(std::ceil(1.1 * static_cast<double>(n))));
   fitted_ = n;
+  pending_ = false;
   job->thermal = CalibrateOverTemperature(fit_calibrator, records, fit_options);
   job->rank = job->thermal.rank;
   job->gate = EvaluateThermalGate(*model, job->thermal, gate_opts, gate_options);
   job->estimate.bias_window = TimeWindow{records.back().t_start_s, records.back().t_end_s};
 }
 
-bool ThermalModelPipeline::HasPending() const {
-  std::lock_guard lock(*calibrator_mutex);
-  return records.size() > fitted_;
-}
+bool ThermalModelPipeline::HasPending() const { return pending_; }
 
 void ThermalModelPipeline::SolvePending(const GateOptions& gate_opts, ModelUpdate* job) {
   std::lock_guard lock(*calibrator_mutex);
-  if (records.size() > fitted_) Fit(gate_opts, job);
+  if (records.size() > fitted_) {
+    Fit(gate_opts, job);
+  } else {
+    job->solved = false;  // a fit since the request took them
+  }
 }
 
 void ThermalModelPipeline::TakeUpdate(const ModelUpdate& job) {

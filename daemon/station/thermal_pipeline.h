@@ -14,6 +14,7 @@
 // then whenever the poses have grown by a tenth (its cost grows with the cube of the poses), and
 // once more when the input ends (a replay).
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -80,6 +81,9 @@ struct ThermalModelPipeline : ModelPipeline {
   void Fit(const GateOptions& gate, ModelUpdate* job);
   std::size_t fitted_ = 0;       // records in the latest fit
   std::size_t next_fit_at_ = 0;  // the record count that fits again
+  // Records added since the latest fit (read on the loop without the calibrator's lock, which a
+  // fit holds for seconds).
+  std::atomic<bool> pending_{false};
   // Where a sample's correction is evaluated, and its flag (nullptr: inside the range).
   double EvaluationTemperature(const Sample& sample, const char** flag) const;
 };
