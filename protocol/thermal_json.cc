@@ -172,4 +172,70 @@ bool ReadThermalEstimate(const MeasurementModel& model, const nlohmann::json& do
   return true;
 }
 
+bool ParseThermalCalibrationDocument(const nlohmann::json& j, ThermalCalibrationDocument* out,
+                                     std::string* error) {
+  auto fail = [&](const std::string& what) {
+    if (error) *error = what;
+    return false;
+  };
+  if (!IsThermalCalibration(j)) return fail("not a calibration over temperature (\"kind\")");
+  for (const char* key : {"device", "model", "base_model"}) {
+    if (!j.contains(key) || !j[key].is_string() || j[key].get<std::string>().empty()) {
+      return fail(fmt::format("'{}' is missing or not a non-empty string", key));
+    }
+  }
+  ThermalCalibrationDocument d;
+  d.device = j["device"].get<std::string>();
+  d.model = j["model"].get<std::string>();
+  d.base_model = j["base_model"].get<std::string>();
+  const std::string where = d.device + " " + d.model + ": ";
+  auto bad = [&](const std::string& what) { return fail(where + what); };
+  if (j.contains("schema") && j["schema"] != 1) {
+    return bad("schema " + j["schema"].dump() + " is not supported (1 is)");
+  }
+  d.version =
+      j.value("version", nlohmann::json()).is_number_integer() ? j["version"].get<int>() : 0;
+  for (auto [key, to] : {std::pair{"software", &d.software}, std::pair{"time", &d.time}}) {
+    if (j.contains(key) && j[key].is_string()) *to = j[key].get<std::string>();
+  }
+  std::string why;
+  if (j.contains("context")) {
+    if (!ParseModelContext(j["context"], &d.context, &why)) return bad(why);
+    d.context_recorded = true;
+  }
+  d.measurement_model = MakeModel(d.base_model, d.context, &why);
+  if (!d.measurement_model) return bad(why);
+  const MeasurementModel& model = *d.measurement_model;
+  if (!ReadThermalEstimate(model, j, &d.estimate, &why)) return bad(why);
+  const int n = d.estimate.basis.num_coefficients();
+  d.covariance_complete = d.estimate.covariance.rows() == n && d.estimate.covariance.allFinite();
+  const nlohmann::json& t = j["temperature"];
+  d.chi2 = t.value("chi2", 0.0);
+  d.dof = t.value("dof", 0);
+  d.p_value = t.value("p_value", 1.0);
+  d.rank = t.value("rank", 0);
+  if (j.contains("calibrator") && j["calibrator"].is_object()) {
+    d.sensor_class = j["calibrator"].value("sensor_class", std::string());
+  }
+  GateOptions gate;
+  GateTolerancesForClass(d.sensor_class.empty() ? "industrial" : d.sensor_class, &gate.tolerances);
+  for (int i : GatedParameters(model)) {
+    const ParameterInfo& p = model.parameters()[static_cast<std::size_t>(i)];
+    d.tolerances[p.name] = ToleranceFor(p, gate);
+  }
+  if (j.contains("tolerances")) {
+    if (!j["tolerances"].is_object()) return bad("'tolerances' is not an object");
+    d.tolerances.clear();
+    for (const auto& [name, v] : j["tolerances"].items()) {
+      if (!v.is_number() || !(v.get<double>() > 0) || model.index_of(name) < 0) {
+        return bad("tolerance of '" + name + "' is not a positive number of a parameter");
+      }
+      d.tolerances[name] = v.get<double>();
+    }
+    d.tolerances_recorded = true;
+  }
+  *out = std::move(d);
+  return true;
+}
+
 }  // namespace turncal::protocol

@@ -5,6 +5,8 @@
 // at t0 and at the range's ends) and the station's document calibrations/DEVICE.MODEL@T.json
 // (docs/THERMAL.md "The document").
 
+#include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -48,5 +50,32 @@ bool IsThermalCalibration(const nlohmann::json& document);
 // the section is missing or malformed, or does not fit the model.
 bool ReadThermalEstimate(const MeasurementModel& model, const nlohmann::json& document,
                          ThermalEstimate* out, std::string* why);
+
+// A station's document over temperature, parsed and checked against its base model (what a
+// certificate states).
+struct ThermalCalibrationDocument {
+  std::string device;
+  std::string model;       // "accel13@T"
+  std::string base_model;  // "accel13"
+  int version = 0;
+  std::string software;
+  std::string time;
+  std::string sensor_class;  // "" when not recorded
+  ModelContext context;
+  bool context_recorded = false;
+  std::unique_ptr<MeasurementModel> measurement_model;  // the base model, with `context`
+  ThermalEstimate estimate;
+  // The coefficients' covariance is in the document, whole and finite: sigma at any temperature
+  // follows. Otherwise only each coefficient's own sigma is known (sigma at t0).
+  bool covariance_complete = false;
+  double chi2 = 0.0, p_value = 1.0;
+  int dof = 0, rank = 0;
+  std::map<std::string, double> tolerances;  // recorded, else the class's (industrial's)
+  bool tolerances_recorded = false;
+};
+// False with a message naming what is wrong when the document is not a calibration over
+// temperature of a known model with a polynomial for each of its parameters.
+bool ParseThermalCalibrationDocument(const nlohmann::json& j, ThermalCalibrationDocument* out,
+                                     std::string* error);
 
 }  // namespace turncal::protocol

@@ -50,6 +50,9 @@ table.params td.name { font-family: "DejaVu Sans Mono", monospace; }
 table.params td.kind { text-align: left; color: #555; }
 table.params td.nd { text-align: center; color: #777; font-style: italic; }
 table.params td.check { text-align: left; }
+table.params.thermal { font-size: 7.6pt; }
+table.params.thermal th, table.params.thermal td { padding-left: 1mm; padding-right: 1mm; }
+table.params.thermal th { white-space: normal; vertical-align: bottom; }
 tr.within td.check { color: #17622a; } tr.exceeds td { background: #fbe9e9; } tr.exceeds td.check { color: #a01010; font-weight: 600; }
 tr.ungated td.check, tr.undetermined td.check { color: #666; }
 .statement { font-size: 7.8pt; color: #333; margin: 1.5mm 0 0; text-align: justify; }
@@ -320,7 +323,108 @@ std::string CertParameterRow(const Json& p) {
   return row + "<td class=\"check\">" + verdict + "</td></tr>";
 }
 
+// "value ± U" in the shown unit, U to two significant digits (or the value alone when U is not
+// stated).
+std::string CertValuePlusU(const Json& shown, const std::string& value_unit) {
+  const double value = CertNum(shown, "value"), U = CertNum(shown, "U");
+  if (!std::isfinite(U)) {
+    return CertWithUnit(CertUnsigned(fmt::format("{:.6g}", value)), value_unit) +
+           R"( <span class="nd">(U not stated)</span>)";
+  }
+  const int decimals = CertDecimalsFor(U);
+  const std::string unit = CertText(shown, "unit");
+  return CertWithUnit(CertFixed(value, decimals), value_unit) + " &#177; " +
+         CertWithUnit(CertFixed(U, decimals), unit);
+}
+
+// "unit/degC^j" as printed.
+std::string CertPerDegree(const std::string& unit) {
+  const std::size_t at = unit.find("/degC");
+  if (at == std::string::npos) return CertUnit(unit);
+  const std::string power = unit.substr(at + 5);
+  return CertUnit(unit.substr(0, at)) + "/&#176;C" +
+         (power == "^2"   ? "&#178;"
+          : power == "^3" ? "&#179;"
+                          : Escape(power));
+}
+
+// A calibration over temperature: each parameter at the range's ends and at T0, its worst u over
+// the range against the tolerance, and the polynomials' coefficients.
+std::string CertThermalResults(const Json& c) {
+  const Json& t = c["temperature"];
+  const double lo = CertNum(t, "t_min_c"), hi = CertNum(t, "t_max_c"), t0 = CertNum(t, "t0_c");
+  std::string o = fmt::format(
+      "<h2>Results over temperature</h2><p class=\"statement\">Each parameter is a polynomial in "
+      "the sensor&#8217;s temperature T (the die&#8217;s, as the device reports it), p(T) = "
+      "&#931;<sub>j</sub> c<sub>j</sub> (T &#8722; T0)<sup>j</sup>, calibrated over "
+      "<strong>{:.1f} &#8230; {:.1f} &#176;C</strong> (T0 = {:.1f} &#176;C; {} poses at {} "
+      "distinct temperatures). Outside this range the station uses the parameters at the nearer "
+      "end and flags the samples; this certificate states nothing there.</p>",
+      lo, hi, t0, t.value("poses", 0), t.value("distinct_temperatures", 0));
+  o += fmt::format(
+      "<table class=\"params thermal\"><thead><tr><th>Parameter</th><th>Order</th><th>At {:.1f} "
+      "&#176;C &#177; U (k&#8201;=&#8201;2)</th><th>At T0 = {:.1f} &#176;C &#177; U</th><th>At "
+      "{:.1f} &#176;C &#177; U</th><th>Largest u over the range</th><th>Tolerance T on u</th><th "
+      "class=\"left\">Gate check (largest u)</th></tr></thead><tbody>",
+      lo, t0, hi);
+  for (const Json& p : c["parameters"]) {
+    const Json& s = p["shown"];
+    const std::string check = CertText(p, "check");
+    const std::string vu = CertText(s, "value_unit"), unit = CertText(s, "unit");
+    const double worst = CertNum(s, "u_worst"), tolerance = CertNum(s, "tolerance_u");
+    std::string verdict = "not gated";
+    if (check == "within") verdict = "&#8804; T &#10003;";
+    if (check == "exceeds") verdict = "&gt; T &#10007;";
+    if (check == "not determined") verdict = "no u: fails &#10007;";
+    o += fmt::format(
+        R"(<tr id="param-{0}" class="{1}"><td class="name">{0}</td><td>{2}</td><td>{3}</td>)"
+        R"(<td>{4}</td><td>{5}</td><td>{6}</td><td>{7}</td><td class="check">{8}</td></tr>)",
+        Escape(CertText(p, "name")),
+        check == "within"    ? "within"
+        : check == "exceeds" ? "exceeds"
+                             : (check == "not determined" ? "undetermined" : "ungated"),
+        p.value("order", 0), CertValuePlusU(p["t_min"]["shown"], vu), CertValuePlusU(s, vu),
+        CertValuePlusU(p["t_max"]["shown"], vu),
+        std::isfinite(worst) ? CertWithUnit(CertFixed(worst, CertDecimalsFor(worst)), unit) +
+                                   fmt::format("<br>at {:.1f} &#176;C", CertNum(p, "u_worst_at_c"))
+                             : std::string("&#8212;"),
+        std::isfinite(tolerance) ? CertWithUnit(fmt::format("{:.3g}", tolerance), unit)
+                                 : std::string("&#8212;"),
+        verdict);
+  }
+  o += "</tbody></table><h2>Coefficients</h2><table class=\"params\"><thead><tr><th>"
+       "Coefficient</th><th>Value</th><th>u (k&#8201;=&#8201;1)</th><th>U "
+       "(k&#8201;=&#8201;2)</th></tr></thead><tbody>";
+  for (const Json& k : t["coefficients"]) {
+    const Json& s = k["shown"];
+    const double u = CertNum(s, "u"), U = CertNum(s, "U");
+    const std::string unit = CertText(s, "unit");
+    const int decimals = CertDecimalsFor(U);
+    o += fmt::format(
+        "<tr><td class=\"name\">{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+        Escape(CertText(k, "name")),
+        std::isfinite(U) ? CertFixed(CertNum(s, "value"), decimals) + CertPerDegree(unit)
+                         : CertUnsigned(fmt::format("{:.6g}", CertNum(s, "value"))),
+        std::isfinite(u) ? CertFixed(u, CertDecimalsFor(u)) + CertPerDegree(unit)
+                         : std::string("not determined"),
+        std::isfinite(U) ? CertFixed(U, decimals) + CertPerDegree(unit) : std::string("&#8212;"));
+  }
+  o += "</tbody></table><p class=\"statement\"><strong>Uncertainty.</strong> u: standard "
+       "uncertainty (1&#963;) of each parameter at that temperature, from the covariance of all "
+       "the coefficients. U = k&#183;u with k = 2 (about 95 % for a normal distribution; GUM, "
+       "JCGM 100:2008). <strong>Tolerance.</strong> The publish gate compares the largest u over "
+       "the calibrated range (41 temperatures, the ends included) with T. Values are rounded to "
+       "the last digit of U; the data embedded in this file hold them unrounded, in SI units per "
+       "&#176;C<sup>j</sup>.";
+  if (!t.value("covariance_complete", true)) {
+    o += " The calibration does not hold the coefficients&#8217; whole covariance: u is stated at "
+         "T0 only.";
+  }
+  return o + "</p>";
+}
+
 std::string CertResults(const Json& c) {
+  if (c.contains("temperature")) return CertThermalResults(c);
   std::string o =
       "<h2>Results</h2><table class=\"params\"><thead><tr><th>Parameter</th>"
       "<th class=\"left\">Kind</th><th>Value</th><th>u (k&#8201;=&#8201;1)</th><th>U "

@@ -216,6 +216,99 @@ Json CertCalibrator(const Json& calibrator, const std::string& sensor_class) {
           {"drift_gauss_markov_tau_s", CertNumber(CertNumberOr(drift, "gauss_markov_tau_s", NAN))}};
 }
 
+// A calibration over temperature (issue 36): each parameter's row at T0 (value, u, U) with its
+// value and u at the range's ends and its worst u over the range, which is what the gate
+// compares with the tolerance; and the polynomials' coefficients (unit per degC^j about T0).
+// Without the whole covariance only sigma at T0 is known: u at the ends is then not stated.
+void CertThermal(const protocol::ThermalCalibrationDocument& doc, Json* parameters,
+                 Json* temperature) {
+  const ThermalEstimate& e = doc.estimate;
+  const auto& infos = doc.measurement_model->parameters();
+  const double t0 = e.basis.t0_c, lo = e.t_min_c, hi = e.t_max_c;
+  const Eigen::VectorXd nan = Eigen::VectorXd::Constant(e.basis.num_parameters(), NAN);
+  auto sigma_at = [&](double t) { return doc.covariance_complete ? e.SigmaAt(t) : nan; };
+  Eigen::VectorXd sigma_t0(e.basis.num_parameters());
+  for (int p = 0; p < e.basis.num_parameters(); ++p) sigma_t0[p] = e.sigma[e.basis.index(p, 0)];
+  if (doc.covariance_complete) sigma_t0 = e.SigmaAt(t0);
+  const Eigen::VectorXd theta_t0 = e.ThetaAt(t0), theta_lo = e.ThetaAt(lo),
+                        theta_hi = e.ThetaAt(hi);
+  const Eigen::VectorXd sigma_lo = sigma_at(lo), sigma_hi = sigma_at(hi);
+  // The worst u over the range on the gate's grid (41 temperatures, the ends included).
+  constexpr int kGrid = 41;
+  Eigen::VectorXd worst = Eigen::VectorXd::Constant(e.basis.num_parameters(), -1.0);
+  Eigen::VectorXd worst_at = Eigen::VectorXd::Constant(e.basis.num_parameters(), NAN);
+  for (int g = 0; g < kGrid && doc.covariance_complete; ++g) {
+    const double t = lo + (hi - lo) * g / (kGrid - 1);
+    const Eigen::VectorXd s = e.SigmaAt(t);
+    for (int p = 0; p < s.size(); ++p) {
+      if (!(s[p] <= worst[p])) worst[p] = s[p], worst_at[p] = t;
+    }
+  }
+  for (std::size_t i = 0; i < infos.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    const auto tol = doc.tolerances.find(infos[i].name);
+    const double tolerance = tol == doc.tolerances.end() ? -1.0 : tol->second;
+    Json row = CertParameter(infos[i], infos[i], theta_t0[k], sigma_t0[k], tolerance);
+    auto at = [&](double value, double sigma) {
+      const Json r = CertParameter(infos[i], infos[i], value, sigma, -1.0);
+      return Json{{"value", r["value"]}, {"u", r["u"]}, {"U", r["U"]}, {"shown", r["shown"]}};
+    };
+    const double w = doc.covariance_complete ? worst[k] : NAN;
+    row["order"] = e.basis.orders[i];
+    row["t_min"] = at(theta_lo[k], sigma_lo[k]);
+    row["t_max"] = at(theta_hi[k], sigma_hi[k]);
+    row["u_worst"] = CertNumber(w);
+    row["u_worst_at_c"] = CertNumber(std::isfinite(w) ? worst_at[k] : NAN);
+    row["shown"]["u_worst"] = CertNumber(std::isfinite(w) ? CertShown(infos[i], w).first : NAN);
+    if (tolerance >= 0 && std::isfinite(sigma_t0[k])) {
+      row["check"] = !std::isfinite(w) ? "not determined" : w <= tolerance ? "within" : "exceeds";
+    }
+    parameters->push_back(row);
+  }
+  Json coefficients = Json::array();
+  for (int n = 0; n < e.basis.num_coefficients(); ++n) {
+    int param = 0, power = 0;
+    for (int p = 0; p < e.basis.num_parameters(); ++p) {
+      for (int j = 0; j <= e.basis.orders[static_cast<std::size_t>(p)]; ++j) {
+        if (e.basis.index(p, j) == n) param = p, power = j;
+      }
+    }
+    const ParameterInfo& info = infos[static_cast<std::size_t>(param)];
+    const double value = e.coefficients[n], sigma = e.sigma[n];
+    const auto [value_shown, unit] = CertShown(info, value);
+    const auto [u_shown, u_unit] = CertShown(info, sigma);
+    const std::string per = power == 0 ? "" : power == 1 ? "/degC" : fmt::format("/degC^{}", power);
+    coefficients.push_back({{"name", e.basis.CoefficientName(infos, n)},
+                            {"parameter", info.name},
+                            {"power", power},
+                            {"unit", ToString(info.unit) + per},
+                            {"value", value},
+                            {"u", CertNumber(sigma)},
+                            {"U", CertNumber(kCertCoverageFactor * sigma)},
+                            {"shown",
+                             {{"value", CertNumber(value_shown)},
+                              {"u", CertNumber(u_shown)},
+                              {"U", CertNumber(kCertCoverageFactor * u_shown)},
+                              {"unit", (std::isfinite(sigma) ? u_unit : unit) + per}}}});
+  }
+  *temperature = {{"t0_c", t0},
+                  {"t_min_c", lo},
+                  {"t_max_c", hi},
+                  {"distinct_temperatures", e.distinct_temperatures},
+                  {"poses", e.poses},
+                  {"covariance_complete", doc.covariance_complete},
+                  {"coefficients", coefficients}};
+}
+
+// The table's poses of a calibration over temperature: its records' (it keeps no pose list).
+Json CertRecordPoses(const Json& records) {
+  Json poses = Json::array();
+  for (const Json& r : records.is_array() ? records : Json::array()) {
+    if (r.is_object() && r.contains("pose")) poses.push_back(r["pose"]);
+  }
+  return poses;
+}
+
 std::vector<std::string> CertStrings(const Json& j, const char* key) {
   std::vector<std::string> out;
   if (!j.is_object() || !j.contains(key) || !j[key].is_array()) return out;
@@ -243,16 +336,13 @@ bool CertificateContent(const CertificateSource& source, Json* content, std::str
     *error = "the calibration is not a JSON object";
     return false;
   }
-  if (protocol::IsThermalCalibration(c)) {
-    *error = c.value("model", std::string("this")) +
-             " is a calibration over temperature: its certificate (the range, the coefficients "
-             "and U at the range's ends and at T0) is not written yet; the report shows it";
-    return false;
-  }
   const bool free = protocol::IsFreeCalibration(c);
+  const bool thermal = protocol::IsThermalCalibration(c);
   std::string device, model, time, software, sensor;
   int version = 0;
-  Json parameters = Json::array(), environment, procedure;
+  Json parameters = Json::array(), environment, procedure, temperature;
+  Json fit_source = c;     // where chi2, dof, p_value and rank are
+  std::size_t fitted = 0;  // the fit's unknowns
   const Json params = c.value("params", Json::object());
   const Json provenance =
       c.contains("provenance") && c["provenance"].is_object() ? c["provenance"] : Json::object();
@@ -276,6 +366,18 @@ bool CertificateContent(const CertificateSource& source, Json* content, std::str
     version = doc.version, sensor = ToString(m->sensor());
     environment = CertFreeEnvironment(doc.context);
     procedure = {{"pose_source", "free"}, {"poses", CertPoses(Json::array())}};
+  } else if (thermal) {
+    protocol::ThermalCalibrationDocument doc;
+    if (!protocol::ParseThermalCalibrationDocument(c, &doc, error)) return false;
+    CertThermal(doc, &parameters, &temperature);
+    device = doc.device, model = doc.model, time = doc.time, software = doc.software;
+    version = doc.version, sensor = ToString(doc.measurement_model->sensor());
+    environment = CertTableEnvironment(doc.context, doc.context_recorded);
+    procedure = {{"pose_source", "turntable"},
+                 {"poses", CertPoses(CertRecordPoses(provenance.value("records", Json())))},
+                 {"tolerances_recorded", doc.tolerances_recorded}};
+    fit_source = c["temperature"];
+    fitted = static_cast<std::size_t>(doc.estimate.basis.num_coefficients());
   } else {
     protocol::CalibrationDocument doc;
     if (!protocol::ParseCalibrationDocument(c, &doc, error)) return false;
@@ -329,14 +431,15 @@ bool CertificateContent(const CertificateSource& source, Json* content, std::str
                 {"notes", CertStrings(gate, "notes")},
                 {"override", c.value("override", Json())}}},
               {"fit",
-               {{"chi2", CertNumber(CertNumberOr(c, "chi2", NAN))},
-                {"dof", CertNumber(CertNumberOr(c, "dof", NAN))},
-                {"p_value", CertNumber(CertNumberOr(c, "p_value", NAN))},
-                {"rank", CertNumber(CertNumberOr(c, "rank", NAN))},
-                {"parameters", parameters.size()},
+               {{"chi2", CertNumber(CertNumberOr(fit_source, "chi2", NAN))},
+                {"dof", CertNumber(CertNumberOr(fit_source, "dof", NAN))},
+                {"p_value", CertNumber(CertNumberOr(fit_source, "p_value", NAN))},
+                {"rank", CertNumber(CertNumberOr(fit_source, "rank", NAN))},
+                {"parameters", thermal ? fitted : parameters.size()},
                 {"gauge", CertString(c, "gauge")},
                 {"message", CertString(c.value("fit_check", Json()), "message")}}},
               {"renderer", std::string("turncal ") + kVersion}};
+  if (thermal) (*content)["temperature"] = temperature;
   return true;
 }
 

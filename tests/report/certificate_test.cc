@@ -16,8 +16,8 @@
 namespace turncal::report {
 namespace {
 
-nlohmann::json Fixture() {
-  std::ifstream in(std::string(TURNCAL_SOURCE_DIR) + "/tests/report/certificate_accel13.json");
+nlohmann::json Fixture(const std::string& name = "certificate_accel13.json") {
+  std::ifstream in(std::string(TURNCAL_SOURCE_DIR) + "/tests/report/" + name);
   std::stringstream text;
   text << in.rdbuf();
   return nlohmann::json::parse(text.str());
@@ -245,6 +245,119 @@ TEST(Certificate, NumberNamesStationDeviceModelAndVersion) {
 
 TEST(Certificate, Sha256OfKnownInput) {
   EXPECT_EQ(Sha256Hex("abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+}
+
+// A calibration over temperature (tests/report/certificate_mag13T.json: mag13@T as turncald wrote
+// it in tests/daemon/e2e_thermal_test.py's session, an industrial MIP IMU at 0, 20 and 40 degC; its
+// provenance kept to every 8th record, rounded to six digits): the range, U = 2u at the range's
+// ends and at T0 as the document states sigma there, the coefficients, the gate's check on the
+// largest u over the range.
+CertificateSource ThermalSource() {
+  CertificateSource s;
+  s.calibration = Fixture("certificate_mag13T.json");
+  s.station = "lab-2";
+  return s;
+}
+
+TEST(Certificate, OverTemperatureStatesTheRangeTheCoefficientsAndUAtTheEndsAndT0) {
+  const CertificateSource source = ThermalSource();
+  std::string hash;
+  const std::string html = Render(source, &hash);
+  EXPECT_TRUE(VerifyCertificateHtml(html).ok);
+  EXPECT_NE(html.find("Results over temperature"), std::string::npos);
+  EXPECT_NE(html.find("0.0 &#8230; 40.0 &#176;C"), std::string::npos);
+  const nlohmann::json data = DataBlock(html);
+  const nlohmann::json& doc = source.calibration["temperature"];
+  EXPECT_EQ(data["calibration"]["model"], "mag13@T");
+  EXPECT_DOUBLE_EQ(data["temperature"]["t_min_c"].get<double>(), doc["t_min_c"].get<double>());
+  EXPECT_DOUBLE_EQ(data["temperature"]["t_max_c"].get<double>(), doc["t_max_c"].get<double>());
+  EXPECT_DOUBLE_EQ(data["temperature"]["t0_c"].get<double>(), doc["t0_c"].get<double>());
+  EXPECT_EQ(data["parameters"].size(), 13u);
+  for (const auto& [name, at_t0] : doc["at"]["t0"].items()) {
+    const nlohmann::json& p = Parameter(data, name);
+    EXPECT_EQ(p["order"], doc["orders"][name]) << name;
+    for (const auto& [key, where] : {std::pair{"t_min", p["t_min"]}, std::pair{"t0", p},
+                                     std::pair{"t_max", p["t_max"]}}) {
+      const nlohmann::json& stated = doc["at"][key][name];
+      EXPECT_NEAR(where["value"].get<double>(), stated["value"].get<double>(),
+                  1e-9 * (1 + std::abs(stated["value"].get<double>())))
+          << name << " at " << key;
+      EXPECT_NEAR(where["u"].get<double>(), stated["sigma"].get<double>(),
+                  1e-9 * stated["sigma"].get<double>())
+          << name << " at " << key;
+      EXPECT_DOUBLE_EQ(where["U"].get<double>(), 2 * where["u"].get<double>()) << name;
+    }
+    // The largest u over the range is at least u at either end and at T0.
+    EXPECT_GE(p["u_worst"].get<double>() * (1 + 1e-12),
+              std::max({p["u"].get<double>(), p["t_min"]["u"].get<double>(),
+                        p["t_max"]["u"].get<double>()}))
+        << name;
+  }
+  const nlohmann::json& coefficients = data["temperature"]["coefficients"];
+  EXPECT_EQ(coefficients.size(), doc["coefficient_order"].size());
+  for (const auto& k : coefficients) {
+    const nlohmann::json& stated = doc["coefficients"][k["name"].get<std::string>()];
+    EXPECT_DOUBLE_EQ(k["value"].get<double>(), stated["value"].get<double>());
+    EXPECT_DOUBLE_EQ(k["U"].get<double>(), 2 * stated["sigma"].get<double>());
+  }
+  const nlohmann::json* bx_dt = nullptr;
+  for (const auto& k : coefficients) {
+    if (k["name"] == "bx*dT") bx_dt = &k;
+  }
+  ASSERT_NE(bx_dt, nullptr);
+  EXPECT_EQ((*bx_dt)["unit"], "field/degC");  // the device unit of the field, per degC
+  EXPECT_EQ((*bx_dt)["power"], 1);
+  EXPECT_NE(html.find("mG/&#176;C"), std::string::npos);
+  EXPECT_EQ(data["verdict"]["pass"], true);
+  EXPECT_EQ(data["fit"]["parameters"], doc["coefficient_order"].size());
+}
+
+TEST(Certificate, OverTemperatureTheGateCheckIsTheLargestUOverTheRange) {
+  CertificateSource source = ThermalSource();
+  const nlohmann::json data = DataBlock(Render(source));
+  // The parameter whose u grows most away from T0; a tolerance between u at T0 and its largest u.
+  std::string name;
+  double ratio = 0;
+  for (const auto& p : data["parameters"]) {
+    if (p["tolerance_u"].is_null()) continue;
+    const double r = p["u_worst"].get<double>() / p["u"].get<double>();
+    if (r > ratio) ratio = r, name = p["name"];
+  }
+  ASSERT_GT(ratio, 1.05) << name;
+  const nlohmann::json& p = Parameter(data, name);
+  source.calibration["tolerances"][name] =
+      0.5 * (p["u"].get<double>() + p["u_worst"].get<double>());
+  const std::string html = Render(source);
+  EXPECT_EQ(Parameter(DataBlock(html), name)["check"], "exceeds");
+  EXPECT_NE(Row(html, name).find("&gt; T &#10007;"), std::string::npos) << Row(html, name);
+  source.calibration["tolerances"][name] = 1.01 * p["u_worst"].get<double>();
+  EXPECT_EQ(Parameter(DataBlock(Render(source)), name)["check"], "within");
+}
+
+TEST(Certificate, OverTemperatureWithoutTheCovarianceStatesUAtT0Only) {
+  CertificateSource source = ThermalSource();
+  source.calibration["temperature"].erase("covariance");
+  const std::string html = Render(source);
+  const nlohmann::json data = DataBlock(html);
+  const nlohmann::json& g11 = Parameter(data, "g11");
+  EXPECT_DOUBLE_EQ(g11["u"].get<double>(),
+                   source.calibration["temperature"]["coefficients"]["g11"]["sigma"].get<double>());
+  EXPECT_TRUE(g11["t_min"]["u"].is_null());
+  EXPECT_TRUE(g11["u_worst"].is_null());
+  EXPECT_EQ(g11["check"], "not determined");
+  EXPECT_NE(html.find("u is stated at T0 only"), std::string::npos);
+}
+
+TEST(Certificate, OverTemperatureMalformedIsRefusedWithTheReason) {
+  CertificateSource source = ThermalSource();
+  source.calibration.erase("temperature");
+  std::string html, hash, error;
+  EXPECT_FALSE(RenderCertificateHtml(source, &html, &hash, &error));
+  EXPECT_NE(error.find("no \"temperature\" section"), std::string::npos) << error;
+  source = ThermalSource();
+  source.calibration["base_model"] = "accel99";
+  EXPECT_FALSE(RenderCertificateHtml(source, &html, &hash, &error));
+  EXPECT_NE(error.find("accel99"), std::string::npos) << error;
 }
 
 }  // namespace
