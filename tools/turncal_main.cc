@@ -13,6 +13,7 @@
 #include "tools/noise_command.h"
 #include "tools/observability_command.h"
 #include "tools/plan_compare_command.h"
+#include "tools/plan_thermal_command.h"
 #include "tools/registry_command.h"
 #include "tools/sequence_command.h"
 #include "tools/sim_command.h"
@@ -34,6 +35,7 @@ int main(int argc, char** argv) {
   turncal::tools::AddSimCommand(&app);
   turncal::tools::AddObservabilityCommands(&app);
   turncal::tools::AddPlanCompareCommand(&app);
+  turncal::tools::AddPlanThermalCommand(&app);
   turncal::tools::AddSequenceCommand(&app);
   turncal::tools::AddClientCommands(&app);
   turncal::tools::AddDeviceWriteCommand(&app);

@@ -1,0 +1,78 @@
+// Planning over temperature (montecarlo/thermal_plan.h) on a small range and a quick die, so that
+// it runs in seconds: the classic procedure's time holds at least its soaks and its poses, a ramp's
+// at least the ramp, the plan is quicker than the classic procedure, a seed gives the same times,
+// and what cannot be planned is refused with the reason.
+
+#include "montecarlo/thermal_plan.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace turncal::montecarlo {
+namespace {
+
+ThermalPlanOptions Small() {
+  ThermalPlanOptions o;
+  o.model = "mag13";
+  o.sensor_class = "industrial";
+  o.t_lo_c = 0.0;
+  o.t_hi_c = 20.0;
+  o.die_tau_s = 60.0;
+  o.plateaus = 3;
+  o.ramp_rates_c_per_min = {1.0, 2.0};
+  o.runs = 2;
+  o.jobs = 2;
+  return o;
+}
+
+TEST(ThermalPlan, TheRampIsQuickerThanTheClassicSoaksAndBothHoldWhatTheyMust) {
+  const ThermalPlanOptions o = Small();
+  const ThermalPlan plan = PlanOverTemperature(o);
+  ASSERT_TRUE(plan.error.empty()) << plan.error;
+  ASSERT_GT(plan.pose_s, o.dwell_s);
+  ASSERT_EQ(plan.classic.failures(), 0) << plan.classic.last_reason;
+  // The classic procedure: the two ramps between the plateaus at the chamber's rate, the die's
+  // settling after each (the soak test's window at least), and its poses.
+  const double ramps_s = (o.t_hi_c - o.t_lo_c) / o.chamber_max_rate_c_per_min * 60.0;
+  const double poses_s = 26.0 * plan.classic.cubes * o.plateaus * plan.pose_s;
+  EXPECT_GE(plan.classic.min_seconds(), ramps_s + 2 * o.soak_window_s + 0.8 * poses_s);
+  ASSERT_EQ(plan.ramps.size(), 2u);
+  ASSERT_GE(plan.chosen, 0);
+  const ThermalProcedureOutcome& chosen = plan.ramps[static_cast<std::size_t>(plan.chosen)];
+  EXPECT_EQ(chosen.failures(), 0);
+  // A ramp takes at least the ramp itself, and the plan less than the classic procedure.
+  EXPECT_GE(chosen.min_seconds(), (o.t_hi_c - o.t_lo_c) / chosen.rate_c_per_min * 60.0);
+  EXPECT_LT(chosen.max_seconds(), plan.classic.max_seconds());
+  EXPECT_EQ(chosen.chamber.rfind("0; ramp 20 ", 0), 0u) << chosen.chamber;
+  // The ramps were tried fastest first.
+  EXPECT_EQ(plan.ramps[0].rate_c_per_min, 2.0);
+}
+
+TEST(ThermalPlan, ASeedGivesTheSameTimes) {
+  const ThermalPlan a = PlanOverTemperature(Small());
+  ThermalPlanOptions o = Small();
+  o.jobs = 1;
+  const ThermalPlan b = PlanOverTemperature(o);
+  EXPECT_EQ(a.classic.seconds, b.classic.seconds);
+  ASSERT_EQ(a.ramps.size(), b.ramps.size());
+  for (std::size_t k = 0; k < a.ramps.size(); ++k) EXPECT_EQ(a.ramps[k].seconds, b.ramps[k].seconds);
+}
+
+TEST(ThermalPlan, WhatCannotBePlannedIsRefusedWithTheReason) {
+  ThermalPlanOptions o = Small();
+  o.t_hi_c = 5.0;
+  EXPECT_NE(PlanOverTemperature(o).error.find("at least 10 degC"), std::string::npos);
+  o = Small();
+  o.ramp_rates_c_per_min = {3.0};
+  EXPECT_NE(PlanOverTemperature(o).error.find("at most the chamber's 2"), std::string::npos);
+  o = Small();
+  o.model = "gyro12";
+  EXPECT_NE(PlanOverTemperature(o).error.find("rate segments"), std::string::npos);
+  o = Small();
+  o.sensor_class = "hobby";
+  EXPECT_NE(PlanOverTemperature(o).error.find("unknown sensor class"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace turncal::montecarlo
