@@ -347,35 +347,41 @@ bool ReadProvenance(const nlohmann::json& j, CalibrationDocument* d, std::string
 // the document's).
 bool ReadCalibratorAndTolerances(const nlohmann::json& j, const MeasurementModel& model,
                                  CalibrationDocument* d, std::string* why) {
-  const auto& params = model.parameters();
   SensorClass industrial = IndustrialClass();
   d->calibrator = OptionsForClass(model, industrial);
   if (j.contains("calibrator") &&
       !ReadCalibrator(j["calibrator"], &d->calibrator, &d->sensor_class)) {
     return Why(why, "'calibrator' is malformed");
   }
+  return ReadTolerances(j, model, d->sensor_class, &d->tolerances, &d->tolerances_recorded, why);
+}
+
+}  // namespace
+
+bool ReadTolerances(const nlohmann::json& j, const MeasurementModel& model,
+                    const std::string& sensor_class, std::map<std::string, double>* tolerances,
+                    bool* recorded, std::string* why) {
   GateOptions gate;
-  GateTolerancesForClass(d->sensor_class.empty() ? "industrial" : d->sensor_class,
-                         &gate.tolerances);
+  GateTolerancesForClass(sensor_class.empty() ? "industrial" : sensor_class, &gate.tolerances);
+  tolerances->clear();
+  *recorded = false;
   for (int i : GatedParameters(model)) {
-    const ParameterInfo& p = params[static_cast<std::size_t>(i)];
-    d->tolerances[p.name] = ToleranceFor(p, gate);
+    const ParameterInfo& p = model.parameters()[static_cast<std::size_t>(i)];
+    (*tolerances)[p.name] = ToleranceFor(p, gate);
   }
   if (j.contains("tolerances")) {
     if (!j["tolerances"].is_object()) return Why(why, "'tolerances' is not an object");
-    d->tolerances.clear();
+    tolerances->clear();
     for (const auto& [name, v] : j["tolerances"].items()) {
       if (!v.is_number() || !(v.get<double>() > 0) || model.index_of(name) < 0) {
         return Why(why, "tolerance of '" + name + "' is not a positive number of a parameter");
       }
-      d->tolerances[name] = v.get<double>();
+      (*tolerances)[name] = v.get<double>();
     }
-    d->tolerances_recorded = true;
+    *recorded = true;
   }
   return true;
 }
-
-}  // namespace
 
 bool ParseCalibrationDocument(const nlohmann::json& j, CalibrationDocument* out,
                               std::string* error) {

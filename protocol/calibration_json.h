@@ -88,6 +88,13 @@ nlohmann::json PoseCalibrationJson(const PoseCalibrationInput& input);
 bool ReadCalibrationValues(const MeasurementModel& model, const nlohmann::json& calibration,
                            Eigen::VectorXd* theta, Eigen::MatrixXd* covariance);
 
+// A document's gate tolerances: its "tolerances" when it records them (*recorded), else the
+// class's (industrial's when `sensor_class` is empty) for the model's gated parameters. False with
+// a reason when "tolerances" is malformed or names no parameter of the model.
+bool ReadTolerances(const nlohmann::json& j, const MeasurementModel& model,
+                    const std::string& sensor_class, std::map<std::string, double>* tolerances,
+                    bool* recorded, std::string* why);
+
 // One calibration document, parsed and checked against its model.
 struct CalibrationDocument {
   std::string device;

@@ -217,22 +217,8 @@ bool ParseThermalCalibrationDocument(const nlohmann::json& j, ThermalCalibration
   if (j.contains("calibrator") && j["calibrator"].is_object()) {
     d.sensor_class = j["calibrator"].value("sensor_class", std::string());
   }
-  GateOptions gate;
-  GateTolerancesForClass(d.sensor_class.empty() ? "industrial" : d.sensor_class, &gate.tolerances);
-  for (int i : GatedParameters(model)) {
-    const ParameterInfo& p = model.parameters()[static_cast<std::size_t>(i)];
-    d.tolerances[p.name] = ToleranceFor(p, gate);
-  }
-  if (j.contains("tolerances")) {
-    if (!j["tolerances"].is_object()) return bad("'tolerances' is not an object");
-    d.tolerances.clear();
-    for (const auto& [name, v] : j["tolerances"].items()) {
-      if (!v.is_number() || !(v.get<double>() > 0) || model.index_of(name) < 0) {
-        return bad("tolerance of '" + name + "' is not a positive number of a parameter");
-      }
-      d.tolerances[name] = v.get<double>();
-    }
-    d.tolerances_recorded = true;
+  if (!ReadTolerances(j, model, d.sensor_class, &d.tolerances, &d.tolerances_recorded, &why)) {
+    return bad(why);
   }
   *out = std::move(d);
   return true;

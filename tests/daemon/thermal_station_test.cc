@@ -227,7 +227,8 @@ TEST(ThermalStation, WhatCannotBeCalibratedOverTemperatureIsRefusedWithTheReason
   record.temp_spread = TemperatureSpread{3.0, 24.9, 125.0};
   m->AddAndSolve(record, options.gate, &job);
   EXPECT_FALSE(job.added);
-  EXPECT_NE(job.error.find("or a jump in the temperature channel?"), std::string::npos) << job.error;
+  EXPECT_NE(job.error.find("or a jump in the temperature channel?"), std::string::npos)
+      << job.error;
   record.temp_spread = TemperatureSpread{0.01, 24.98, 25.02};
   m->AddAndSolve(record, options.gate, &job);
   EXPECT_TRUE(job.added) << job.error;

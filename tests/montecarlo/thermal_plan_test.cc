@@ -56,7 +56,8 @@ TEST(ThermalPlan, ASeedGivesTheSameTimes) {
   const ThermalPlan b = PlanOverTemperature(o);
   EXPECT_EQ(a.classic.seconds, b.classic.seconds);
   ASSERT_EQ(a.ramps.size(), b.ramps.size());
-  for (std::size_t k = 0; k < a.ramps.size(); ++k) EXPECT_EQ(a.ramps[k].seconds, b.ramps[k].seconds);
+  for (std::size_t k = 0; k < a.ramps.size(); ++k)
+    EXPECT_EQ(a.ramps[k].seconds, b.ramps[k].seconds);
 }
 
 TEST(ThermalPlan, WhatCannotBePlannedIsRefusedWithTheReason) {

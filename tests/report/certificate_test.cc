@@ -276,8 +276,8 @@ TEST(Certificate, OverTemperatureStatesTheRangeTheCoefficientsAndUAtTheEndsAndT0
   for (const auto& [name, at_t0] : doc["at"]["t0"].items()) {
     const nlohmann::json& p = Parameter(data, name);
     EXPECT_EQ(p["order"], doc["orders"][name]) << name;
-    for (const auto& [key, where] : {std::pair{"t_min", p["t_min"]}, std::pair{"t0", p},
-                                     std::pair{"t_max", p["t_max"]}}) {
+    for (const auto& [key, where] :
+         {std::pair{"t_min", p["t_min"]}, std::pair{"t0", p}, std::pair{"t_max", p["t_max"]}}) {
       const nlohmann::json& stated = doc["at"][key][name];
       EXPECT_NEAR(where["value"].get<double>(), stated["value"].get<double>(),
                   1e-9 * (1 + std::abs(stated["value"].get<double>())))
