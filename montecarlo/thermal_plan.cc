@@ -150,18 +150,13 @@ class Session {
     chamber->Advance(s_.move_s);
     const double t0 = chamber->t_s();
     const double die_c = chamber->Advance(s_.o->dwell_s);
-    // The bias's wander in time (the class's Gauss-Markov process and random walk) at the dwell's
-    // middle; SimulateRecord's own pose offsets are off (s_.white_only).
-    const double dt = 0.5 * (t0 + chamber->t_s()) - wander_t_s_;
-    wander_t_s_ += dt;
-    for (int k = 0; k < 3; ++k) {
-      const double a = std::exp(-dt / s_.drift.gm_tau_s);
-      wander_[k] = a * wander_[k] + s_.drift.gm_sigma[k] * std::sqrt(1 - a * a) * normal_(rng_) +
-                   s_.drift.rw_density[k] * std::sqrt(dt) * normal_(rng_);
-    }
+    // The bias's wander in time (the class's Gauss-Markov process and random walk) averaged over
+    // the dwell, as the calibrator's drift model has it; SimulateRecord's own pose offsets are off
+    // (s_.white_only).
+    const Eigen::Vector3d wander_mean = AdvanceWander(t0, chamber->t_s());
     PoseRecord rec =
         SimulateRecord(*s_.model, truth_.ThetaAt(die_c), pose, s_.white_only, s_.o->dwell_s, &rng_);
-    (s_.model->sensor() == SensorKind::kAccelerometer ? rec.acc : rec.mag)->mean += wander_;
+    (s_.model->sensor() == SensorKind::kAccelerometer ? rec.acc : rec.mag)->mean += wander_mean;
     rec.temp_c = die_c;
     rec.t_start_s = t0;
     rec.t_end_s = chamber->t_s();
@@ -179,14 +174,39 @@ class Session {
       last_reason_ = e.error;
       return false;
     }
+    last_chi2_p_ = e.p_value;
     const GateResult g = EvaluateThermalGate(*s_.model, e, s_.gate, s_.thermal_gate);
     if (!g.pass && !g.reasons.empty()) last_reason_ = g.reasons.front();
     return g.pass;
   }
   int poses() const { return static_cast<int>(records_.size()); }
   const std::string& last_reason() const { return last_reason_; }
+  double last_chi2_p() const { return last_chi2_p_; }
 
  private:
+  // Moves the wander to t0_s, then through [t0_s, t1_s] in steps of at most 0.1 s; returns its
+  // mean over that window (the trapezoid rule over the steps).
+  Eigen::Vector3d AdvanceWander(double t0_s, double t1_s) {
+    Step(t0_s - wander_t_s_);
+    const int steps = std::max(1, static_cast<int>(std::ceil((t1_s - t0_s) / 0.1)));
+    const double h = (t1_s - t0_s) / steps;
+    Eigen::Vector3d sum = 0.5 * wander_;
+    for (int i = 0; i < steps; ++i) {
+      Step(h);
+      sum += (i + 1 < steps ? 1.0 : 0.5) * wander_;
+    }
+    return sum / steps;
+  }
+  void Step(double dt) {
+    if (!(dt > 0)) return;
+    wander_t_s_ += dt;
+    for (int k = 0; k < 3; ++k) {
+      const double a = std::exp(-dt / s_.drift.gm_tau_s);
+      wander_[k] = a * wander_[k] + s_.drift.gm_sigma[k] * std::sqrt(1 - a * a) * normal_(rng_) +
+                   s_.drift.rw_density[k] * std::sqrt(dt) * normal_(rng_);
+    }
+  }
+
   const Setup& s_;
   const ThermalTruth& truth_;
   std::mt19937_64 rng_;
@@ -197,13 +217,15 @@ class Session {
   double lo_c_ = INFINITY, hi_c_ = -INFINITY;
   int since_fit_ = 0;
   std::string last_reason_;
+  double last_chi2_p_ = NAN;
 };
 
 struct RunResult {
   double seconds = -1.0;
   int poses = 0;
   std::string reason;
-  int legs = 1;  // a ramp's legs between the ends (up, down, up, ...)
+  int legs = 1;         // a ramp's legs between the ends (up, down, up, ...)
+  double chi2_p = NAN;  // the last fit's
 };
 
 RunResult Classic(const Setup& s, const ThermalTruth& truth, std::uint64_t noise_seed, int cubes) {
@@ -217,10 +239,11 @@ RunResult Classic(const Setup& s, const ThermalTruth& truth, std::uint64_t noise
       while (!chamber.Settled(o.soak_rate_c_per_min)) chamber.Advance(1.0);
     }
     for (std::size_t p = 0; p < cubes * CubePoses26().size(); ++p) {
-      if (session.TakePose(&chamber)) return {chamber.t_s(), session.poses(), ""};
+      if (session.TakePose(&chamber))
+        return {chamber.t_s(), session.poses(), "", 1, session.last_chi2_p()};
     }
   }
-  return {-1.0, session.poses(), session.last_reason()};
+  return {-1.0, session.poses(), session.last_reason(), 1, session.last_chi2_p()};
 }
 
 RunResult Ramp(const Setup& s, const ThermalTruth& truth, std::uint64_t noise_seed,
@@ -236,7 +259,8 @@ RunResult Ramp(const Setup& s, const ThermalTruth& truth, std::uint64_t noise_se
   int legs = 1, arrived_at = -1;  // the poses when the die reached this leg's end
   const double leg_s = (o.t_hi_c - o.t_lo_c) / rate_c_per_min * 60.0 + 6.0 * o.die_tau_s;
   while (chamber.t_s() < std::min(kMaxLegs * leg_s, give_up_s)) {
-    if (session.TakePose(&chamber)) return {chamber.t_s(), session.poses(), "", legs};
+    if (session.TakePose(&chamber))
+      return {chamber.t_s(), session.poses(), "", legs, session.last_chi2_p()};
     // The die at the end (or, with an overshoot, past it): the air back to the end, and one more
     // cycle of the cube there; a gate that still fails sends the chamber to the other end.
     const bool up = setpoint == o.t_hi_c;
@@ -253,7 +277,14 @@ RunResult Ramp(const Setup& s, const ThermalTruth& truth, std::uint64_t noise_se
       ++legs;
     }
   }
-  return {-1.0, session.poses(), session.last_reason(), legs};
+  if (chamber.t_s() >= give_up_s) {
+    // Stopped at a quicker procedure's time: slower cannot be the plan.
+    return {-1.0, session.poses(),
+            fmt::format("stopped at {:.2f} h, a quicker procedure's time{}", give_up_s / 3600.0,
+                        session.last_reason().empty() ? "" : "; " + session.last_reason()),
+            legs, session.last_chi2_p()};
+  }
+  return {-1.0, session.poses(), session.last_reason(), legs, session.last_chi2_p()};
 }
 
 std::string Format(double v) { return fmt::format("{:g}", std::round(v * 100.0) / 100.0); }
@@ -305,6 +336,7 @@ ThermalPlan PlanOverTemperature(const ThermalPlanOptions& o) {
     for (const RunResult& r : results) {
       out->seconds.push_back(r.seconds);
       out->poses.push_back(r.poses);
+      out->chi2_p.push_back(r.chi2_p);
       out->legs = std::max(out->legs, r.legs);
       if (r.seconds < 0 && !r.reason.empty()) out->last_reason = r.reason;
     }

@@ -63,6 +63,7 @@ struct ThermalProcedureOutcome {
   bool skipped = false;  // a ramp not simulated: its ramp alone outlasts a quicker passing plan
   std::vector<double> seconds;  // per run, to the passing gate; negative: never passed
   std::vector<int> poses;       // per run, poses to the passing gate
+  std::vector<double> chi2_p;   // per run, the p-value of its last fit's chi^2 (NaN: none)
   std::string last_reason;      // a failing run's last gate reason
   int failures() const;
   double median_seconds() const;  // over the runs that passed; NaN when none did

@@ -20,8 +20,9 @@ constexpr Manual kPlanThermalManual = {
     "26 cube poses at each once the die has settled) and along ramps of the chamber with the table "
     "cycling the cube; each procedure's time from a device soaked at the range's low end to a "
     "gate passing over the whole range. The plan is the quickest ramp that passed in every run: "
-    "its chamber profile (turncal sim --chamber syntax) and its poses. In memory, independent "
-    "pose noise; the honesty of sigma along such sessions is turncal montecarlo --pipeline "
+    "its chamber profile (turncal sim --chamber syntax) and its poses. In memory: white noise and "
+    "the class's bias wander (averaged over each dwell, as the calibrator's drift model has it); "
+    "the honesty of sigma along such sessions is turncal montecarlo --pipeline "
     "--chamber's.",
     "turncal plan-thermal --model accel13 --class industrial --range 0 40 --runs 5",
     "0; 1 no ramp passed in every run; 2 a command-line mistake", "docs/OBSERVABILITY.md"};
@@ -37,6 +38,12 @@ nlohmann::json ToJson(const montecarlo::ThermalProcedureOutcome& p) {
           {"rate_c_per_min", p.rate_c_per_min},
           {"seconds", p.seconds},
           {"poses", p.poses},
+          {"chi2_p",
+           [&] {
+             nlohmann::json a = nlohmann::json::array();
+             for (double v : p.chi2_p) a.push_back(number(v));
+             return a;
+           }()},
           {"median_s", number(p.median_seconds())},
           {"max_s", number(p.max_seconds())},
           {"never", p.failures()},
