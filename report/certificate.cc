@@ -254,6 +254,7 @@ std::string CertProcedure(const Json& c) {
     if (const double session = CertNum(p, "session_s"); std::isfinite(session)) {
       text += fmt::format(", {:.0f} s in all", session);
     }
+    if (p.value("clock", "") == "sensor") text += " (the device's clock)";
     o += CertRow("Dwell per pose", text);
   }
   const Json& k = p["calibrator"];

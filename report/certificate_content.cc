@@ -117,13 +117,21 @@ Json CertIdentity(const std::string& device, const Json& from_device, const Json
 }
 
 // What the records say about the session: how long each pose was held, the sensor's
-// temperature, how long it all took.
+// temperature, how long it all took. Times are the device's own clock where every record has it
+// (a replay or a sped-up simulation runs the host's clock at another pace), else the host's.
 Json CertRecords(const Json& records) {
   std::vector<double> dwell_s, temp_c;
   double first_s = INFINITY, last_s = -INFINITY;
+  bool sensor_clock = records.is_array() && !records.empty();
+  for (const Json& r : records.is_array() ? records : Json::array()) {
+    sensor_clock = sensor_clock && std::isfinite(CertNumberOr(r, "t_sensor_start", NAN)) &&
+                   std::isfinite(CertNumberOr(r, "t_sensor_end", NAN));
+  }
+  const char* start = sensor_clock ? "t_sensor_start" : "t_start";
+  const char* end = sensor_clock ? "t_sensor_end" : "t_end";
   if (records.is_array()) {
     for (const Json& r : records) {
-      const double t0 = CertNumberOr(r, "t_start", NAN), t1 = CertNumberOr(r, "t_end", NAN);
+      const double t0 = CertNumberOr(r, start, NAN), t1 = CertNumberOr(r, end, NAN);
       if (std::isfinite(t0) && std::isfinite(t1) && t1 >= t0) {
         dwell_s.push_back(t1 - t0);
         first_s = std::min(first_s, t0);
@@ -136,6 +144,7 @@ Json CertRecords(const Json& records) {
   return {{"records", records.is_array() ? records.size() : 0},
           {"dwell_s_median", CertNumber(CertMedian(dwell_s))},
           {"session_s", CertNumber(last_s - first_s)},
+          {"clock", sensor_clock ? "sensor" : "host"},
           {"temperature_c", temp_c.empty() ? Json() : Json::array({*tmin, *tmax})}};
 }
 
@@ -400,6 +409,7 @@ bool CertificateContent(const CertificateSource& source, Json* content, std::str
   procedure["records"] = records["records"];
   procedure["dwell_s_median"] = records["dwell_s_median"];
   procedure["session_s"] = records["session_s"];
+  procedure["clock"] = records["clock"];
   procedure["calibrator"] =
       CertCalibrator(c.value("calibrator", Json()), CertString(c, "sensor_class"));
 

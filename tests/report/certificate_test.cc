@@ -227,6 +227,29 @@ TEST(Certificate, ContentHoldsTheEnvironmentProcedureAndVerdict) {
   EXPECT_EQ(data["calibration"]["time_utc"], "2026-03-14T09:26:53Z");
 }
 
+// A session sped up 20x (or replayed) runs the host's clock at another pace: where every record
+// has the device's own window, the dwell and the session's length are the device's.
+TEST(Certificate, DwellAndSessionLengthAreTheDevicesClockWhereEveryRecordHasIt) {
+  CertificateSource source = Source();
+  nlohmann::json& records = source.calibration["provenance"]["records"];
+  ASSERT_TRUE(records.is_array());
+  ASSERT_FALSE(records.empty());
+  for (std::size_t i = 0; i < records.size(); ++i) {
+    nlohmann::json& r = records[i];
+    const double host0 = r["t_start"].get<double>(), host1 = r["t_end"].get<double>();
+    r["t_sensor_start"] = 1000.0 + 20.0 * host0;  // the host ran 20x faster than the device
+    r["t_sensor_end"] = 1000.0 + 20.0 * host1;
+  }
+  nlohmann::json data = DataBlock(Render(source));
+  EXPECT_EQ(data["procedure"]["clock"], "sensor");
+  EXPECT_NEAR(data["procedure"]["dwell_s_median"].get<double>(), 60.0, 2.0);
+  EXPECT_NE(Render(source).find("(the device's clock)"), std::string::npos);
+  records[0].erase("t_sensor_start");  // one record without: the host's clock for all
+  data = DataBlock(Render(source));
+  EXPECT_EQ(data["procedure"]["clock"], "host");
+  EXPECT_NEAR(data["procedure"]["dwell_s_median"].get<double>(), 3.0, 0.1);
+}
+
 TEST(Certificate, MalformedCalibrationIsRefusedWithAMessage) {
   CertificateSource source = Source();
   source.calibration.erase("params");
