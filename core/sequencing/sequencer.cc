@@ -305,6 +305,13 @@ void Sequencer::Feed(const StillSample& in) {
     last_motion_t_s_ = t_s;
   }
   const bool moving = !still && detector_->finding().kind != StillFinding::kFilling;
+  if (soak_ && soak_->check_bias && !bias_settled_) {
+    if (moving) {
+      bias_settle_.Clear();
+    } else if (still) {
+      bias_settle_.Add(s, soak_->window_s);
+    }
+  }
   if (has_evicted) {
     while (move_size_ > 0 && move_ring_[move_head_].seq <= evicted.seq) {
       moves_.Add(move_ring_[move_head_]);
@@ -362,8 +369,24 @@ void Sequencer::Feed(const StillSample& in) {
 bool Sequencer::SoakSettled(double t_s) {
   if (!soak_ || !announced_) return true;
   if (soak_tracker_.Settled(*soak_, &soak_why_)) {
-    soak_why_.clear();
-    return true;
+    if (!soak_->check_bias || bias_settled_) {
+      soak_why_.clear();
+      return true;
+    }
+    const HalvesLimit limit = [this](int triad, int axis, double n1, double n2) {
+      return detector_->HalvesDriftLimit(triad, axis, n1, n2);
+    };
+    std::string why;
+    if (bias_settle_.Settled(soak_->window_s, limit, &why)) {
+      bias_settled_ = true;
+      soak_why_.clear();
+      return true;
+    }
+    soak_why_ = fmt::format(
+        "waiting for the soak at {:.1f} degC: the temperature has settled ({}), "
+        "{}",
+        soak_->setpoint_c,
+        soak_tracker_.latest_c() ? fmt::format("{:.2f} degC", *soak_tracker_.latest_c()) : "", why);
   }
   // Said again every 10 s while the pose waits.
   if (t_s - soak_event_t_s_ >= 10.0) {

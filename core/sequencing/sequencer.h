@@ -44,6 +44,7 @@
 #include <vector>
 
 #include "core/estimation/pose_record.h"
+#include "core/sequencing/bias_settle.h"
 #include "core/sequencing/host_clock.h"
 #include "core/sequencing/move_tracker.h"
 #include "core/sequencing/pose_check.h"
@@ -148,7 +149,14 @@ class Sequencer {
   bool free_mode() const { return free_; }
   // A climate chamber's soak (core/sequencing/soak.h): announced poses wait until the sensor's
   // temperature has settled (nullopt: a ramp, or no chamber; poses are taken at once).
-  void SetSoak(std::optional<SoakOptions> soak) { soak_ = std::move(soak); }
+  // A new set-point (or none) watches the bias again.
+  void SetSoak(std::optional<SoakOptions> soak) {
+    if (!soak || !soak_ || soak->setpoint_c != soak_->setpoint_c) {
+      bias_settled_ = false;
+      bias_settle_.Clear();
+    }
+    soak_ = std::move(soak);
+  }
   const std::optional<SoakOptions>& soak() const { return soak_; }
   const SoakTracker& soak_tracker() const { return soak_tracker_; }
   void SetPredictor(PosePredictor predictor) { predictor_ = std::move(predictor); }
@@ -266,8 +274,10 @@ class Sequencer {
   double last_motion_t_s_ = -1.0;
   std::optional<SoakOptions> soak_;
   SoakTracker soak_tracker_;
-  std::string soak_why_;          // why the pending pose waits for the soak (empty: it does not)
-  double soak_event_t_s_ = -1e9;  // the latest kSoakWaiting event
+  BiasSettleTracker bias_settle_;  // the output at rest while a soak's bias is watched
+  bool bias_settled_ = false;      // the bias has settled at this set-point
+  std::string soak_why_;           // why the pending pose waits for the soak (empty: it does not)
+  double soak_event_t_s_ = -1e9;   // the latest kSoakWaiting event
   std::string last_noise_failure_;
   SampleCounts totals_;
   std::int64_t captured_ = 0, rejected_ = 0;

@@ -21,6 +21,9 @@ struct SoakOptions {
   double window_s = 60.0;
   // A pose that waits longer for the soak is rejected with the soak's state as the reason.
   double timeout_s = 3600.0;
+  // Once the temperature has settled, the bias too (core/sequencing/bias_settle.h): the table at
+  // rest for the window, its output's two halves agreeing; checked once per set-point.
+  bool check_bias = true;
 
   bool IsValid(std::string* error) const;
 };

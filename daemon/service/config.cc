@@ -251,6 +251,20 @@ bool ParseFree(const toml::table* t, const std::string& source, StationOptions* 
   return true;
 }
 
+// A boolean key, if present (as_boolean: value<bool>() would take 1 for true).
+bool GetBoolean(const toml::table& t, const char* key, bool* out, const std::string& source,
+                std::string* error) {
+  const toml::node* n = t.get(key);
+  if (!n) return true;
+  const auto* v = n->as_boolean();
+  if (!v) {
+    *error = fmt::format("{}: '{}' must be true or false", Where(*n, source), key);
+    return false;
+  }
+  *out = v->get();
+  return true;
+}
+
 // [thermal]: calibrations over temperature ("MODEL@T" in the models; docs/THERMAL.md).
 bool ParseThermal(const toml::table* t, const std::string& source, StationOptions* out,
                   std::string* error) {
@@ -258,8 +272,9 @@ bool ParseThermal(const toml::table* t, const std::string& source, StationOption
   return OnlyKeys(*t,
                   {"max_order", "t0_c", "drop_below_sigmas", "distinct_resolution_c", "min_span_c",
                    "grid_points", "soak_rate_c_per_min", "soak_window_s", "soak_timeout_s",
-                   "max_pose_span_c"},
+                   "max_pose_span_c", "soak_check_bias"},
                   "[thermal]", source, error) &&
+         GetBoolean(*t, "soak_check_bias", &th.soak.check_bias, source, error) &&
          GetInt(*t, "max_order", &th.fit.max_order, source, error) &&
          GetNumber(*t, "t0_c", &th.fit.t0_c, source, error) &&
          GetNumber(*t, "drop_below_sigmas", &th.fit.drop_below_sigmas, source, error) &&

@@ -1,9 +1,14 @@
 // The chamber's soak (core/sequencing/soak.h, issue 36): with a set-point announced, a pose waits
 // until the sensor's temperature has stopped moving, says why while it waits (POSE_WAITING), and
 // is rejected with the soak's state when the chamber never settles; without one, poses are taken
-// at once whatever the temperature does.
+// at once whatever the temperature does. Once the temperature has settled, the bias must too: a
+// bias still relaxing at a settled temperature holds the pose, with the axis and the change as the
+// reason.
 
 #include <cmath>
+#include <random>
+#include <string>
+#include <vector>
 
 #include "core/sequencing/soak.h"
 #include "tests/core/sequencer_test_util.h"
@@ -27,6 +32,7 @@ TEST(SequencerSoak, PosesWaitUntilTheTemperatureHasSettledAndSayWhy) {
   soak.setpoint_c = 40.0;
   soak.max_rate_c_per_min = 0.05;
   soak.window_s = 30.0;
+  soak.check_bias = false;  // the cube's poses rest a few seconds: the temperature alone here
   seq.SetSoak(soak);
   Replay(s, &seq, Settling);
   std::vector<std::string> waiting;
@@ -80,6 +86,70 @@ TEST(SequencerSoak, AChamberThatNeverSettlesRejectsThePoseWithTheSoaksState) {
     }
   }
   EXPECT_TRUE(timed_out);
+}
+
+// The table resting at one pose for 240 s at 100 Hz, the temperature settled at 40 degC from the
+// start, the accelerometer's z bias relaxing by `relax_mps2` exp(-t / 20 s) (a package's stress
+// after the die settled); the pose announced at 2 s. Returns the first capture's start (NaN: none)
+// and the soak's reasons.
+double RestingPoseCapturedAt(double relax_mps2, bool check_bias, std::vector<std::string>* why) {
+  Collected c;
+  Sequencer seq(SequencerOptions{}, Collect(&c));
+  SoakOptions soak;
+  soak.setpoint_c = 40.0;
+  soak.window_s = 30.0;
+  soak.check_bias = check_bias;
+  seq.SetSoak(soak);
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> normal;
+  bool announced = false;
+  for (int i = 0; i < 24000; ++i) {
+    const double t = i / 100.0;
+    if (!announced && t >= 2.0) {
+      Announcement a;
+      a.index = 0;
+      a.t_host_ns = Ns(t);
+      std::string error;
+      EXPECT_TRUE(seq.Announce(a, &error)) << error;
+      announced = true;
+    }
+    Sample x;
+    x.t_host_ns = Ns(t);
+    x.acc_mps2 = Eigen::Vector3d(0.01 * normal(rng), 0.01 * normal(rng),
+                                 -9.81 + 0.01 * normal(rng) + relax_mps2 * std::exp(-t / 20.0));
+    x.mag = Eigen::Vector3d(0.2 + 1e-3 * normal(rng), 1e-3 * normal(rng), 0.4 + 1e-3 * normal(rng));
+    x.temp_c = 40.0 + 0.01 * normal(rng);
+    seq.Push(x);
+  }
+  seq.Finish(Ns(240.0));
+  for (const auto& e : c.events) {
+    if (e.kind == SequencerEventKind::kSoakWaiting) why->push_back(e.reason);
+  }
+  return c.captured.empty() ? NAN : c.captured.front().record->t_start_s;
+}
+
+TEST(SequencerSoak, ABiasStillRelaxingAtASettledTemperatureHoldsThePose) {
+  // Without a transient: taken once both windows have filled (80 % of 30 s after the start).
+  std::vector<std::string> why;
+  const double quiet = RestingPoseCapturedAt(0.0, true, &why);
+  ASSERT_TRUE(std::isfinite(quiet));
+  EXPECT_LT(quiet, 40.0);
+  // 0.05 m/s^2 relaxing with tau 20 s: the means of a 30-s window's halves differ by about
+  // 0.039 e^-(t - 15) / 20 m/s^2 (t the window's end), against the stillness detector's limit of
+  // 2.2e-3 (sigma 0.01 per sample, 1500 samples a half): taken at 77 s here; at 25 s unchecked.
+  why.clear();
+  const double relaxing = RestingPoseCapturedAt(0.05, true, &why);
+  ASSERT_TRUE(std::isfinite(relaxing));
+  EXPECT_GT(relaxing, 45.0);
+  EXPECT_LT(relaxing, 120.0);
+  bool named = false;
+  for (const std::string& w : why) {
+    named = named || w.find("the bias still moves: acc z changed by -") != std::string::npos;
+  }
+  EXPECT_TRUE(named) << (why.empty() ? "no reason" : why.back());
+  // The temperature alone (check_bias = false) would have taken it with the bias still moving.
+  why.clear();
+  EXPECT_LT(RestingPoseCapturedAt(0.05, false, &why), 40.0);
 }
 
 TEST(SequencerSoak, TheTrackersSlopeIsTheLeastSquaresLine) {

@@ -72,7 +72,7 @@ TEST(Config, CalibrationsOverTemperature) {
   ASSERT_TRUE(ParseConfig(
       "[station]\nmodels = [\"accel13@T\", \"mag13\"]\n[thermal]\nmax_order = 2\nt0_c = 20\n"
       "drop_below_sigmas = 0.5\nmin_span_c = 15\ngrid_points = 11\nsoak_rate_c_per_min = 0.1\n"
-      "soak_window_s = 120\nsoak_timeout_s = 1800\n",
+      "soak_window_s = 120\nsoak_timeout_s = 1800\nsoak_check_bias = false\n",
       "t.toml", &c, &error))
       << error;
   EXPECT_EQ(c.station.models, (std::vector<std::string>{"accel13@T", "mag13"}));
@@ -84,6 +84,9 @@ TEST(Config, CalibrationsOverTemperature) {
   EXPECT_EQ(c.station.thermal.soak.max_rate_c_per_min, 0.1);
   EXPECT_EQ(c.station.thermal.soak.window_s, 120.0);
   EXPECT_EQ(c.station.thermal.soak.timeout_s, 1800.0);
+  EXPECT_FALSE(c.station.thermal.soak.check_bias);
+  EXPECT_FALSE(ParseConfig("[thermal]\nsoak_check_bias = 1\n", "t.toml", &c, &error));
+  EXPECT_NE(error.find("'soak_check_bias' must be true or false"), std::string::npos) << error;
   EXPECT_FALSE(ParseConfig("[thermal]\nsoak_rate_c_per_min = 0\n", "t.toml", &c, &error));
   EXPECT_NE(error.find("soak_rate_c_per_min"), std::string::npos) << error;
   EXPECT_FALSE(ParseConfig("[thermal]\nmax_oder = 2\n", "t.toml", &c, &error));
