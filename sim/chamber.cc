@@ -141,11 +141,14 @@ bool DieThermal::IsValid(std::string* error) const {
   if (!(quantum_c >= 0) || !std::isfinite(quantum_c)) {
     return fail("the temperature's quantum must be finite and >= 0");
   }
+  if (!(hysteresis_c >= 0) || !std::isfinite(hysteresis_c)) {
+    return fail("the hysteresis must be finite and >= 0 degC");
+  }
   return true;
 }
 
 DieTemperature::DieTemperature(const ChamberProfile& chamber, const DieThermal& die)
-    : chamber_(chamber), die_(die), die_c_(chamber.AirAt(0.0)) {}
+    : chamber_(chamber), die_(die), die_c_(chamber.AirAt(0.0)), parameter_c_(die_c_) {}
 
 double DieTemperature::Advance(double t_s) {
   const double dt = t_s - t_s_;
@@ -156,6 +159,8 @@ double DieTemperature::Advance(double t_s) {
                           die_.self_heating_c * (1.0 - std::exp(-mid / die_.self_heating_tau_s));
     die_c_ += (target - die_c_) * (1.0 - std::exp(-dt / die_.tau_s));
     t_s_ = t_s;
+    const double half = 0.5 * die_.hysteresis_c;
+    parameter_c_ = std::clamp(parameter_c_, die_c_ - half, die_c_ + half);
   }
   return die_c_;
 }

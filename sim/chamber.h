@@ -9,6 +9,13 @@
 // it by self-heating that grows after power-on (time 0) as self_heating_c (1 - exp(-t /
 // self_heating_tau_s)). The temperature the device reports is the die's, rounded to `quantum_c`
 // (0: a float, as MIP and Xbus send; some consumer parts report 1 degree C steps).
+//
+// Hysteresis (`hysteresis_c`, 0: none): the parameters follow not the die's temperature but a
+// "play" of it (the elementary hysteresis operator): a temperature that stays within
+// hysteresis_c / 2 of the die and moves only when the die pushes it, so that after a rise the
+// parameters are those of hysteresis_c / 2 below the die, after a fall above it, and at a
+// turning point they stand still until the die has moved hysteresis_c. A calibration over
+// temperature (a single p(T)) cannot follow it; the truth holds that temperature per pose.
 
 #include <string>
 #include <vector>
@@ -48,7 +55,8 @@ struct DieThermal {
   double tau_s = 300.0;  // the die's lag behind the air
   double self_heating_c = 3.0;
   double self_heating_tau_s = 600.0;
-  double quantum_c = 0.0;  // the reported temperature's step (0: none)
+  double quantum_c = 0.0;     // the reported temperature's step (0: none)
+  double hysteresis_c = 0.0;  // the play between the die and the parameters' temperature
 
   bool IsValid(std::string* error) const;
 };
@@ -62,12 +70,15 @@ class DieTemperature {
   double Advance(double t_s);
   // What the device reports for a die temperature.
   double Reported(double die_c) const;
+  // The temperature the parameters are at (the die's, through the hysteresis's play).
+  double parameter_c() const { return parameter_c_; }
 
  private:
   const ChamberProfile& chamber_;
   DieThermal die_;
   double t_s_ = 0.0;
   double die_c_ = 0.0;
+  double parameter_c_ = 0.0;
 };
 
 }  // namespace turncal

@@ -107,6 +107,9 @@ struct SessionPoseEvent {
   double revolutions_s = 0.0;
   // The die's true temperature averaged over the dwell (with a chamber; NaN without).
   double die_mean_c = std::numeric_limits<double>::quiet_NaN();
+  // The temperature the parameters were at, averaged over the dwell: the die's through the
+  // hysteresis's play (DieThermal::hysteresis_c; equal to die_mean_c without hysteresis).
+  double parameter_mean_c = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct SimulatedSession {

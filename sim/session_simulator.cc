@@ -181,6 +181,7 @@ class SessionSimulator {
       }
       die_.emplace(*o_.chamber, o_.die);
       die_sum_.assign(1, 0.0);
+      param_sum_.assign(1, 0.0);
     }
   }
 
@@ -387,9 +388,12 @@ class SessionSimulator {
     if (die_) {
       die_c = die_->Advance(tk);
       die_sum_.push_back(die_sum_.back() + die_c);
-      acc_at = out_.accel_thermal->ThetaAt(die_c), acc_theta = &acc_at;
-      mag_at = out_.mag_thermal->ThetaAt(die_c), mag_theta = &mag_at;
-      if (gyro_model_) gyr_at = out_.gyro_thermal->ThetaAt(die_c), gyr_theta = &gyr_at;
+      // The parameters at the die's temperature through the hysteresis's play (none: the die's).
+      const double param_c = die_->parameter_c();
+      param_sum_.push_back(param_sum_.back() + param_c);
+      acc_at = out_.accel_thermal->ThetaAt(param_c), acc_theta = &acc_at;
+      mag_at = out_.mag_thermal->ThetaAt(param_c), mag_theta = &mag_at;
+      if (gyro_model_) gyr_at = out_.gyro_thermal->ThetaAt(param_c), gyr_theta = &gyr_at;
     }
     const double settle = std::exp(-tk / o_.warmup_tau_s);
     Eigen::Vector3d drift_acc, drift_mag;
@@ -457,7 +461,10 @@ class SessionSimulator {
       if (gyro_model_) {
         e.gyr_wander_mean = (out_.gyr_drift_sum[b] - out_.gyr_drift_sum[a]) / count;
       }
-      if (die_) e.die_mean_c = (die_sum_[b] - die_sum_[a]) / count;
+      if (die_) {
+        e.die_mean_c = (die_sum_[b] - die_sum_[a]) / count;
+        e.parameter_mean_c = (param_sum_[b] - param_sum_[a]) / count;
+      }
     }
   }
 
@@ -477,6 +484,7 @@ class SessionSimulator {
   // With a chamber: the die's temperature, and its prefix sums per sample.
   std::optional<DieTemperature> die_;
   std::vector<double> die_sum_;
+  std::vector<double> param_sum_;  // the parameters' temperature (the hysteresis's play)
 };
 
 }  // namespace

@@ -110,6 +110,11 @@ void AddNoiseAndTableOptions(CLI::App* cmd, SimCommandArgs* args) {
                   "with --chamber: the reported temperature's step, degC (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd->add_option("--temp-hysteresis", args->temp_hysteresis_c,
+                  "with --chamber: the parameters lag the die's temperature by this play, degC "
+                  "(rising: those of half of it below the die; falling: above; 0: none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd->add_flag("--repeat-poses", args->repeat_poses,
                 "with --chamber: cycle the poses until the chamber's profile has run");
   cmd->add_flag("--no-rate-segments", args->no_rate_segments,

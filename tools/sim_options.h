@@ -56,6 +56,7 @@ struct SimCommandArgs {
   double die_tau_s = DieThermal{}.tau_s;
   double self_heating_c = DieThermal{}.self_heating_c;
   double temp_quantum_c = DieThermal{}.quantum_c;
+  double temp_hysteresis_c = DieThermal{}.hysteresis_c;
   bool repeat_poses = false;
 };
 

@@ -7,10 +7,13 @@ namespace turncal::tools {
 bool ApplyChamberArgs(const SimCommandArgs& args, SessionSimOptions* session, std::string* error) {
   const bool chamber_options = args.repeat_poses || args.die_tau_s != DieThermal{}.tau_s ||
                                args.self_heating_c != DieThermal{}.self_heating_c ||
-                               args.temp_quantum_c != DieThermal{}.quantum_c;
+                               args.temp_quantum_c != DieThermal{}.quantum_c ||
+                               args.temp_hysteresis_c != DieThermal{}.hysteresis_c;
   if (args.chamber.empty()) {
     if (chamber_options) {
-      *error = "--repeat-poses, --die-tau, --self-heating and --temp-quantum need --chamber";
+      *error =
+          "--repeat-poses, --die-tau, --self-heating, --temp-quantum and --temp-hysteresis need "
+          "--chamber";
       return false;
     }
     return true;
@@ -24,6 +27,7 @@ bool ApplyChamberArgs(const SimCommandArgs& args, SessionSimOptions* session, st
   die.tau_s = args.die_tau_s;
   die.self_heating_c = args.self_heating_c;
   die.quantum_c = args.temp_quantum_c;
+  die.hysteresis_c = args.temp_hysteresis_c;
   if (!die.IsValid(error)) return false;
   session->chamber = profile;
   session->die = die;
@@ -89,12 +93,15 @@ nlohmann::json ThermalTruthJson(const sim::SimCapture& capture) {
       mag.push_back(Triad(s.MagDriftMean(t, t1)));
       if (!capture.gyro_model.empty()) gyr.push_back(Triad(s.GyrDriftMean(t, t1)));
     }
-    nlohmann::json p = {{"index", e.index},
-                        {"t_s", e.t_s},
-                        {"dwell_end_s", e.dwell_end_s},
-                        {"die_mean_c", std::isfinite(e.die_mean_c) ? nlohmann::json(e.die_mean_c)
-                                                                   : nlohmann::json()},
-                        {"wander", {{"acc", acc}, {"mag", mag}}}};
+    nlohmann::json p = {
+        {"index", e.index},
+        {"t_s", e.t_s},
+        {"dwell_end_s", e.dwell_end_s},
+        {"die_mean_c",
+         std::isfinite(e.die_mean_c) ? nlohmann::json(e.die_mean_c) : nlohmann::json()},
+        {"parameter_mean_c",
+         std::isfinite(e.parameter_mean_c) ? nlohmann::json(e.parameter_mean_c) : nlohmann::json()},
+        {"wander", {{"acc", acc}, {"mag", mag}}}};
     if (!capture.gyro_model.empty()) p["wander"]["gyr"] = gyr;
     poses.push_back(p);
   }
@@ -103,7 +110,8 @@ nlohmann::json ThermalTruthJson(const sim::SimCapture& capture) {
            {{"tau_s", so.die.tau_s},
             {"self_heating_c", so.die.self_heating_c},
             {"self_heating_tau_s", so.die.self_heating_tau_s},
-            {"quantum_c", so.die.quantum_c}}},
+            {"quantum_c", so.die.quantum_c},
+            {"hysteresis_c", so.die.hysteresis_c}}},
           {"bias_truth", "at_last_pose"},
           {"wander_slice_s", kSlice_s},
           {"models", models},

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 namespace turncal {
@@ -93,6 +94,50 @@ TEST(DieTemperature, ReportsInTheDevicesSteps) {
   die.quantum_c = 0.0;
   DieTemperature f(p, die);
   EXPECT_EQ(f.Reported(24.4), 24.4);
+}
+
+// Hysteresis as a play of width H: rising, the parameters are at the die minus H / 2; at the
+// turn they stand still until the die has fallen by H; falling, at the die plus H / 2. Without
+// hysteresis they are at the die exactly.
+TEST(DieTemperature, HysteresisIsAPlayBetweenTheDieAndTheParameters) {
+  DieThermal die;
+  die.tau_s = 30.0;
+  die.self_heating_c = 0.0;
+  die.hysteresis_c = 2.0;
+  ChamberProfile p;
+  ASSERT_TRUE(ChamberProfile::Parse("0; ramp 40 4 600; ramp 0 4 600", &p, nullptr));
+  DieTemperature d(p, die);
+  DieThermal plain = die;
+  plain.hysteresis_c = 0.0;
+  DieTemperature q(p, plain);
+  double t = 0.0, top_die = -1e9, top_param = -1e9;
+  for (; t < 400.0; t += 0.05) {
+    const double die_c = d.Advance(t);
+    EXPECT_EQ(q.Advance(t), die_c);
+    EXPECT_EQ(q.parameter_c(), die_c);
+    EXPECT_LE(std::abs(d.parameter_c() - die_c), 1.0 + 1e-12);
+  }
+  EXPECT_NEAR(d.parameter_c(), d.Advance(t) - 1.0, 1e-9);  // rising: H / 2 below
+  // The die settles at 40 (the ramp down starts at 1200 s), then falls: the parameters hold at
+  // the top's 39 until the die is at 38, then follow it 1 above.
+  int held = 0;
+  for (; t < 1500.0; t += 0.05) {
+    const double die_c = d.Advance(t);
+    top_die = std::max(top_die, die_c);
+    top_param = std::max(top_param, d.parameter_c());
+    if (t > 1200.0 && die_c > top_die - 2.0 + 1e-6) {
+      EXPECT_NEAR(d.parameter_c(), top_param, 1e-9) << t;
+      ++held;
+    }
+  }
+  EXPECT_GT(held, 100);  // some seconds of the fall
+  EXPECT_NEAR(top_param, top_die - 1.0, 1e-6);
+  EXPECT_LT(d.Advance(t), 30.0);
+  EXPECT_NEAR(d.parameter_c(), d.Advance(t) + 1.0, 1e-9);  // falling: H / 2 above
+  die.hysteresis_c = -1.0;
+  std::string error;
+  EXPECT_FALSE(die.IsValid(&error));
+  EXPECT_NE(error.find("hysteresis"), std::string::npos) << error;
 }
 
 }  // namespace
