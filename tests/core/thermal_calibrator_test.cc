@@ -217,18 +217,39 @@ TEST(ThermalCalibrator, TooFewTemperaturesLowerTheOrderAndSaySo) {
 // order 3. The fit neither crashes (a turncald under CI load aborted on it: the null space was
 // taken from a thin V) nor claims what it cannot know: the undetermined coefficients have an
 // infinite sigma and the rank says so.
-TEST(ThermalCalibrator, FewerEquationsThanCoefficientsLeaveThemUndetermined) {
+// Early in a ramp: 6 poses at 6 temperatures give 18 equations, which cannot carry mag13's 12
+// sensor parameters at order 1 (24 coefficients and beta): the orders start lower, every
+// coefficient is determined, and the reason says why. 14 poses carry order 1 (37 < 42).
+TEST(ThermalCalibrator, FewerEquationsThanCoefficientsCapTheOrders) {
   ThermalRun run = Simulate("mag13", ConsumerClass(), {0.0, 8.0, 16.0, 24.0, 32.0, 40.0}, 6);
   std::vector<PoseRecord> early;
   for (std::size_t k = 0; k < run.records.size(); k += 26) early.push_back(run.records[k + k / 26]);
   ASSERT_EQ(early.size(), 6u);
-  const ThermalEstimate est = CalibrateOverTemperature(run.options, early, ThermalOptions{});
-  if (est.ok) {
-    EXPECT_LT(est.rank, est.coefficients.size());
-    EXPECT_LE(est.rank, 18);
-    EXPECT_FALSE(est.sigma.allFinite());
-  } else {
-    EXPECT_FALSE(est.error.empty());
+  ThermalEstimate est = CalibrateOverTemperature(run.options, early, ThermalOptions{});
+  ASSERT_TRUE(est.ok) << est.error;
+  EXPECT_EQ(est.rank, est.coefficients.size());
+  EXPECT_EQ(est.coefficients.size(), 13);
+  EXPECT_TRUE(est.sigma.allFinite());
+  EXPECT_NE(est.order_reasons[0].find("the highest the 6 poses' 18 equations carry"),
+            std::string::npos)
+      << est.order_reasons[0];
+  ThermalOptions asked;
+  asked.orders.assign(13, 2);
+  asked.orders[9] = 0;  // beta
+  est = CalibrateOverTemperature(run.options, early, asked);
+  ASSERT_TRUE(est.ok) << est.error;
+  EXPECT_NE(est.order_reasons[0].find("2 asked, but the 6 poses' 18 equations carry at most "
+                                      "order 0"),
+            std::string::npos)
+      << est.order_reasons[0];
+  for (std::size_t k = 6; k < 78; k += 13) early.push_back(run.records[k + 26]);
+  for (std::size_t k = 10; k < 78; k += 13) early.push_back(run.records[k + 52]);
+  ASSERT_GE(early.size(), 14u);
+  est = CalibrateOverTemperature(run.options, early, ThermalOptions{});
+  ASSERT_TRUE(est.ok) << est.error;
+  EXPECT_GE(est.basis.orders[0], 0);
+  for (const std::string& r : est.order_reasons) {
+    EXPECT_EQ(r.find("equations carry"), std::string::npos) << early.size() << ": " << r;
   }
 }
 
