@@ -117,7 +117,8 @@ TEST(DieTemperature, HysteresisIsAPlayBetweenTheDieAndTheParameters) {
     EXPECT_EQ(q.parameter_c(), die_c);
     EXPECT_LE(std::abs(d.parameter_c() - die_c), 1.0 + 1e-12);
   }
-  EXPECT_NEAR(d.parameter_c(), d.Advance(t) - 1.0, 1e-9);  // rising: H / 2 below
+  const double rising_die_c = d.Advance(t);  // before parameter_c(): arguments have no order
+  EXPECT_NEAR(d.parameter_c(), rising_die_c - 1.0, 1e-9);  // rising: H / 2 below
   // The die settles at 40 (the ramp down starts at 1200 s), then falls: the parameters hold at
   // the top's 39 until the die is at 38, then follow it 1 above.
   int held = 0;
@@ -132,8 +133,9 @@ TEST(DieTemperature, HysteresisIsAPlayBetweenTheDieAndTheParameters) {
   }
   EXPECT_GT(held, 100);  // some seconds of the fall
   EXPECT_NEAR(top_param, top_die - 1.0, 1e-6);
-  EXPECT_LT(d.Advance(t), 30.0);
-  EXPECT_NEAR(d.parameter_c(), d.Advance(t) + 1.0, 1e-9);  // falling: H / 2 above
+  const double falling_die_c = d.Advance(t);
+  EXPECT_LT(falling_die_c, 30.0);
+  EXPECT_NEAR(d.parameter_c(), falling_die_c + 1.0, 1e-9);  // falling: H / 2 above
   die.hysteresis_c = -1.0;
   std::string error;
   EXPECT_FALSE(die.IsValid(&error));
