@@ -237,7 +237,8 @@ class PipelineMonteCarlo {
     } else {
       Score(m, truth, out);
     }
-    if (!o_.keep_dir.empty() && !(out->z.cwiseAbs().maxCoeff() <= 4.0))
+    if (!o_.keep_dir.empty() &&
+        (!(out->z.cwiseAbs().maxCoeff() <= 4.0) || out->p_value < o_.keep_p_below))
       KeepCapture(path.path, *out);
     out->session_s = capture.session.duration_s;
     const int finished = ++done_;
@@ -425,7 +426,8 @@ class PipelineMonteCarlo {
     return true;
   }
 
-  // A run with a parameter beyond 4 sigma keeps its capture, for turncald --replay.
+  // A run with a parameter beyond 4 sigma (or a chi^2 p-value below keep_p_below) keeps its
+  // capture, for turncald --replay.
   void KeepCapture(const std::string& path, const PipelineRun& run) const {
     std::error_code ec;
     std::filesystem::create_directories(o_.keep_dir, ec);

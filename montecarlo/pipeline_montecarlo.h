@@ -78,6 +78,7 @@ struct PipelineMonteCarloOptions {
   std::string thermal_orders = "chosen";
   double rate_hz = 0.0;  // the simulated device's output rate (0: the protocol's default)
   std::string keep_dir;  // when set: the captures of runs with a parameter beyond 4 sigma go here
+  double keep_p_below = 0.0;  // with keep_dir: also the runs whose chi^2 p-value is below this
   // Called after each run that gave an estimate with the number of such runs so far, one call at
   // a time (the runs run on `jobs` threads).
   std::function<void(int solved)> progress;

@@ -239,9 +239,14 @@ void AddPipelineMonteCarloOptions(CLI::App* mc, PipelineMonteCarloArgs* args) {
                  "with --pipeline: the simulated device's output rate, Hz (default: the "
                  "protocol's)")
       ->check(CLI::NonNegativeNumber);
-  mc->add_option("--keep", pipe->keep_dir,
-                 "with --pipeline: keep the captures of runs with a parameter beyond 4 sigma in "
-                 "this folder (run-SEED.tcap), for turncald --replay");
+  CLI::Option* keep = mc->add_option(
+      "--keep", pipe->keep_dir,
+      "with --pipeline: keep the captures of runs with a parameter beyond 4 sigma in "
+      "this folder (run-SEED.tcap), for turncald --replay");
+  mc->add_option("--keep-p-below", pipe->keep_p_below,
+                 "with --keep: also keep the runs whose chi^2 p-value is below this")
+      ->check(CLI::Range(0.0, 1.0))
+      ->needs(keep);
 }
 
 }  // namespace turncal::tools

@@ -96,10 +96,7 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
     return fail("the drift model needs the record's time window (t_start_s < t_end_s)");
   }
 
-  Eigen::Matrix3d sigma =
-      triad->mean_covariance
-          ? *triad->mean_covariance
-          : Eigen::Matrix3d(triad->covariance / static_cast<double>(triad->count));
+  Eigen::Matrix3d sigma = WeighedMeanCovariance(*triad);
   sigma = 0.5 * (sigma + sigma.transpose());
   // Averaging and drift are timed on the sensor's clock when the record has it (a simulator or
   // a replay may run the host's clock at another pace).

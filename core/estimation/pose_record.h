@@ -3,6 +3,7 @@
 // angles and the statistics of each triad over one stationary window.
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -28,6 +29,24 @@ struct TriadStats {
   std::optional<Eigen::Matrix3d> mean_covariance;
   std::int64_t count = 0;
 };
+
+// The covariance of a triad's mean as the estimators weigh it: the producer's mean_covariance, or
+// the sample covariance / count scaled by nu / (nu - 4), nu = count - 1 degrees of freedom. A
+// sample covariance S of 3-vectors has E[S^-1] = Sigma^-1 nu / (nu - 4) (the inverse Wishart's
+// mean): weighed by S^-1 itself, a record's chi^2 comes out that much too large (+1 % at 400
+// samples, +27 % at 20), which through the pipeline leaned the chi^2 p-values of an industrial
+// accelerometer's long sessions to small values (mean z of the p-values 0.175 over 200 runs of
+// 216 poses; 0.007 with the factor). The factor makes the information unbiased; the sigma it
+// gives the parameters is that much (0.5 % at 400 samples) larger. With fewer than 6 samples the
+// mean of S^-1 does not exist and the covariance is left as it is (the calibrator's white floor
+// bounds it).
+inline Eigen::Matrix3d WeighedMeanCovariance(const TriadStats& s) {
+  if (s.mean_covariance) return *s.mean_covariance;
+  const double count = static_cast<double>(std::max<std::int64_t>(1, s.count));
+  const double nu = count - 1.0;
+  const double unbiased = nu > 4.0 ? nu / (nu - 4.0) : 1.0;
+  return s.covariance * (unbiased / count);
+}
 
 // How the sensor's reported temperature moved over a record's window (deg C).
 struct TemperatureSpread {

@@ -43,9 +43,7 @@ bool FreeContext::IsValid(std::string* error) const {
 }
 
 Eigen::Matrix3d MeanCovariance(const TriadStats& stats, double offset_sigma) {
-  Eigen::Matrix3d c = stats.mean_covariance
-                          ? *stats.mean_covariance
-                          : Eigen::Matrix3d(stats.covariance / std::max<double>(1, stats.count));
+  Eigen::Matrix3d c = WeighedMeanCovariance(stats);
   c.diagonal().array() += offset_sigma * offset_sigma;
   return c;
 }

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
+#include <vector>
 
 #include "core/modeling/mag22_gauge.h"
 #include "sim/synthetic.h"
@@ -307,8 +309,9 @@ TEST(Calibrator, NonFiniteOrSingularRecordsAreRefusedWithAReason) {
 }
 
 // The floor on a pose's white covariance must not lift honest windows: over 400 windows of 300
-// white samples at the configured density the mean weighted variance is the true one. The sample
-// covariance's scatter gives the tolerance: per window the mean of 3 eigenvalues has relative sd
+// white samples at the configured density the mean weighted variance is the true one times the
+// inverse Wishart's nu / (nu - 4) = 299 / 295 (WeighedMeanCovariance). The sample covariance's
+// scatter gives the tolerance: per window the mean of 3 eigenvalues has relative sd
 // sqrt(2 / (3 x 299)) = 0.047, over 400 windows 0.0024, so 4 sigma = 0.0094. A floor at the
 // level itself (+4.8 % at n = 300) fails it.
 TEST(Calibrator, WhiteFloorDoesNotInflateHonestWindows) {
@@ -347,11 +350,57 @@ TEST(Calibrator, WhiteFloorDoesNotInflateHonestWindows) {
     ratio += cov.trace() / (3.0 * white_mean_var);
   }
   ratio /= windows;
-  EXPECT_NEAR(ratio, 1.0, 0.0094);
+  EXPECT_NEAR(ratio, 299.0 / 295.0, 0.0094);
   // The floor still stands for what cannot be white noise.
   EXPECT_NEAR(WhiteFloorFraction(300), 1.0 - 4.0 * std::sqrt(2.0 / 300.0), 1e-12);
   EXPECT_EQ(WhiteFloorFraction(10), 0.1);
   EXPECT_EQ(WhiteFloorFraction(0), 0.1);
+}
+
+// Weighed by the inverse of its own sample covariance a window's mean error is Hotelling's T^2:
+// E[T^2] = 3 nu / (nu - 4), 3.8 for 20 samples (nu = 19), not 3. WeighedMeanCovariance scales the
+// covariance by nu / (nu - 4) so that the whitened error's squared norm has mean 3: over 4000
+// windows of 20 samples its sd is 3.8 x sqrt(Var F(3, 17)) x 15 / 19 = 2.9, the mean's 0.046,
+// and 4 sigma 0.18; without the factor the mean is 3.8.
+TEST(Calibrator, WhitenedErrorsOfShortWindowsHaveMeanThree) {
+  const SensorClass sensor = IndustrialClass();
+  std::mt19937_64 rng(78);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  const int n = 20;
+  const double sample_sigma = sensor.acc_noise_density * std::sqrt(sensor.rate_hz / 2.0);
+  CalibratorOptions o;
+  o.model = "accel13";
+  o.noise_density = sensor.acc_noise_density;
+  Calibrator calibrator(o);
+  std::string error;
+  const int windows = 4000;
+  std::vector<Eigen::Vector3d> errors;
+  for (int k = 0; k < windows; ++k) {
+    Eigen::MatrixXd x(n, 3);
+    for (int i = 0; i < n; ++i) {
+      for (int j = 0; j < 3; ++j) x(i, j) = sample_sigma * normal(rng);
+    }
+    const Eigen::RowVector3d mean = x.colwise().mean();
+    const Eigen::MatrixXd centred = x.rowwise() - mean;
+    TriadStats stats;
+    stats.count = n;
+    stats.mean = Eigen::Vector3d(0, 0, -9.81) + mean.transpose();
+    stats.covariance = centred.transpose() * centred / (n - 1);
+    errors.push_back(mean.transpose());
+    PoseRecord record;
+    record.t_start_s = 10.0 * k;
+    record.t_end_s = record.t_start_s + n / sensor.rate_hz;
+    record.acc = stats;
+    ASSERT_TRUE(calibrator.add_pose(record, &error)) << error;
+  }
+  const std::vector<WeightedPose> weighted = calibrator.weighted_poses();
+  ASSERT_EQ(weighted.size(), errors.size());
+  double mean_chi2 = 0.0;
+  for (std::size_t k = 0; k < weighted.size(); ++k) {
+    mean_chi2 += (weighted[k].sqrt_information * errors[k]).squaredNorm();
+  }
+  mean_chi2 /= windows;
+  EXPECT_NEAR(mean_chi2, 3.0, 0.18);
 }
 
 TEST(Calibrator, InvalidOptionsAreReported) {
