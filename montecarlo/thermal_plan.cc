@@ -40,6 +40,9 @@ bool ThermalPlanOptions::IsValid(std::string* error) const {
   if (!(soak_rate_c_per_min > 0) || !(soak_window_s > 0)) return fail("the soak test's limits");
   if (!(coverage_c >= 0) || refit_every < 1 || runs < 1) return fail("coverage, refit or runs");
   if (!(overshoot_c >= 0)) return fail("the overshoot must be >= 0");
+  for (int e : end_cubes) {
+    if (e < 0 || e > 10) return fail(fmt::format("end cubes {}: must be 0 .. 10", e));
+  }
   return true;
 }
 
@@ -247,17 +250,25 @@ RunResult Classic(const Setup& s, const ThermalTruth& truth, std::uint64_t noise
 }
 
 RunResult Ramp(const Setup& s, const ThermalTruth& truth, std::uint64_t noise_seed,
-               double rate_c_per_min, double give_up_s) {
+               double rate_c_per_min, int end_cubes, double give_up_s) {
   const ThermalPlanOptions& o = *s.o;
   Chamber chamber(o.t_lo_c, o.die_tau_s, o.soak_window_s);
+  Session session(s, truth, noise_seed);
+  // The device starts soaked at the low end: the cube there end_cubes times before the ramp.
+  chamber.Set(o.t_lo_c, rate_c_per_min);
+  const int per_end = 26 * std::max(1, end_cubes);
+  for (int k = 0; k < 26 * end_cubes; ++k) {
+    if (session.TakePose(&chamber))
+      return {chamber.t_s(), session.poses(), "", 1, session.last_chi2_p()};
+  }
   double setpoint = o.t_hi_c;  // the end the chamber is heading for
   chamber.Set(setpoint + o.overshoot_c, rate_c_per_min);
-  Session session(s, truth, noise_seed);
   // Up to kMaxLegs legs between the ends (each the ramp, the die's approach and a cube there),
   // and no longer than `give_up_s` (the classic procedure's time: a plan must be quicker).
   constexpr int kMaxLegs = 3;
   int legs = 1, arrived_at = -1;  // the poses when the die reached this leg's end
-  const double leg_s = (o.t_hi_c - o.t_lo_c) / rate_c_per_min * 60.0 + 6.0 * o.die_tau_s;
+  const double leg_s = (o.t_hi_c - o.t_lo_c) / rate_c_per_min * 60.0 + 6.0 * o.die_tau_s +
+                       per_end * (s.move_s + o.dwell_s);
   while (chamber.t_s() < std::min(kMaxLegs * leg_s, give_up_s)) {
     if (session.TakePose(&chamber))
       return {chamber.t_s(), session.poses(), "", legs, session.last_chi2_p()};
@@ -270,7 +281,7 @@ RunResult Ramp(const Setup& s, const ThermalTruth& truth, std::uint64_t noise_se
       arrived_at = session.poses();
       if (o.overshoot_c > 0) chamber.Set(setpoint, o.chamber_max_rate_c_per_min);
     }
-    if (arrived_at >= 0 && session.poses() - arrived_at >= 26 && legs < kMaxLegs) {
+    if (arrived_at >= 0 && session.poses() - arrived_at >= per_end && legs < kMaxLegs) {
       setpoint = up ? o.t_lo_c : o.t_hi_c;
       chamber.Set(up ? setpoint - o.overshoot_c : setpoint + o.overshoot_c, rate_c_per_min);
       arrived_at = -1;
@@ -324,11 +335,12 @@ ThermalPlan PlanOverTemperature(const ThermalPlanOptions& o) {
 
   // Every procedure sees the same devices and the same noise streams (run r: seed + r).
   auto simulate = [&](double rate_c_per_min, int cubes, double give_up_s) {
+    // A ramp's `cubes` are its end cubes; the classic procedure's, per plateau.
     return RunInParallel<RunResult>(o.runs, o.jobs, [&](int run, RunResult* out) {
       std::mt19937_64 truth_rng(o.seed * 1000003ULL + static_cast<std::uint64_t>(run));
       const ThermalTruth truth = DrawThermalTruth(*s.model, s.sensor, s.thermal.t0_c, &truth_rng);
       const std::uint64_t noise_seed = o.seed * 7919ULL + static_cast<std::uint64_t>(run) * 31ULL;
-      *out = rate_c_per_min > 0 ? Ramp(s, truth, noise_seed, rate_c_per_min, give_up_s)
+      *out = rate_c_per_min > 0 ? Ramp(s, truth, noise_seed, rate_c_per_min, cubes, give_up_s)
                                 : Classic(s, truth, noise_seed, cubes);
     });
   };
@@ -383,25 +395,42 @@ ThermalPlan PlanOverTemperature(const ThermalPlanOptions& o) {
   std::sort(rates.begin(), rates.end(), std::greater<double>());
   // No ramp runs longer than the classic procedure took (when it passed).
   double best_s = plan.classic.failures() == 0 ? plan.classic.max_seconds() : INFINITY;
+  const double end_s = 26.0 * plan.pose_s;  // a cube's table time
   for (double r : rates) {
-    ThermalProcedureOutcome ramp;
-    ramp.name = fmt::format("ramp {} degC/min, the cube cycled", Format(r));
-    ramp.rate_c_per_min = r;
-    if ((o.t_hi_c - o.t_lo_c) / r * 60.0 >= best_s) {
-      ramp.skipped = true;
-    } else {
-      take(simulate(r, 1, best_s), &ramp);
-      if (ramp.failures() == 0) best_s = std::min(best_s, ramp.max_seconds());
+    for (int e : o.end_cubes) {
+      ThermalProcedureOutcome ramp;
+      ramp.name = e == 0 ? fmt::format("ramp {} degC/min, the cube cycled", Format(r))
+                         : fmt::format("ramp {} degC/min, the cube cycled, {} cube{} at each end",
+                                       Format(r), e, e > 1 ? "s" : "");
+      ramp.rate_c_per_min = r;
+      ramp.end_cubes = e;
+      if ((o.t_hi_c - o.t_lo_c) / r * 60.0 + 2.0 * e * end_s >= best_s) {
+        ramp.skipped = true;
+      } else {
+        take(simulate(r, e, best_s), &ramp);
+        if (ramp.failures() == 0) best_s = std::min(best_s, ramp.max_seconds());
+      }
+      plan.ramps.push_back(ramp);
     }
-    plan.ramps.push_back(ramp);
   }
   for (ThermalProcedureOutcome& r : plan.ramps) {
     // The profile of the slowest run: its legs between the ends.
     r.chamber = Format(o.t_lo_c);
+    if (r.end_cubes > 0) {
+      r.chamber +=
+          fmt::format("; soak {} {}", Format(o.t_lo_c), Format(std::ceil(r.end_cubes * end_s)));
+    }
     for (int leg = 0; leg < r.legs; ++leg) {
       const double end = leg % 2 ? o.t_lo_c : o.t_hi_c;
       const double past = leg % 2 ? end - o.overshoot_c : end + o.overshoot_c;
       r.chamber += fmt::format("; ramp {} {}", Format(past), Format(r.rate_c_per_min));
+      if (r.end_cubes > 0 && o.overshoot_c <= 0) {
+        // Held for the die's approach (from r tau / 60 behind to within the coverage) and the
+        // cubes.
+        const double lag_c = r.rate_c_per_min * o.die_tau_s / 60.0;
+        const double approach_s = o.die_tau_s * std::log(std::max(1.0, lag_c / o.coverage_c));
+        r.chamber += fmt::format(" {}", Format(std::ceil(approach_s + r.end_cubes * end_s)));
+      }
       if (o.overshoot_c > 0) {
         r.chamber += fmt::format(" (until the die is within {} degC of {}); ramp {} {}",
                                  Format(o.coverage_c), Format(end), Format(end),

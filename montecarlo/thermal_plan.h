@@ -38,6 +38,10 @@ struct ThermalPlanOptions {
   double dwell_s = 5.0;
   int plateaus = 5;  // the classic procedure's set-points, the ends included
   std::vector<double> ramp_rates_c_per_min = {0.25, 0.5, 1.0, 2.0};
+  // Each ramp also with the cube this many times at each end: at the low end (where the device
+  // starts, soaked) before the chamber moves, and at the far end before it turns back (0: one
+  // cube at the far end only). The poses where the polynomials' sigma is largest.
+  std::vector<int> end_cubes = {0};
   double soak_rate_c_per_min = 0.05;  // the classic procedure's soak test
   double soak_window_s = 60.0;
   // A ramp may drive the chamber's air this far past the range's ends (the die, lagging, then
@@ -60,6 +64,7 @@ struct ThermalProcedureOutcome {
   double rate_c_per_min = 0.0;  // 0: the classic procedure
   int legs = 1;                 // a ramp's legs between the ends in the slowest run
   int cubes = 1;                // the classic procedure: the cube this many times at each plateau
+  int end_cubes = 0;            // a ramp: the cube this many times at each end (0: once at the far)
   bool skipped = false;  // a ramp not simulated: its ramp alone outlasts a quicker passing plan
   std::vector<double> seconds;  // per run, to the passing gate; negative: never passed
   std::vector<int> poses;       // per run, poses to the passing gate

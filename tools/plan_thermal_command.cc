@@ -36,6 +36,7 @@ nlohmann::json ToJson(const montecarlo::ThermalProcedureOutcome& p) {
   return {{"name", p.name},
           {"chamber", p.chamber},
           {"rate_c_per_min", p.rate_c_per_min},
+          {"end_cubes", p.end_cubes},
           {"seconds", p.seconds},
           {"poses", p.poses},
           {"chi2_p",
@@ -160,6 +161,13 @@ void AddPlanThermalCommand(CLI::App* app) {
       ->check(CLI::Range(3, 50))
       ->capture_default_str();
   cmd->add_option("--ramp-rates", o->ramp_rates_c_per_min, "the ramps to try, degC/min")
+      ->delimiter(',')
+      ->capture_default_str();
+  cmd->add_option("--end-cubes", o->end_cubes,
+                  "each ramp also with the cube this many times at each end (the low end before "
+                  "the ramp, the far end before turning back; 0: once at the far end)")
+      ->delimiter(',')
+      ->check(CLI::Range(0, 10))
       ->capture_default_str();
   cmd->add_option("--runs", o->runs, "simulated devices (truth and noise from seed + run)")
       ->check(CLI::Range(1, 10000))

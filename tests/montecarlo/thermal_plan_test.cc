@@ -92,6 +92,25 @@ TEST(ThermalPlan, TheSimulatedWanderIsTheDriftModelsChiSquareIsHonest) {
   EXPECT_EQ(plan.ramps[0].failures(), 0);
 }
 
+// A ramp with the cube at each end: the cube at the low end before the chamber moves (its time
+// and poses come first), the chamber's profile holds there, and the ramp still passes.
+TEST(ThermalPlan, ARampWithCubesAtTheEndsTakesThemFirstAtTheLowEnd) {
+  ThermalPlanOptions o = Small();
+  o.ramp_rates_c_per_min = {2.0};
+  o.end_cubes = {1};
+  const ThermalPlan plan = PlanOverTemperature(o);
+  ASSERT_TRUE(plan.error.empty()) << plan.error;
+  ASSERT_EQ(plan.ramps.size(), 1u);
+  const ThermalProcedureOutcome& r = plan.ramps[0];
+  EXPECT_EQ(r.end_cubes, 1);
+  ASSERT_EQ(r.failures(), 0) << r.last_reason;
+  const double ramp_s = (o.t_hi_c - o.t_lo_c) / r.rate_c_per_min * 60.0;
+  EXPECT_GE(r.min_seconds(), ramp_s + 26.0 * plan.pose_s);
+  for (int poses : r.poses) EXPECT_GT(poses, 26);
+  EXPECT_EQ(r.chamber.rfind("0; soak 0 ", 0), 0u) << r.chamber;
+  EXPECT_NE(r.name.find("1 cube at each end"), std::string::npos) << r.name;
+}
+
 TEST(ThermalPlan, WhatCannotBePlannedIsRefusedWithTheReason) {
   ThermalPlanOptions o = Small();
   o.t_hi_c = 5.0;
@@ -99,6 +118,9 @@ TEST(ThermalPlan, WhatCannotBePlannedIsRefusedWithTheReason) {
   o = Small();
   o.ramp_rates_c_per_min = {3.0};
   EXPECT_NE(PlanOverTemperature(o).error.find("at most the chamber's 2"), std::string::npos);
+  o = Small();
+  o.end_cubes = {-1};
+  EXPECT_NE(PlanOverTemperature(o).error.find("end cubes -1"), std::string::npos);
   o = Small();
   o.model = "gyro12";
   EXPECT_NE(PlanOverTemperature(o).error.find("rate segments"), std::string::npos);

@@ -98,7 +98,8 @@ CASES = {
              # takes.
              (["--model", "gyro12", "--rates", ",".join(["100"] * 2000)], "planner refuses")],
     "plan-vs-cube": [(["--model", "accel99"], MISTAKE)],
-    "plan-thermal": [(["--model", "gyro12"], MISTAKE), (["--range", "0", "5"], MISTAKE)],
+    "plan-thermal": [(["--model", "gyro12"], MISTAKE), (["--range", "0", "5"], MISTAKE),
+                     (["--end-cubes", "0,-1"], MISTAKE)],
     "sequence": [(["/nonexistent.tcap"], "cannot be read")],
 }
 
