@@ -183,6 +183,7 @@ nlohmann::json ToJson(const NoiseProfile& p) {
                       {"source", p.source}};
   if (p.device_period_s) j["device_period_s"] = *p.device_period_s;
   if (std::isfinite(p.sigma_dof)) j["sigma_dof"] = p.sigma_dof;
+  if (std::isfinite(p.gyr_bias_temp_c)) j["gyr_bias_temp_c"] = p.gyr_bias_temp_c;
   nlohmann::json identified = nlohmann::json::object();
   for (int t = 0; t < 3; ++t) {
     const auto& d = p.identified_drift[static_cast<std::size_t>(t)];
@@ -223,6 +224,9 @@ bool ParseNoiseProfile(const nlohmann::json& j, NoiseProfile* out, std::string* 
   }
   if (j.contains("sigma_dof") && j["sigma_dof"].is_number()) {
     p.sigma_dof = j["sigma_dof"].get<double>();
+  }
+  if (j.contains("gyr_bias_temp_c") && j["gyr_bias_temp_c"].is_number()) {
+    p.gyr_bias_temp_c = j["gyr_bias_temp_c"].get<double>();
   }
   if (j.contains("identified_drift")) {
     const auto& identified = j["identified_drift"];

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "core/sequencing/sequencer.h"
@@ -122,6 +123,13 @@ void Sequencer::Complete(double t_s) {
     }
   }
   ++captured_;
+  // A static pose's gyro mean is the bias now (the Earth's rate, < 7.3e-5 rad/s, is well inside
+  // the rate test's limit): the next poses' rate test follows the bias through temperature.
+  if (!rate_mode_ && record.gyr && record.gyr->count > 0) {
+    detector_->TrackGyroBias(record.gyr->mean, record.temp_c
+                                                   ? *record.temp_c
+                                                   : std::numeric_limits<double>::quiet_NaN());
+  }
   Emit(SequencerEventKind::kCaptured, t_s,
        fmt::format("{} samples over {:.2f} s{}", counts_.used, record.duration_s(),
                    record.move_in

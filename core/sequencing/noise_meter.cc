@@ -174,6 +174,12 @@ bool NoiseMeter::TriadNoise(int t, double nd, NoiseProfile* profile, std::string
               grand.norm(), grand.norm() * 180 / M_PI, options_.gyr_bias_limit_radps));
     }
     profile->gyr_bias_sigma_radps = sigma.maxCoeff() / std::sqrt(nd);
+    double temp_sum = 0.0;
+    int temp_n = 0;
+    for (const StillSample& s : samples_) {
+      if (std::isfinite(s.temp_c)) temp_sum += s.temp_c, ++temp_n;
+    }
+    if (temp_n > 0) profile->gyr_bias_temp_c = temp_sum / temp_n;
   }
   return true;
 }

@@ -102,11 +102,11 @@ NoiseProfile NoiseProfileForClass(const SensorClass& c, double rate_hz, bool use
 
 bool StillnessOptions::IsValid(std::string* error) const {
   if (!(window_s > 0 && window_s <= 10) || !(false_alarm > 0 && false_alarm < 0.5) ||
-      !(outlier_k >= 3) || !(gyr_bias_drift_radps >= 0)) {
+      !(outlier_k >= 3) || !(gyr_bias_drift_radps >= 0) || !(gyr_bias_tempco_radps_per_c >= 0)) {
     if (error) {
       *error =
           "stillness: window must be in (0, 10] s, false alarm in (0, 0.5), outlier k >= 3, gyro "
-          "bias drift >= 0";
+          "bias drift and temperature coefficient >= 0";
     }
     return false;
   }
@@ -258,6 +258,7 @@ bool StillnessDetector::IsOutlier(const StillSample& s) {
 
 bool StillnessDetector::Push(const StillSample& s, StillSample* evicted, bool* has_evicted) {
   *has_evicted = false;
+  if (std::isfinite(s.temp_c)) last_temp_c_ = s.temp_c;
   const auto w = static_cast<std::size_t>(w_);
   if (size_ == w) {
     *evicted = ring_[head_];
@@ -341,12 +342,24 @@ void StillnessDetector::Evaluate() {
         const double mean = anchor_[c] + s1_[c] / n;
         const double limit = z_ * std::sqrt(sigma * sigma / n + profile_.gyr_bias_sigma_radps *
                                                                     profile_.gyr_bias_sigma_radps) +
-                             options_.gyr_bias_drift_radps;
+                             options_.gyr_bias_drift_radps + TemperatureAllowance();
         consider(StillFinding::kRate, t, a, std::abs(mean - profile_.gyr_bias_radps[a]), limit);
       }
     }
   }
   finding_ = f;
+}
+
+void StillnessDetector::TrackGyroBias(const Eigen::Vector3d& mean_radps, double temp_c) {
+  if (!mean_radps.allFinite()) return;
+  profile_.gyr_bias_radps = mean_radps;
+  profile_.gyr_bias_temp_c = temp_c;
+}
+
+double StillnessDetector::TemperatureAllowance() const {
+  const double moved_c = std::abs(last_temp_c_ - profile_.gyr_bias_temp_c);
+  if (!std::isfinite(moved_c)) return 0.0;
+  return StillnessOptions::kTempcoSigmas * options_.gyr_bias_tempco_radps_per_c * moved_c;
 }
 
 std::string StillnessDetector::DescribeLimits() const {

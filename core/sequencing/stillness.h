@@ -75,7 +75,9 @@ struct NoiseProfile {
   // Per-sample 1 sigma per axis of each triad; absent: the triad is not used for stillness.
   std::array<std::optional<Eigen::Vector3d>, 3> sigma;
   Eigen::Vector3d gyr_bias_radps = Eigen::Vector3d::Zero();
-  double gyr_bias_sigma_radps = 0.0;      // how well the bias is known (1 sigma)
+  double gyr_bias_sigma_radps = 0.0;  // how well the bias is known (1 sigma)
+  // The sensor's temperature while the bias was measured (deg C; NaN: not known or not reported).
+  double gyr_bias_temp_c = std::numeric_limits<double>::quiet_NaN();
   double rate_hz = 0.0;                   // sample rate
   std::optional<double> device_period_s;  // device-clock sample period (for gap counting)
   // Degrees of freedom of the sigma estimates; infinite when configured from a datasheet.
@@ -155,6 +157,15 @@ struct StillnessOptions {
   double outlier_k = 5.0;  // robust sigmas for an isolated outlier
   // Gyro bias change allowed after the profile was measured (temperature, instability).
   double gyr_bias_drift_radps = 2e-3;
+  // The gyro bias's temperature coefficient (1 sigma over devices, rad/s per degC; the station
+  // takes its sensor class's): the rate test also allows kTempcoSigmas times it per degC the
+  // sensor's temperature has moved from where the bias was measured (at start-up, then at each
+  // captured static pose, StillnessDetector::TrackGyroBias). In a chamber ramping 40 degC
+  // an industrial gyro's bias moves ~3.5e-3 rad/s, more than the fixed allowance: without this
+  // every static pose after that read as turning (issue 36: gyro12 over temperature lost every
+  // static pose after the first such rejection in 164 of 200 simulated sessions).
+  double gyr_bias_tempco_radps_per_c = 0.0;
+  static constexpr double kTempcoSigmas = 4.0;
   // The bias wander of each triad (kTriadAcc, kTriadGyr, kTriadMag) that the halves' drift tests
   // allow for besides the white noise: within a dwell a sensor's own drift looks like a slowly
   // creeping table, and a consumer accelerometer's (0.02 m/s^2, tau 100 s) moves the halves of a
@@ -189,6 +200,12 @@ class StillnessDetector {
   // Consecutive still verdicts up to the last Push.
   std::int64_t still_run() const { return still_run_; }
   const StillFinding& finding() const { return finding_; }
+  // What the rate test allows for the gyro bias's move with temperature since it was measured.
+  double TemperatureAllowance() const;
+  // A captured static pose's gyro mean (and the temperature over it, NaN: none) becomes the rate
+  // test's bias: the bias follows the sensor through a chamber's ramp (and its slow wander)
+  // instead of staying the start-up measurement's.
+  void TrackGyroBias(const Eigen::Vector3d& mean_radps, double temp_c);
   // Forgets the window (after a gap in the stream).
   void Clear();
   // The limits in words, for logs and docs.
@@ -230,6 +247,7 @@ class StillnessDetector {
   std::array<double, 9> window_drift_limit_{};  // HalvesDriftLimit for the window's halves
   std::int64_t still_run_ = 0;
   StillFinding finding_;
+  double last_temp_c_ = std::numeric_limits<double>::quiet_NaN();  // the latest sample's
 };
 
 }  // namespace turncal

@@ -24,6 +24,10 @@ SequencerOptions DevicePipeline::SequencerOptionsFor(const StationOptions& optio
           sensor, t == kTriadAcc ? SensorKind::kAccelerometer : SensorKind::kMagnetometer);
     }
   }
+  // The gyro bias moves with temperature: the rate test allows for the class's coefficient.
+  if (so.stillness.gyr_bias_tempco_radps_per_c == 0.0) {
+    so.stillness.gyr_bias_tempco_radps_per_c = sensor.gyr_bias_tempco;
+  }
   return so;
 }
 
