@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <limits>
 #include <string>
 #include <vector>
@@ -37,6 +38,7 @@ TEST(NoiseProfileJson, IdentifiedDriftRoundTripsAndOldFilesStillParse) {
   acc.scale = 2.9;
   acc.poses = 32;
   p.identified_drift[kTriadAcc] = acc;
+  p.gyr_bias_temp_c = 31.25;
   const nlohmann::json j = ToJson(p);
   NoiseProfile back;
   std::string error;
@@ -47,11 +49,15 @@ TEST(NoiseProfileJson, IdentifiedDriftRoundTripsAndOldFilesStillParse) {
   EXPECT_EQ(back.identified_drift[kTriadAcc]->poses, 32);
   EXPECT_EQ(back.identified_drift[kTriadAcc]->drift.gm_sigma, acc.drift.gm_sigma);
   EXPECT_EQ(back.identified_drift[kTriadAcc]->drift.gm_tau_s, 100);
+  EXPECT_EQ(back.gyr_bias_temp_c, 31.25);
 
   nlohmann::json old = j;
   old.erase("identified_drift");
   ASSERT_TRUE(ParseNoiseProfile(old, &back, &error)) << error;
   EXPECT_FALSE(back.identified_drift[kTriadAcc].has_value());
+  old.erase("gyr_bias_temp_c");
+  ASSERT_TRUE(ParseNoiseProfile(old, &back, &error)) << error;
+  EXPECT_TRUE(std::isnan(back.gyr_bias_temp_c));
 
   nlohmann::json bad = j;
   bad["identified_drift"]["acc"]["scale"] = -1;
