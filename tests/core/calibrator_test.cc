@@ -308,6 +308,36 @@ TEST(Calibrator, NonFiniteOrSingularRecordsAreRefusedWithAReason) {
   EXPECT_TRUE(with_floor.add_pose(zero, &error)) << error;
 }
 
+// accel13 without drift or pose offsets, its white floor at the class's noise density.
+CalibratorOptions AccelWithWhiteFloor(const SensorClass& sensor) {
+  CalibratorOptions o;
+  o.model = "accel13";
+  o.noise_density = sensor.acc_noise_density;
+  return o;
+}
+
+// A still accelerometer window of n white samples of sample_sigma per axis about (0, 0, -9.81):
+// its mean and sample covariance as the sequencer records them.
+PoseRecord WhiteWindow(int n, double sample_sigma, double t_start_s, double rate_hz,
+                       std::mt19937_64* rng) {
+  std::normal_distribution<double> normal(0.0, 1.0);
+  Eigen::MatrixXd x(n, 3);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < 3; ++j) x(i, j) = sample_sigma * normal(*rng);
+  }
+  const Eigen::RowVector3d mean = x.colwise().mean();
+  const Eigen::MatrixXd centred = x.rowwise() - mean;
+  TriadStats stats;
+  stats.count = n;
+  stats.mean = Eigen::Vector3d(0, 0, -9.81) + mean.transpose();
+  stats.covariance = centred.transpose() * centred / (n - 1);
+  PoseRecord record;
+  record.t_start_s = t_start_s;
+  record.t_end_s = t_start_s + n / rate_hz;
+  record.acc = stats;
+  return record;
+}
+
 // The floor on a pose's white covariance must not lift honest windows: over 400 windows of 300
 // white samples at the configured density the mean weighted variance is the true one times the
 // inverse Wishart's nu / (nu - 4) = 299 / 295 (WeighedMeanCovariance). The sample covariance's
@@ -317,31 +347,14 @@ TEST(Calibrator, NonFiniteOrSingularRecordsAreRefusedWithAReason) {
 TEST(Calibrator, WhiteFloorDoesNotInflateHonestWindows) {
   const SensorClass sensor = IndustrialClass();
   std::mt19937_64 rng(77);
-  std::normal_distribution<double> normal(0.0, 1.0);
   const int n = 300;
   const double sample_sigma = sensor.acc_noise_density * std::sqrt(sensor.rate_hz / 2.0);
   const double white_mean_var = sample_sigma * sample_sigma / n;
-  CalibratorOptions o;
-  o.model = "accel13";
-  o.noise_density = sensor.acc_noise_density;
-  Calibrator calibrator(o);
+  Calibrator calibrator(AccelWithWhiteFloor(sensor));
   std::string error;
   const int windows = 400;
   for (int k = 0; k < windows; ++k) {
-    Eigen::MatrixXd x(n, 3);
-    for (int i = 0; i < n; ++i) {
-      for (int j = 0; j < 3; ++j) x(i, j) = sample_sigma * normal(rng);
-    }
-    const Eigen::RowVector3d mean = x.colwise().mean();
-    const Eigen::MatrixXd centred = x.rowwise() - mean;
-    TriadStats stats;
-    stats.count = n;
-    stats.mean = Eigen::Vector3d(0, 0, -9.81) + mean.transpose();
-    stats.covariance = centred.transpose() * centred / (n - 1);
-    PoseRecord record;
-    record.t_start_s = 10.0 * k;
-    record.t_end_s = record.t_start_s + n / sensor.rate_hz;
-    record.acc = stats;
+    const PoseRecord record = WhiteWindow(n, sample_sigma, 10.0 * k, sensor.rate_hz, &rng);
     ASSERT_TRUE(calibrator.add_pose(record, &error)) << error;
   }
   double ratio = 0.0;
@@ -365,32 +378,15 @@ TEST(Calibrator, WhiteFloorDoesNotInflateHonestWindows) {
 TEST(Calibrator, WhitenedErrorsOfShortWindowsHaveMeanThree) {
   const SensorClass sensor = IndustrialClass();
   std::mt19937_64 rng(78);
-  std::normal_distribution<double> normal(0.0, 1.0);
   const int n = 20;
   const double sample_sigma = sensor.acc_noise_density * std::sqrt(sensor.rate_hz / 2.0);
-  CalibratorOptions o;
-  o.model = "accel13";
-  o.noise_density = sensor.acc_noise_density;
-  Calibrator calibrator(o);
+  Calibrator calibrator(AccelWithWhiteFloor(sensor));
   std::string error;
   const int windows = 4000;
   std::vector<Eigen::Vector3d> errors;
   for (int k = 0; k < windows; ++k) {
-    Eigen::MatrixXd x(n, 3);
-    for (int i = 0; i < n; ++i) {
-      for (int j = 0; j < 3; ++j) x(i, j) = sample_sigma * normal(rng);
-    }
-    const Eigen::RowVector3d mean = x.colwise().mean();
-    const Eigen::MatrixXd centred = x.rowwise() - mean;
-    TriadStats stats;
-    stats.count = n;
-    stats.mean = Eigen::Vector3d(0, 0, -9.81) + mean.transpose();
-    stats.covariance = centred.transpose() * centred / (n - 1);
-    errors.push_back(mean.transpose());
-    PoseRecord record;
-    record.t_start_s = 10.0 * k;
-    record.t_end_s = record.t_start_s + n / sensor.rate_hz;
-    record.acc = stats;
+    const PoseRecord record = WhiteWindow(n, sample_sigma, 10.0 * k, sensor.rate_hz, &rng);
+    errors.push_back(record.acc->mean - Eigen::Vector3d(0, 0, -9.81));
     ASSERT_TRUE(calibrator.add_pose(record, &error)) << error;
   }
   const std::vector<WeightedPose> weighted = calibrator.weighted_poses();

@@ -158,22 +158,29 @@ NoiseProfile WhiteProfile(double rate_hz) {
   return p;
 }
 
+// A still sample at t_s: the accelerometer reads -g on z with 4e-3 m/s^2 of white noise, the gyro
+// 1e-3 rad/s of white noise about zero (WhiteProfile's).
+StillSample WhiteStill(double t_s, std::mt19937_64* rng) {
+  std::normal_distribution<double> n(0, 1);
+  StillSample s;
+  s.t_host_ns = Ns(t_s);
+  s.v[kTriadAcc] =
+      Eigen::Vector3d(0, 0, -9.80665) + 4e-3 * Eigen::Vector3d(n(*rng), n(*rng), n(*rng));
+  s.v[kTriadGyr] = 1e-3 * Eigen::Vector3d(n(*rng), n(*rng), n(*rng));
+  s.present = 0b011;
+  return s;
+}
+
 TEST(StillnessDetector, NoFalseAlarmOverTenMinutesOfStillNoise) {
   // 60000 evaluations x 21 tests at 1e-8 each: expected false alarms 0.013.
   const NoiseProfile p = WhiteProfile(100);
   StillnessDetector d(p, StillnessOptions{});
   std::mt19937_64 rng(5);
-  std::normal_distribution<double> n(0, 1);
   int moving = 0, outliers = 0;
   StillSample ev;
   bool has = false;
   for (int k = 0; k < 60000; ++k) {
-    StillSample s;
-    s.t_host_ns = Ns(k * 0.01);
-    s.v[kTriadAcc] =
-        Eigen::Vector3d(0, 0, -9.80665) + 4e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
-    s.v[kTriadGyr] = 1e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
-    s.present = 0b011;
+    StillSample s = WhiteStill(k * 0.01, &rng);
     if (d.IsOutlier(s)) ++outliers;
     if (!d.Push(s, &ev, &has) && k >= d.window()) ++moving;
   }
@@ -186,19 +193,13 @@ TEST(StillnessDetector, NoFalseAlarmOverTenMinutesOfStillNoise) {
 TEST(StillnessDetector, SeesSlowTurnsTiltsAndVibration) {
   const NoiseProfile p = WhiteProfile(100);
   std::mt19937_64 rng(6);
-  std::normal_distribution<double> n(0, 1);
   auto run = [&](auto motion) {
     StillnessDetector d(p, StillnessOptions{});
     StillSample ev;
     bool has = false;
     for (int k = 0; k < 300; ++k) {
       const double t = k * 0.01;
-      StillSample s;
-      s.t_host_ns = Ns(t);
-      s.v[kTriadAcc] =
-          Eigen::Vector3d(0, 0, -9.80665) + 4e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
-      s.v[kTriadGyr] = 1e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
-      s.present = 0b011;
+      StillSample s = WhiteStill(t, &rng);
       motion(t, &s);
       if (!d.Push(s, &ev, &has) && k >= d.window() && t > 1.5) return d.finding();
     }
@@ -239,7 +240,6 @@ TEST(StillnessDetector, FollowsTheGyroBiasThroughTemperature) {
   const double tempco = 0.005 * M_PI / 180;  // rad/s per degC
   const Eigen::Vector3d bias_at_40(40.0 * tempco, 0.0, 0.0);
   std::mt19937_64 rng(7);
-  std::normal_distribution<double> n(0, 1);
   auto run = [&](double tempco_allowed, double bias_temp_c, const Eigen::Vector3d& bias,
                  double temp_c, double turn_radps) {
     StillnessOptions o;
@@ -251,14 +251,10 @@ TEST(StillnessDetector, FollowsTheGyroBiasThroughTemperature) {
     StillSample ev;
     bool has = false;
     for (int k = 0; k < 300; ++k) {
-      StillSample s;
-      s.t_host_ns = Ns(k * 0.01);
-      s.v[kTriadAcc] =
-          Eigen::Vector3d(0, 0, -9.80665) + 4e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
-      s.v[kTriadGyr] = bias_at_40 + 1e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+      StillSample s = WhiteStill(k * 0.01, &rng);
+      s.v[kTriadGyr] += bias_at_40;
       s.v[kTriadGyr].z() += turn_radps;
       s.temp_c = temp_c;
-      s.present = 0b011;
       if (!d.Push(s, &ev, &has) && k >= d.window()) return d.finding();
     }
     return StillFinding{};
@@ -282,17 +278,11 @@ TEST(StillnessDetector, FollowsTheGyroBiasThroughTemperature) {
 // The start-up measurement keeps the temperature the gyro bias was measured at.
 TEST(NoiseMeter, KeepsTheTemperatureTheGyroBiasWasMeasuredAt) {
   std::mt19937_64 rng(8);
-  std::normal_distribution<double> n(0, 1);
   NoiseMeter meter(NoiseMeterOptions{});
   NoiseMeter::Status status = NoiseMeter::Status::kCollecting;
   for (int k = 0; status == NoiseMeter::Status::kCollecting; ++k) {
-    StillSample s;
-    s.t_host_ns = Ns(k * 0.01);
-    s.v[kTriadAcc] =
-        Eigen::Vector3d(0, 0, -9.80665) + 4e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
-    s.v[kTriadGyr] = 1e-3 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    StillSample s = WhiteStill(k * 0.01, &rng);
     s.temp_c = k % 10 < 2 ? NAN : 24.0 + (k % 2);  // NaN now and then: left out
-    s.present = 0b011;
     status = meter.Add(s);
   }
   ASSERT_EQ(status, NoiseMeter::Status::kMeasured) << meter.failure();
