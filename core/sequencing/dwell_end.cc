@@ -126,9 +126,8 @@ void Sequencer::Complete(double t_s) {
   // A static pose's gyro mean is the bias now (the Earth's rate, < 7.3e-5 rad/s, is well inside
   // the rate test's limit): the next poses' rate test follows the bias through temperature.
   if (!rate_mode_ && record.gyr && record.gyr->count > 0) {
-    detector_->TrackGyroBias(record.gyr->mean, record.temp_c
-                                                   ? *record.temp_c
-                                                   : std::numeric_limits<double>::quiet_NaN());
+    detector_->TrackGyroBias(record.gyr->mean,
+                             record.temp_c.value_or(std::numeric_limits<double>::quiet_NaN()));
   }
   Emit(SequencerEventKind::kCaptured, t_s,
        fmt::format("{} samples over {:.2f} s{}", counts_.used, record.duration_s(),

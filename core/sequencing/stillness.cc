@@ -327,6 +327,8 @@ void StillnessDetector::Evaluate() {
       f = StillFinding{kind, t, a, value, limit};
     }
   };
+  // The gyro bias's allowed move: the fixed allowance and its temperature's (once per evaluation).
+  const double bias_allowance = options_.gyr_bias_drift_radps + TemperatureAllowance();
   for (int t = 0; t < 3; ++t) {
     if (!use_[t]) continue;
     for (int a = 0; a < 3; ++a) {
@@ -342,7 +344,7 @@ void StillnessDetector::Evaluate() {
         const double mean = anchor_[c] + s1_[c] / n;
         const double limit = z_ * std::sqrt(sigma * sigma / n + profile_.gyr_bias_sigma_radps *
                                                                     profile_.gyr_bias_sigma_radps) +
-                             options_.gyr_bias_drift_radps + TemperatureAllowance();
+                             bias_allowance;
         consider(StillFinding::kRate, t, a, std::abs(mean - profile_.gyr_bias_radps[a]), limit);
       }
     }

@@ -155,7 +155,7 @@ struct StillnessOptions {
   // Probability that one test on one axis calls a still window moving (per evaluation).
   double false_alarm = 1e-8;
   double outlier_k = 5.0;  // robust sigmas for an isolated outlier
-  // Gyro bias change allowed after the profile was measured (temperature, instability).
+  // Gyro bias change allowed after the bias was taken (instability; temperature below).
   double gyr_bias_drift_radps = 2e-3;
   // The gyro bias's temperature coefficient (1 sigma over devices, rad/s per degC; the station
   // takes its sensor class's): the rate test also allows kTempcoSigmas times it per degC the
