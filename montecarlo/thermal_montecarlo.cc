@@ -79,6 +79,10 @@ void OneRun(const ThermalMonteCarloOptions& o, const Setup& s, int r, ThermalRun
     return;
   }
   if (o.orders == "truth") {
+    if (est.coefficients.size() != truth.coefficients.size()) {
+      out->error = "the fit lowered an order below the truth's (the soaks do not carry it)";
+      return;
+    }
     out->z = (est.coefficients - truth.coefficients).cwiseQuotient(est.sigma);
   }
   out->z_held.resize(static_cast<Eigen::Index>(s.held_out_c.size()) * s.model->num_parameters());
@@ -157,6 +161,19 @@ ThermalMonteCarloSummary RunThermalMonteCarlo(const ThermalMonteCarloOptions& o)
   setup.t0_c = 0.5 * (soaks.front() + soaks.back());
   if (o.orders == "truth") {
     const ThermalBasis shape = ThermalTruthBasis(*setup.model, setup.sensor, setup.t0_c);
+    // The coefficients are compared with the truth's one by one: the soaks must carry its
+    // highest order (n + 1 distinct temperatures for order n), or the fit lowers it.
+    const int truth_order = *std::max_element(shape.orders.begin(), shape.orders.end());
+    std::vector<double> temps = soaks;
+    const auto distinct = static_cast<int>(std::unique(temps.begin(), temps.end()) - temps.begin());
+    if (distinct <= truth_order) {
+      s.error = fmt::format(
+          "--thermal-orders truth compares the coefficients with the truth's polynomials of "
+          "order {}: that needs at least {} distinct soak temperatures (given {}); add soaks or "
+          "use --thermal-orders chosen",
+          truth_order, truth_order + 1, distinct);
+      return s;
+    }
     for (int j = 0; j < shape.num_coefficients(); ++j) {
       s.coefficients.push_back(shape.CoefficientName(params, j));
     }
