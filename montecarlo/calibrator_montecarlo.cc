@@ -7,6 +7,7 @@
 #include "core/estimation/calibrator.h"
 #include "core/estimation/sensor_class.h"
 #include "core/planning/pose_designs.h"
+#include "montecarlo/ks_uniform.h"
 #include "sim/session_sim.h"
 #include "sim/synthetic.h"
 
@@ -68,6 +69,7 @@ class CalibratorMonteCarlo {
       return;
     }
     ++s->solved;
+    s->p_values.push_back(e.p_value);
     solve_s_ += e.solve_time_s;
     const Eigen::VectorXd err = e.theta - truth;
     sum_sq_err_ += err.cwiseAbs2();
@@ -95,7 +97,7 @@ class CalibratorMonteCarlo {
                                       Calibrator* calibrator) const {
     SessionSimOptions o;
     o.sensor = sensor_;
-    o.rate_hz = 100;
+    o.rate_hz = o_.rate_hz;
     o.dwell_s = o_.dwell_s;
     o.seed = seed;
     const SimulatedSession session = accel_ ? SimulateSession(*model_, *other_, poses_, o)
@@ -119,6 +121,7 @@ class CalibratorMonteCarlo {
     s->mean_solve_ms = ok ? 1e3 * solve_s_ / ok : 0.0;
     s->rmse = (sum_sq_err_ / ok).cwiseSqrt();
     s->sigma = (sum_var_ / ok).cwiseSqrt();
+    if (s->p_values.size() >= 2) s->ks = KsUniform(s->p_values);
   }
 
   const CalibratorMonteCarloOptions& o_;

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/frames/table_pose.h"
+#include "montecarlo/ks_uniform.h"
 #include "montecarlo/z_scores.h"
 
 namespace turncal::montecarlo {
@@ -35,6 +36,7 @@ struct CalibratorMonteCarloOptions {
   // offset per pose ("independent", the model before issue 19).
   std::string noise = "white";
   std::string drift_model = "gauss-markov";
+  double rate_hz = 100.0;  // "session": the simulated output rate
 };
 
 struct CalibratorMonteCarloSummary {
@@ -48,6 +50,10 @@ struct CalibratorMonteCarloSummary {
   // sigma, their z-scores.
   Eigen::VectorXd rmse, sigma;
   ZScoreSummary z;
+  // Each solved run's chi^2 p-value and their Kolmogorov-Smirnov test against uniform (reported;
+  // not among Passed()'s criteria: "white" and "independent" runs are comparisons).
+  std::vector<double> p_values;
+  KsTest ks;
 
   // The verdict on a parameter: RMSE <= 1.1 sigma and std z in [0.9, 1.1].
   bool Honest(int parameter) const;

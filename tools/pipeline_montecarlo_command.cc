@@ -237,7 +237,7 @@ void AddPipelineMonteCarloOptions(CLI::App* mc, PipelineMonteCarloArgs* args) {
       ->type_name("PROFILE");
   mc->add_option("--device-rate", pipe->rate_hz,
                  "with --pipeline: the simulated device's output rate, Hz (default: the "
-                 "protocol's)")
+                 "protocol's); with --noise session: the simulator's (default 100)")
       ->check(CLI::NonNegativeNumber);
   CLI::Option* keep = mc->add_option(
       "--keep", pipe->keep_dir,

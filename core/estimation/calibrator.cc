@@ -194,11 +194,8 @@ bool Calibrator::BuildBlocks(std::string* error) {
     return true;
   }
   std::vector<TimeWindow> windows;
-  std::vector<Eigen::Matrix3d> white;
-  for (const auto& p : poses_) {
-    windows.push_back(p.window);
-    white.push_back(p.white);
-  }
+  for (const auto& p : poses_) windows.push_back(p.window);
+  const std::vector<Eigen::Matrix3d> white = WeighedWhites(drift_);
   GlsWhitening gls;
   if (!BuildGlsWhitening(windows, white, drift_, &gls, error)) return false;
   order_ = gls.order;
@@ -218,6 +215,34 @@ bool Calibrator::BuildBlocks(std::string* error) {
     gls_blocks_.push_back(std::move(cost));
   }
   return true;
+}
+
+std::vector<Eigen::Matrix3d> Calibrator::WeighedWhites(const BiasDrift& drift) const {
+  std::vector<Eigen::Matrix3d> white;
+  std::vector<TimeWindow> windows;
+  bool sampled = false;
+  for (const auto& p : poses_) {
+    white.push_back(p.white);
+    windows.push_back(p.window);
+    sampled = sampled || p.white_dof > 4.0;
+  }
+  GlsWhitening gls;
+  std::string error;
+  if (!sampled || !BuildGlsWhitening(windows, white, drift, &gls, &error)) return white;
+  const auto n = static_cast<Eigen::Index>(poses_.size());
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const auto i = static_cast<std::size_t>(gls.order[static_cast<std::size_t>(k)]);
+    if (!(poses_[i].white_dof > 4.0)) continue;
+    // C^-1 = W^T W in time order, W = L^-1 lower triangular: its diagonal block k is the sum
+    // over m >= k of W_mk^T W_mk.
+    Eigen::Matrix3d precision = Eigen::Matrix3d::Zero();
+    for (Eigen::Index m = k; m < n; ++m) {
+      const Eigen::Matrix3d b = gls.W.block<3, 3>(3 * m, 3 * k);
+      precision.noalias() += b.transpose() * b;
+    }
+    white[i] += SampleWeightCorrection(poses_[i].white_sample, precision, poses_[i].white_dof);
+  }
+  return white;
 }
 
 Estimate Calibrator::solve() {
@@ -247,12 +272,13 @@ DriftScale Calibrator::IdentifyDrift(const Estimate& est) const {
   std::vector<Eigen::Vector3d> white;
   std::vector<TimeWindow> windows;
   Jacobian3 Ji;
+  const std::vector<Eigen::Matrix3d> weighed = WeighedWhites(drift_);
   for (int i = 0; i < n; ++i) {
     const Pose& p = poses_[static_cast<std::size_t>(i)];
     MeasuredMinusPredicted(p, est.theta, &Ji);
     J.middleRows<3>(3 * i) = Ji;
     r.segment<3>(3 * i) = est.residuals[static_cast<std::size_t>(i)].raw;
-    white.push_back(p.white.diagonal());
+    white.push_back(weighed[static_cast<std::size_t>(i)].diagonal());
     windows.push_back(p.window);
   }
   return IdentifyDriftScale(J, r, white, windows, options_.drift, options_.drift_scale);

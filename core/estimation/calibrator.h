@@ -240,6 +240,11 @@ class Calibrator {
   // The residual blocks the solver sees: each pose's own (no drift), or each pose's whitened
   // innovation (drift; rebuilt for every solve, order_ gives the poses' time order).
   bool BuildBlocks(std::string* error);
+  // With a drift model: each pose's white covariance as the generalised least squares weighs it,
+  // its own plus SampleWeightCorrection with its block of the inverse of the poses' joint
+  // covariance under `drift` (core/estimation/pose_record.h). The poses' own when that
+  // covariance cannot be built (BuildGlsWhitening then says why).
+  std::vector<Eigen::Matrix3d> WeighedWhites(const BiasDrift& drift) const;
   int moves_ = 0, moves_refused_ = 0;
   std::string last_move_refusal_;
   std::vector<ceres::CostFunction*> blocks_;

@@ -19,6 +19,10 @@ struct Calibrator::Pose {
   // With a drift model: the unwhitened residual, the pose's own (white) covariance and its window.
   std::unique_ptr<ceres::CostFunction> raw;
   Eigen::Matrix3d white = Eigen::Matrix3d::Identity();
+  // The part of `white` estimated from the window's own samples, and its degrees of freedom (0:
+  // none, e.g. a move's): what SampleWeightCorrection corrects (Calibrator::WeighedWhites).
+  Eigen::Matrix3d white_sample = Eigen::Matrix3d::Zero();
+  double white_dof = 0.0;
   TimeWindow window;       // on the sensor's clock: drift and ordering
   TimeWindow host_window;  // on the host's: when the bias holds, for corrected output
 };

@@ -42,8 +42,9 @@ std::vector<WeightedPose> Calibrator::weighted_poses() const {
   for (int axis = 0; axis < 3; ++axis) {
     marginal.col(axis) = DriftIncrementCovariance(drift_, axis, windows, ref).diagonal();
   }
+  const std::vector<Eigen::Matrix3d> white = WeighedWhites(drift_);
   for (std::size_t i = 0; i < out.size(); ++i) {
-    Eigen::Matrix3d cov = poses_[i].white;
+    Eigen::Matrix3d cov = white[i];
     cov.diagonal() += marginal.row(static_cast<Eigen::Index>(i)).transpose();
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
     out[i].sqrt_information = SqrtInformation(eig.eigenvectors(), eig.eigenvalues());
@@ -55,10 +56,13 @@ void Calibrator::planning_poses(std::vector<WeightedPose>* white,
                                 std::vector<TimeWindow>* windows) const {
   white->clear();
   windows->clear();
-  for (const auto& p : poses_) {
+  std::vector<Eigen::Matrix3d> weighed;
+  if (options_.drift.enabled()) weighed = WeighedWhites(drift_);
+  for (std::size_t i = 0; i < poses_.size(); ++i) {
+    const Pose& p = poses_[i];
     white->push_back(p.weighted);
     if (!options_.drift.enabled()) continue;
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p.white);
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(weighed[i]);
     white->back().sqrt_information = SqrtInformation(eig.eigenvectors(), eig.eigenvalues());
     windows->push_back(p.window);
   }
@@ -96,7 +100,7 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
     return fail("the drift model needs the record's time window (t_start_s < t_end_s)");
   }
 
-  Eigen::Matrix3d sigma = WeighedMeanCovariance(*triad);
+  Eigen::Matrix3d sigma = SampleMeanCovariance(*triad);
   sigma = 0.5 * (sigma + sigma.transpose());
   // Averaging and drift are timed on the sensor's clock when the record has it (a simulator or
   // a replay may run the host's clock at another pace).
@@ -109,21 +113,30 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   // Floor the eigenvalues (the mean is never known much better than the white noise allows), then
   // add the pose-to-pose offset variance.
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
-  Eigen::Vector3d floored = eig.eigenvalues().cwiseMax(floor_var);
+  const Eigen::Matrix3d sample = eig.eigenvectors() *
+                                 eig.eigenvalues().cwiseMax(floor_var).asDiagonal() *
+                                 eig.eigenvectors().transpose();
+  Eigen::Matrix3d total = sample;
   if (p.is_rate()) {
     // The table's own rate error, along the turning axis as the gyro sees it (nominally).
     const Eigen::Vector3d axis = options_.context.mounting * p.TableRate_q();
-    sigma = eig.eigenvectors() * floored.asDiagonal() * eig.eigenvectors().transpose() +
-            options_.rate_accuracy * options_.rate_accuracy * axis * axis.transpose();
-    eig.compute(sigma);
-    floored = eig.eigenvalues();
+    total += options_.rate_accuracy * options_.rate_accuracy * axis * axis.transpose();
   }
-  Eigen::Vector3d lambda =
-      floored.array() + options_.pose_offset_sigma * options_.pose_offset_sigma;
+  total.diagonal().array() += options_.pose_offset_sigma * options_.pose_offset_sigma;
+  eig.compute(total);
+  Eigen::Vector3d lambda = eig.eigenvalues();
   if (!(lambda.minCoeff() > 0) || lambda.minCoeff() < 1e-12 * lambda.maxCoeff()) {
     return fail(
         "the record's covariance is singular and no noise floor is configured "
         "(set noise_density or pose_offset_sigma)");
+  }
+  const double nu = SampleMeanDof(*triad);
+  if (!options_.drift.enabled()) {
+    // The pose's error is its own: weigh its sample covariance for its share of it (with a
+    // drift model, across the poses: WeighedWhites).
+    total += SampleWeightCorrection(sample, total.inverse(), nu);
+    eig.compute(total);
+    lambda = eig.eigenvalues();
   }
   Pose pose;
   WeightedPose& w = pose.weighted;
@@ -135,6 +148,8 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   pose.host_window = TimeWindow{record.t_start_s, record.t_end_s};
   if (options_.drift.enabled()) {
     pose.white = eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
+    pose.white_sample = sample;
+    pose.white_dof = nu;
     pose.raw = model_->MakeResidual(p, w.measured, Eigen::Matrix3d::Identity());
   }
   poses_.push_back(std::move(pose));

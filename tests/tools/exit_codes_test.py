@@ -73,6 +73,8 @@ CASES = {
                    (["--pipeline", "--model", "accel99", "--runs", "2"], MISTAKE),
                    (["--thermal", "-20,warm", "--runs", "2"], MISTAKE),
                    (["--thermal", "25", "--runs", "2"], MISTAKE),
+                   (["--thermal", "20,30", "--model", "mag13", "--runs", "2"], MISTAKE),
+                   (["--device-rate", "20", "--runs", "2"], MISTAKE),
                    (["--thermal", "0,40", "--pipeline", "--runs", "2"], MISTAKE),
                    (["--chamber", "0; ramp 40 4", "--runs", "2"], MISTAKE),
                    (["--pipeline", "--chamber", "0; ramp", "--runs", "2"], MISTAKE),
