@@ -3,6 +3,7 @@
 #include <ceres/ceres.h>
 #include <fmt/format.h>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <boost/math/special_functions/gamma.hpp>
@@ -226,21 +227,29 @@ std::vector<Eigen::Matrix3d> Calibrator::WeighedWhites(const BiasDrift& drift) c
     windows.push_back(p.window);
     sampled = sampled || p.white_dof > 4.0;
   }
-  GlsWhitening gls;
-  std::string error;
-  if (!sampled || !BuildGlsWhitening(windows, white, drift, &gls, &error)) return white;
+  if (!sampled || !drift.enabled()) return white;
+  // Each pose's block of C^-1, axis by axis: the drift is independent per axis, and a second-
+  // order correction does not need the whites' small cross-axis terms. Three n x n inverses
+  // cost a ninth of the joint 3n x 3n one the solve builds (BuildGlsWhitening).
   const auto n = static_cast<Eigen::Index>(poses_.size());
-  for (Eigen::Index k = 0; k < n; ++k) {
-    const auto i = static_cast<std::size_t>(gls.order[static_cast<std::size_t>(k)]);
-    if (!(poses_[i].white_dof > 4.0)) continue;
-    // C^-1 = W^T W in time order, W = L^-1 lower triangular: its diagonal block k is the sum
-    // over m >= k of W_mk^T W_mk.
-    Eigen::Matrix3d precision = Eigen::Matrix3d::Zero();
-    for (Eigen::Index m = k; m < n; ++m) {
-      const Eigen::Matrix3d b = gls.W.block<3, 3>(3 * m, 3 * k);
-      precision.noalias() += b.transpose() * b;
-    }
-    white[i] += SampleWeightCorrection(poses_[i].white_sample, precision, poses_[i].white_dof);
+  const int ref = TimeOrder(windows).back();
+  Eigen::MatrixXd precision_diagonal(n, 3);
+  for (int axis = 0; axis < 3; ++axis) {
+    Eigen::MatrixXd C = DriftIncrementCovariance(drift, axis, windows, ref);
+    for (Eigen::Index i = 0; i < n; ++i) C(i, i) += white[static_cast<std::size_t>(i)](axis, axis);
+    const Eigen::LLT<Eigen::MatrixXd> llt(C);
+    if (llt.info() != Eigen::Success) return white;  // the solve's own build says why
+    const Eigen::MatrixXd l_inv = llt.matrixL().solve(Eigen::MatrixXd::Identity(n, n));
+    // diag(C^-1) = the squared column norms of L^-1.
+    precision_diagonal.col(axis) = l_inv.colwise().squaredNorm().transpose();
+  }
+  if (!precision_diagonal.allFinite()) return white;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Pose& p = poses_[static_cast<std::size_t>(i)];
+    if (!(p.white_dof > 4.0)) continue;
+    const Eigen::Matrix3d precision = precision_diagonal.row(i).transpose().asDiagonal();
+    white[static_cast<std::size_t>(i)] +=
+        SampleWeightCorrection(p.white_sample, precision, p.white_dof);
   }
   return white;
 }

@@ -242,8 +242,8 @@ class Calibrator {
   bool BuildBlocks(std::string* error);
   // With a drift model: each pose's white covariance as the generalised least squares weighs it,
   // its own plus SampleWeightCorrection with its block of the inverse of the poses' joint
-  // covariance under `drift` (core/estimation/pose_record.h). The poses' own when that
-  // covariance cannot be built (BuildGlsWhitening then says why).
+  // covariance under `drift` (core/estimation/pose_record.h; the block's diagonal, axis by axis).
+  // The poses' own when that covariance cannot be factored (BuildGlsWhitening then says why).
   std::vector<Eigen::Matrix3d> WeighedWhites(const BiasDrift& drift) const;
   int moves_ = 0, moves_refused_ = 0;
   std::string last_move_refusal_;
