@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <fmt/format.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -13,11 +14,49 @@
 
 namespace turncal::daemon {
 
+namespace {
+
+// Opens `path` as it is (following links, without creating it) and writes `content` into it.
+bool WriteThrough(const std::string& path, std::string_view content, std::string* error) {
+  auto fail = [&](const std::string& what) {
+    if (error) *error = fmt::format("{}: {}", what, std::strerror(errno));
+    return false;
+  };
+  const int fd = ::open(path.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
+  if (fd < 0) return fail(fmt::format("cannot open '{}'", path));
+  std::size_t done = 0;
+  while (done < content.size()) {
+    const ssize_t n = ::write(fd, content.data() + done, content.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const bool ok = fail(fmt::format("cannot write '{}'", path));
+      ::close(fd);
+      return ok;
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  if (::close(fd) != 0) return fail(fmt::format("cannot close '{}'", path));
+  return true;
+}
+
+}  // namespace
+
 bool WriteFileAtomically(const std::string& path, std::string_view content, std::string* error) {
   auto fail = [&](const std::string& what) {
     if (error) *error = fmt::format("{}: {}", what, std::strerror(errno));
     return false;
   };
+  // A path that exists and is not a regular file (/dev/null, /dev/stdout, a pipe, a symbolic
+  // link) is written through, not replaced: renaming over it replaced /dev/null with a regular
+  // file for every later process on the host (turncald --result-out /dev/null, 2026-11-27).
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    if (S_ISDIR(st.st_mode)) {
+      errno = EISDIR;
+      return fail(fmt::format("cannot write '{}'", path));
+    }
+    return WriteThrough(path, content, error);
+  }
   const std::string tmp = fmt::format("{}.tmp.{}", path, ::getpid());
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) return fail(fmt::format("cannot create '{}'", tmp));

@@ -2,7 +2,9 @@
 // Whole files of the state directory. WriteFileAtomically writes a whole file so that a reader
 // sees either the old file or the new one, never a part: a temporary file beside it, written and
 // fsynced, renamed over the target, and the directory fsynced (DESIGN.md: "a published
-// calibration is never lost or half-written"). ReadJsonFile reads one JSON document.
+// calibration is never lost or half-written"). A path that exists and is not a regular file
+// (/dev/null, /dev/stdout, a pipe, a symbolic link) is written through instead, never replaced;
+// a directory is refused. ReadJsonFile reads one JSON document.
 
 #include <filesystem>
 #include <nlohmann/json_fwd.hpp>
