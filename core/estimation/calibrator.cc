@@ -196,9 +196,9 @@ bool Calibrator::BuildBlocks(std::string* error) {
   }
   std::vector<TimeWindow> windows;
   for (const auto& p : poses_) windows.push_back(p.window);
-  const std::vector<Eigen::Matrix3d> white = WeighedWhites(drift_);
+  gls_white_ = WeighedWhites(drift_);
   GlsWhitening gls;
-  if (!BuildGlsWhitening(windows, white, drift_, &gls, error)) return false;
+  if (!BuildGlsWhitening(windows, gls_white_, drift_, &gls, error)) return false;
   order_ = gls.order;
   gls_w_ = gls.W;
   const int n = num_poses();
@@ -281,13 +281,12 @@ DriftScale Calibrator::IdentifyDrift(const Estimate& est) const {
   std::vector<Eigen::Vector3d> white;
   std::vector<TimeWindow> windows;
   Jacobian3 Ji;
-  const std::vector<Eigen::Matrix3d> weighed = WeighedWhites(drift_);
   for (int i = 0; i < n; ++i) {
     const Pose& p = poses_[static_cast<std::size_t>(i)];
     MeasuredMinusPredicted(p, est.theta, &Ji);
     J.middleRows<3>(3 * i) = Ji;
     r.segment<3>(3 * i) = est.residuals[static_cast<std::size_t>(i)].raw;
-    white.push_back(weighed[static_cast<std::size_t>(i)].diagonal());
+    white.push_back(gls_white_[static_cast<std::size_t>(i)].diagonal());
     windows.push_back(p.window);
   }
   return IdentifyDriftScale(J, r, white, windows, options_.drift, options_.drift_scale);

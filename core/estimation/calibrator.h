@@ -250,6 +250,9 @@ class Calibrator {
   std::vector<ceres::CostFunction*> blocks_;
   std::vector<std::unique_ptr<ceres::CostFunction>> gls_blocks_;
   Eigen::MatrixXd gls_w_;
+  // The whites the last BuildBlocks weighed with (WeighedWhites at drift_): IdentifyDrift's,
+  // right after the solve that built them.
+  std::vector<Eigen::Matrix3d> gls_white_;
   std::vector<int> order_;
 
   CalibratorOptions options_;

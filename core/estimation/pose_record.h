@@ -67,8 +67,8 @@ inline Eigen::Matrix3d SampleWeightCorrection(const Eigen::Matrix3d& w_hat,
 
 // The covariance of a triad's mean as an estimator weighs it alone (its pose's error all white
 // noise): SampleMeanCovariance scaled by nu / (nu - 4) (SampleWeightCorrection with P = W^-1).
-// The free calibrator uses it; the turntable calibrator
-// corrects each pose for its share of white noise (SampleWeightCorrection).
+// The free calibrator uses it; the turntable calibrator corrects each pose for its share of
+// white noise (SampleWeightCorrection).
 inline Eigen::Matrix3d WeighedMeanCovariance(const TriadStats& s) {
   const Eigen::Matrix3d w = SampleMeanCovariance(s);
   const double nu = SampleMeanDof(s);

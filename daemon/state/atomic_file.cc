@@ -16,6 +16,18 @@ namespace turncal::daemon {
 
 namespace {
 
+// Writes all of `content` to `fd` (retrying short writes and EINTR); false with errno set.
+bool WriteAll(int fd, std::string_view content) {
+  std::size_t done = 0;
+  while (done < content.size()) {
+    const ssize_t n = ::write(fd, content.data() + done, content.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) return false;
+    done += static_cast<std::size_t>(n);
+  }
+  return true;
+}
+
 // Opens `path` as it is (following links, without creating it) and writes `content` into it.
 bool WriteThrough(const std::string& path, std::string_view content, std::string* error) {
   auto fail = [&](const std::string& what) {
@@ -24,16 +36,10 @@ bool WriteThrough(const std::string& path, std::string_view content, std::string
   };
   const int fd = ::open(path.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
   if (fd < 0) return fail(fmt::format("cannot open '{}'", path));
-  std::size_t done = 0;
-  while (done < content.size()) {
-    const ssize_t n = ::write(fd, content.data() + done, content.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      const bool ok = fail(fmt::format("cannot write '{}'", path));
-      ::close(fd);
-      return ok;
-    }
-    done += static_cast<std::size_t>(n);
+  if (!WriteAll(fd, content)) {
+    const bool ok = fail(fmt::format("cannot write '{}'", path));
+    ::close(fd);
+    return ok;
   }
   if (::close(fd) != 0) return fail(fmt::format("cannot close '{}'", path));
   return true;
@@ -60,17 +66,11 @@ bool WriteFileAtomically(const std::string& path, std::string_view content, std:
   const std::string tmp = fmt::format("{}.tmp.{}", path, ::getpid());
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) return fail(fmt::format("cannot create '{}'", tmp));
-  std::size_t done = 0;
-  while (done < content.size()) {
-    const ssize_t n = ::write(fd, content.data() + done, content.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      const bool ok = fail(fmt::format("cannot write '{}'", tmp));
-      ::close(fd);
-      ::unlink(tmp.c_str());
-      return ok;
-    }
-    done += static_cast<std::size_t>(n);
+  if (!WriteAll(fd, content)) {
+    const bool ok = fail(fmt::format("cannot write '{}'", tmp));
+    ::close(fd);
+    ::unlink(tmp.c_str());
+    return ok;
   }
   if (::fsync(fd) != 0) {
     const bool ok = fail(fmt::format("cannot sync '{}'", tmp));
