@@ -5,7 +5,8 @@
 # each parameter scored at the held-out temperatures. One JSON line per row on standard output
 # (tests/bench/thermal_table.py makes the table), a progress line per row on standard error.
 #   tests/bench/thermal_matrix.sh BUILD_DIR [RUNS=200] [JOBS=2] [SEED=1]
-# About 50 minutes at 200 runs with 2 jobs on a 2-core host (a gyro12 row 3-6 minutes).
+# About 75 minutes at 200 runs with 2 jobs on a 2-core host, alone (an accel13 or mag13 row 4-7
+# minutes, a gyro12 row 6-10).
 set -euo pipefail
 BUILD=${1:?usage: thermal_matrix.sh BUILD_DIR [RUNS] [JOBS] [SEED]}
 RUNS=${2:-200}
