@@ -134,6 +134,10 @@ void AppendCorrectedLine(std::string* out, const Sample& sample, const Corrected
                          bool with_raw, bool with_sigma) {
   *out += "{\"class\":\"CORRECTED\"";
   AppendSampleTime(out, sample);
+  if (c.t_sensor_s) {
+    *out += ",\"t_sensor\":";
+    AppendFixed9(out, *c.t_sensor_s);
+  }
   if (c.acc_mps2) AppendTriad(out, "acc", *c.acc_mps2);
   if (c.acc_frame) {
     *out += ",\"acc_frame\":\"";

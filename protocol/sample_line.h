@@ -26,6 +26,8 @@ struct CorrectedSample {
   const char* mag_frame = nullptr;
   const char* gyr_frame = nullptr;
   std::vector<std::pair<std::string, int>> versions;  // model, active version
+  // The sample on the sensor clock of pose records (t_sensor_start, t_sensor_end), when known.
+  std::optional<double> t_sensor_s;
   // A calibration over temperature that corrected this sample at another temperature than the
   // sample's: model, "below_range" | "above_range" | "no_temperature" (docs/THERMAL.md).
   std::vector<std::pair<std::string, const char*>> temperature_flags;

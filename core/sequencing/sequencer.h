@@ -171,6 +171,13 @@ class Sequencer {
 
   bool busy() const { return state_ == State::kWaiting || state_ == State::kCollecting; }
   const NoiseProfile* noise() const { return detector_ ? &detector_->profile() : nullptr; }
+  // The sensor clock of the records' t_sensor_start/t_sensor_end for a sample with device time
+  // `t_device_s` (the device clock continued across its resets); nullopt before the sequencer has
+  // seen a device time.
+  std::optional<double> SensorTimeOfDevice(double t_device_s) const {
+    if (!sensor_last_device_s_) return std::nullopt;
+    return t_device_s + sensor_offset_s_;
+  }
   const StillnessDetector* detector() const { return detector_.get(); }
   // Over the whole stream.
   const SampleCounts& totals() const { return totals_; }

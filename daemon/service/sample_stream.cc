@@ -25,6 +25,7 @@ void SampleStream::Send(const SocketServer& server, const Station& station, int 
       if (!tried ||
           (w.uncertainty && !c.acc_sigma && !c.mag_sigma && !c.gyr_sigma && have_correction)) {
         have_correction = station.Correct(device, station_sample, &c, w.uncertainty);
+        c.t_sensor_s = station.SensorTimeOf(device, station_sample);
         tried = true;
       }
       if (!have_correction) {

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <ctime>
 #include <limits>
 #include <mutex>
@@ -86,6 +87,12 @@ int Station::DeviceIndex(const std::string& name) const {
 
 const NoiseProfile* Station::NoiseOf(int device) const {
   return devices_[static_cast<std::size_t>(device)]->sequencer->noise();
+}
+
+std::optional<double> Station::SensorTimeOf(int device, const Sample& sample) const {
+  if (!sample.t_device_s || !std::isfinite(*sample.t_device_s)) return std::nullopt;
+  return devices_[static_cast<std::size_t>(device)]->sequencer->SensorTimeOfDevice(
+      *sample.t_device_s);
 }
 
 const MeasurementModel* Station::ModelOf(const std::string& device,

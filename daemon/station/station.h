@@ -177,6 +177,9 @@ class Station : public ReplayTarget, private CalibrationHost {
   // Per device: poses, the pose being collected (its last progress), sample counts, and per model
   // the gate's verdict and the active version (`status` on the socket).
   nlohmann::json Status(int device) const;
+  // SAMPLE on DEVICE's sensor clock (its pose records' t_sensor_start, t_sensor_end): nullopt
+  // when the sample has no device time or the sequencer has seen none yet.
+  std::optional<double> SensorTimeOf(int device, const Sample& sample) const;
   // The noise the device's sequencer measured (nullptr before it has).
   const NoiseProfile* NoiseOf(int device) const;
 

@@ -38,7 +38,7 @@ import sys
 import tempfile
 import time
 
-from live_session import (check, cube_poses, failures, finish_dir, sending_times,
+from live_session import (check, cube_poses, failures, finish_dir, in_window,
                           start_daemon_on_mip, wait_for)
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
@@ -117,19 +117,15 @@ def solve3(A, y):
 
 
 def windows_and_lines(path):
-    """Captured windows (in sending times, as the sequencer keeps them) and the CORRECTED lines
-    with raw, each given its sending time "t_sent" (a loaded daemon reads in bursts: read times
-    would put samples of a move inside a pose's window)."""
+    """The captured pose records and the CORRECTED lines with raw: a record's lines are those
+    whose sensor time is inside its window (live_session.in_window)."""
     windows, lines = {}, []
     for line in open(path):
         j = json.loads(line)
         if j.get("class") == "POSE_CAPTURED" and j.get("device") == "imu":
-            windows[j["index"]] = (j["record"]["t_start"], j["record"]["t_end"])
+            windows[j["index"]] = j["record"]
         elif j.get("class") == "CORRECTED" and "acc_sigma" in j and "raw" in j:
             lines.append(j)
-    if lines:
-        for j, t in zip(lines, sending_times(lines)):
-            j["t_sent"] = t
     return windows, lines
 
 
@@ -287,8 +283,8 @@ def restarted_device(d, sim, streams, written):
     truth2 = json.load(open(f"{d}/truth2.json"))
     windows, lines = windows_and_lines(f"{d}/watch2.jsonl")
     worst_raw, worst_corrected, compared = (0.0, ""), (0.0, ""), 0
-    for index, (t0, t1) in windows.items():
-        inside = [s for s in lines if t0 <= s["t_sent"] <= t1]
+    for index, record in windows.items():
+        inside = in_window(lines, record)
         if len(inside) < 50:
             continue
         raw_z, corrected_z = compare(inside, truth2["poses"][index]["true_output"], truth2,
@@ -361,8 +357,8 @@ def write_as_the_table_leaves_a_pose(d, original):
     worst, compared = (0.0, ""), 0
     streams3 = {"acc": ([[1, 0, 0], [0, 1, 0], [0, 0, 1]], [0, 0, 0]),
                 "mag": ([[1, 0, 0], [0, 1, 0], [0, 0, 1]], [0, 0, 0])}
-    for index, (t0, t1) in windows.items():
-        inside = [x for x in lines3 if t0 <= x["t_sent"] <= t1]
+    for index, record in windows.items():
+        inside = in_window(lines3, record)
         if len(inside) < 50 or index < 2:  # the write ended before pose 1 was captured
             continue
         _, corrected_z = compare(inside, truth3["poses"][index]["true_output"], truth3, streams3,

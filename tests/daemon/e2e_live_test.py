@@ -27,7 +27,7 @@ import sys
 import tempfile
 import time
 
-from live_session import check, failures, sending_times, wait_for
+from live_session import check, failures, gap_free, in_window, wait_for
 import live_session
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
@@ -85,26 +85,37 @@ def check_truth(result, truth, label):
 
 def check_corrected(d, truth, result):
     """Corrected samples in each captured window against the pose's true output."""
-    windows = {}  # (device, index) -> (t_start, t_end)
+    records = {}  # (device, index) -> pose record
+    in_stream = {}  # (device, index) -> samples the window saw (used, outliers and flagged)
     lines = {}  # device -> [CORRECTED line]
     for line in open(f"{d}/watch.jsonl"):
         j = json.loads(line)
         if j.get("class") == "POSE_CAPTURED":
-            r = j["record"]
-            windows[(j["device"], j["index"])] = (r["t_start"], r["t_end"])
+            records[(j["device"], j["index"])] = j["record"]
+            c = j["counts"]
+            in_stream[(j["device"], j["index"])] = c["used"] + c["outliers"] + c["flagged"]
         elif j.get("class") == "CORRECTED":
             lines.setdefault(j["device"], []).append(j)
-    corrected = {}  # device -> [(t_sent_s, sample)]
-    for name, js in lines.items():
-        corrected[name] = list(zip(sending_times(js), js))
+    # Every CORRECTED line carries the sensor time of the records' windows: where the watcher
+    # lost no line, a window holds exactly the samples the sequencer saw in it (the record's and
+    # the outliers and flagged samples it left out).
+    exact, counted = 0, 0
+    for (device, index), r in records.items():
+        inside = in_window(lines.get(device, []), r)
+        if gap_free(lines.get(device, []), inside):
+            counted += 1
+            exact += len(inside) == in_stream[(device, index)]
+    check(counted >= 10 and exact == counted,
+          f"the lines whose t_sensor is in a record's window are its samples: {exact} of "
+          f"{counted} windows without a lost line")
     compared = 0
     worst = (0.0, "")
     for i, name in enumerate(["imu1", "imu2"]):
         t = truth["devices"][i]
-        for (device, index), (t0, t1) in windows.items():
+        for (device, index), r in records.items():
             if device != name:
                 continue
-            inside = [s for ts, s in corrected.get(name, []) if t0 <= ts <= t1 and "acc_sigma" in s]
+            inside = [s for s in in_window(lines.get(name, []), r) if "acc_sigma" in s]
             if len(inside) < 20:
                 continue  # before the first active calibration
             true = t["poses"][index]["true_output"]

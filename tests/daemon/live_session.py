@@ -94,21 +94,27 @@ def start_daemon_on_mip(turncald, d, models):
         stdout=open(f"{d}/daemon.log", "w"), stderr=subprocess.STDOUT)
 
 
-def sending_times(samples):
-    """When each sample was sent, on the host clock: a record's window is in sending times
-    (docs/SEQUENCER.md), a CORRECTED line carries its read time and its device time. The device
-    clock runs at --live-speed times real time: its rate is the median slope (pairs >= 2 s
-    apart) between the promptest reads of each 0.25 s; the offset is the smallest seen."""
-    pts = [(j["t_host_ns"] * 1e-9, j["t_device"]) for j in samples]
-    rate0 = (pts[-1][0] - pts[0][0]) / (pts[-1][1] - pts[0][1])
-    best = {}
-    for h, dv in pts:
-        k = int(h / 0.25)
-        if k not in best or h - rate0 * dv < best[k][0] - rate0 * best[k][1]:
-            best[k] = (h, dv)
-    b = sorted(best.values())
-    slopes = sorted((q[0] - p[0]) / (q[1] - p[1]) for i, p in enumerate(b) for q in b[i + 1:]
-                    if q[0] - p[0] >= 2.0 and q[1] > p[1])
-    rate = slopes[len(slopes) // 2] if slopes else rate0
-    offset = min(h - rate * dv for h, dv in pts)
-    return [min(h, offset + rate * dv) for h, dv in pts]
+def in_window(lines, record):
+    """The CORRECTED lines of a pose record's window: those whose sensor time ("t_sensor", the
+    clock of the record's t_sensor_start and t_sensor_end) is in [t_sensor_start, t_sensor_end):
+    the first sample's time, the last one's plus one sample period (docs/protocol.md). Exact
+    however the daemon's reads bunched up under load; 0.1 ms of slack for the device clock's
+    jitter (a sample period is 1 ms or more)."""
+    t0, t1 = record["t_sensor_start"] - 1e-4, record["t_sensor_end"] - 1e-4
+    return [j for j in lines if "t_sensor" in j and t0 <= j["t_sensor"] < t1]
+
+
+def gap_free(lines, inside):
+    """True when no line of the stream is missing in or next to the window's lines INSIDE (a slow
+    client drops lines): the device times around them step by at most 1.5 sample periods."""
+    if len(inside) < 2:
+        return False
+    times = [j["t_device"] for j in lines]
+    steps = sorted(b - a for a, b in zip(times, times[1:]) if b > a)
+    period = steps[len(steps) // 2]
+    first = next(k for k, j in enumerate(lines) if j is inside[0])
+    last = first + len(inside) - 1
+    if first == 0 or last + 1 >= len(lines) or lines[last] is not inside[-1]:
+        return False
+    span = times[first - 1:last + 2]
+    return all(0 < b - a <= 1.5 * period for a, b in zip(span, span[1:]))
