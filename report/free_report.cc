@@ -67,6 +67,7 @@ std::string FreeReportText(const FreeReportInput& in, bool list_intervals) {
         in.found.last_noise_failure.empty() ? "" : ", the last: " + in.found.last_noise_failure);
   }
   o += fmt::format("{}\n", in.found.summary);
+  if (in.motion) o += in.motion->Summary() + "\n";
   if (list_intervals) {
     o += fmt::format("{:>4} {:>9} {:>9} {:>7} {:>8} {:>7}  {}\n", "#", "start s", "end s",
                      "still s", "samples", "move s", "raw mean (acc, else mag, else gyro)");
@@ -195,9 +196,22 @@ nlohmann::json FreeReportJson(const FreeReportInput& in) {
     m["fit"] = m["fit_check"];
     models.push_back(m);
   }
-  return {{"source", in.source},         {"summary", in.found.summary},
-          {"skipped", in.found.skipped}, {"skip_reasons", in.found.skip_reasons},
-          {"intervals", intervals},      {"models", models}};
+  nlohmann::json out = {{"source", in.source},         {"summary", in.found.summary},
+                        {"skipped", in.found.skipped}, {"skip_reasons", in.found.skip_reasons},
+                        {"intervals", intervals},      {"models", models}};
+  if (in.motion) {
+    const MotionPoints& m = *in.motion;
+    out["motion"] = {{"points", m.points.size()},
+                     {"samples_with_mag", m.samples_with_mag},
+                     {"held", m.held},
+                     {"in_intervals", m.in_intervals},
+                     {"decimated", m.decimated},
+                     {"rate_hz", m.period_s > 0 ? 1.0 / m.period_s : 0.0},
+                     {"sigma", {m.sigma.x(), m.sigma.y(), m.sigma.z()}},
+                     {"noise_source", m.noise_source},
+                     {"summary", m.Summary()}};
+  }
+  return out;
 }
 
 std::string CoverageSphereSvg(const FreeEstimate& fe, const std::string& id) {
@@ -258,7 +272,8 @@ std::string FreeReportHtml(const FreeReportInput& in) {
 
 std::string FreeReportBody(const FreeReportInput& in) {
   std::string o;
-  o += fmt::format("<p>{}<br>{}</p>\n", svg::Escape(in.source), svg::Escape(in.found.summary));
+  o += fmt::format("<p>{}<br>{}{}</p>\n", svg::Escape(in.source), svg::Escape(in.found.summary),
+                   in.motion ? "<br>" + svg::Escape(in.motion->Summary()) : std::string());
   if (!in.lines.empty()) {
     o += "<ul class=\"small\">";
     for (const auto& line : in.lines) o += "<li>" + svg::Escape(line) + "</li>";

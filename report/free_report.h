@@ -11,6 +11,7 @@
 
 #include "core/analysis/free_advice.h"
 #include "core/estimation/free_calibrator.h"
+#include "core/estimation/free_motion.h"
 #include "core/sequencing/free_intervals.h"
 
 namespace turncal::report {
@@ -21,6 +22,8 @@ struct FreeReportInput {
   // Lines under the source (a station's calibrations: each model's version and provenance).
   std::vector<std::string> lines;
   FreeIntervals found;
+  // The magnetometer's samples in motion taken as data (issue 37), when any were looked for.
+  std::optional<MotionPoints> motion;
   FreeContext context;
   std::vector<FreeModelResult> results;
   std::vector<std::optional<OrientationAdvice>> advice;  // per result

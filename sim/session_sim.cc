@@ -29,6 +29,11 @@ bool SessionSimOptions::IsValid(std::string* error) const {
   if (table && !table->IsValid(error)) return false;
   if (chamber && !chamber->IsValid(error)) return false;
   if (chamber && !die.IsValid(error)) return false;
+  if (hand && !hand->IsValid(error)) return false;
+  if (hand && chamber) return fail("a hand's motion in a chamber is not simulated");
+  if (!(mag_rate_hz >= 0 && mag_bandwidth_hz >= 0)) {
+    return fail("the magnetometer's rate and bandwidth must be >= 0");
+  }
   return true;
 }
 

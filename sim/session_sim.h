@@ -27,6 +27,7 @@
 #include "core/planning/table_motion.h"
 #include "core/sequencing/sample.h"
 #include "sim/chamber.h"
+#include "sim/hand_motion.h"
 #include "sim/synthetic.h"
 #include "sim/thermal_truth.h"
 
@@ -86,6 +87,16 @@ struct SessionSimOptions {
   // With a chamber: the poses again and again until the chamber's profile has run (a turntable
   // cycling its poses through a continuous ramp).
   bool repeat_poses_through_chamber = false;
+  // A hand's continuous rotation instead of the table's poses (issue 37; sim/hand_motion.h): at
+  // rest for start_s (0: no still moment at all), then the motion; the poses are ignored and no
+  // pose is announced.
+  std::optional<sim::HandMotion> hand;
+  // The magnetometer's own sample rate, Hz: below rate_hz the device holds its last value
+  // between updates (sample and hold, as MIP devices do; 0: a new value in every sample), and its
+  // bandwidth, Hz: a first-order low-pass on the field before the noise (0: none; a rotating
+  // field's magnitude is then attenuated by 1 / sqrt(1 + (w / (2 pi bandwidth))^2)).
+  double mag_rate_hz = 0.0;
+  double mag_bandwidth_hz = 0.0;
   std::uint64_t seed = 1;
 
   bool IsValid(std::string* error) const;

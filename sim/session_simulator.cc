@@ -61,6 +61,7 @@ struct Segment {
   Eigen::Vector3d from, to;
   bool moving;
   int spin = -1;
+  bool hand = false;  // the hand's motion (HandPath), from t0
   double rate = 0.0, up_s = 0.0, hold_s = 0.0, ripple = 0.0, ripple_hz = 0.0;
   double ripple_phase = 0.0;  // rad, drawn per segment: a table's ripple is not locked to a window
 
@@ -128,7 +129,11 @@ class SessionSimulator {
 
   SimulatedSession Simulate(const std::vector<TablePose>& poses) {
     DrawTruths();
-    PlanSchedule(poses);
+    if (o_.hand) {
+      PlanHand();
+    } else {
+      PlanSchedule(poses);
+    }
     if (o_.chamber && o_.repeat_poses_through_chamber && out_.duration_s > 0 &&
         out_.duration_s < o_.chamber->duration_s()) {
       // The poses again and again until the chamber's profile has run.
@@ -183,6 +188,20 @@ class SessionSimulator {
       die_sum_.assign(1, 0.0);
       param_sum_.assign(1, 0.0);
     }
+  }
+
+  // A hand's motion: at rest where it starts for start_s, then the motion (no pose events).
+  void PlanHand() {
+    hand_.emplace(*o_.hand, o_.seed);
+    Eigen::Vector3d at, rate;
+    hand_->At(0.0, &at, &rate);
+    double t = 0;
+    if (o_.start_s > 0) segments_.push_back({t, t + o_.start_s, at, at, false});
+    t += o_.start_s;
+    Segment s{t, t + o_.hand->duration_s, at, at, false};
+    s.hand = true;
+    segments_.push_back(s);
+    out_.duration_s = t + o_.hand->duration_s;
   }
 
   // The table's time line: at rest at home for start_s, then per pose a move, the settling and
@@ -286,7 +305,9 @@ class SessionSimulator {
   Angles TableAt(std::size_t seg, double tk) const {
     const Segment& s = segments_[seg];
     Angles a;
-    if (s.spin >= 0) {
+    if (s.hand) {
+      hand_->At(tk - s.t0, &a.value, &a.rate);
+    } else if (s.spin >= 0) {
       a.value = s.from;
       const auto [angle, rate] = s.AngleRate(tk - s.t0);
       a.value[s.spin] = angle;
@@ -418,7 +439,24 @@ class SessionSimulator {
     Eigen::Vector3d acc = accel_model_.Predict(*acc_theta, pose) + drift_acc;
     if (!o_.lever_arm_q_m.isZero()) acc += accel_model_.context().mounting * lever_q;
     Eigen::Vector3d mag = mag_model_.Predict(*mag_theta, pose) + drift_mag;
+    if (o_.mag_bandwidth_hz > 0) {
+      // The magnetometer's first-order low-pass, started at the first value.
+      const double alpha = 1.0 - std::exp(-2 * M_PI * o_.mag_bandwidth_hz * dt_);
+      mag_filtered_ =
+          k == 0 ? mag : Eigen::Vector3d(*mag_filtered_ + alpha * (mag - *mag_filtered_));
+      mag = *mag_filtered_;
+    }
     AddWhiteNoise(&acc, &gyr, &mag);
+    if (o_.mag_rate_hz > 0 && o_.mag_rate_hz < o_.rate_hz) {
+      // Sample and hold: a new value at the magnetometer's own instants (the draws above are made
+      // all the same, so that the other triads' noise is as without it).
+      const auto update = static_cast<std::int64_t>(std::floor(tk * o_.mag_rate_hz + 1e-9));
+      if (update != mag_update_ || !mag_held_) {
+        mag_update_ = update;
+        mag_held_ = mag;
+      }
+      mag = *mag_held_;
+    }
     smp.acc_mps2 = acc;
     smp.gyr_radps = gyr;
     smp.mag = mag;
@@ -481,6 +519,10 @@ class SessionSimulator {
   std::vector<Segment> segments_;
   Drift drift_;
   Eigen::Vector3d previous_rate_q_ = Eigen::Vector3d::Zero();
+  std::optional<sim::HandPath> hand_;
+  // The magnetometer's low-pass state and its held value (SessionSimOptions::mag_*).
+  std::optional<Eigen::Vector3d> mag_filtered_, mag_held_;
+  std::int64_t mag_update_ = -1;
   // With a chamber: the die's temperature, and its prefix sums per sample.
   std::optional<DieTemperature> die_;
   std::vector<double> die_sum_;

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <memory>
@@ -10,6 +11,7 @@
 
 #include "core/analysis/free_advice.h"
 #include "core/estimation/free_calibrator.h"
+#include "core/estimation/free_motion.h"
 #include "core/estimation/sensor_class.h"
 #include "core/sequencing/free_intervals.h"
 #include "daemon/state/atomic_file.h"
@@ -41,6 +43,8 @@ struct FreeArgs {
   double max_dwell_s = 60.0;
   double min_coverage_percent = 0.0;
   bool intervals = false;
+  bool still_only = false;
+  int max_motion_points = MotionOptions{}.max_points;
   bool json = false;
   std::string html;
 };
@@ -262,25 +266,30 @@ int Run(const FreeArgs& a) {
     fmt::print(stderr, "turncal free: {}\n", error);
     return 2;
   }
-  FreeIntervalCollector collector(so);
-  for (const Sample& s : samples) collector.Push(s);
-  FreeIntervals found = collector.Finish(samples.back().t_host_ns);
+  // The still intervals, then the magnetometer's samples in motion (issue 37).
+  MotionOptions mo;
+  mo.max_points = a.max_motion_points;
+  FreeCollected collected = CollectFree(samples, so, a.still_only ? nullptr : &mo);
+  const FreeIntervals& found = collected.found;
+  const std::vector<FreeInterval>& data = collected.data;
+  const std::optional<MotionPoints>& motion = collected.motion;
 
   const std::vector<std::string> models =
-      a.models.empty() ? DefaultFreeModels(found.intervals) : Split(a.models);
+      a.models.empty() ? DefaultFreeModels(data) : Split(a.models);
   FreeCalibratorOptions co;
   co.min_coverage = a.min_coverage_percent / 100;
   std::vector<FreeModelResult> results;
-  if (!CalibrateFreeModels(models, found.intervals, context, co, &results, &error)) {
+  if (!CalibrateFreeModels(models, data, context, co, &results, &error)) {
     fmt::print(stderr, "turncal free: {}\n", error);
     return 2;
   }
   report::FreeReportInput input;
   input.source = source;
   input.found = found;
+  input.motion = motion;
   input.context = context;
   input.results = results;
-  input.advice = NextOrientations(results, found.intervals, context);
+  input.advice = NextOrientations(results, data, context);
   bool all_passed = !results.empty();
   for (const auto& r : results) all_passed &= r.estimate.estimate.ok && r.estimate.gate_passed;
   if (!a.html.empty() &&
@@ -379,6 +388,13 @@ void AddFreeCommand(CLI::App* app) {
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   cmd->add_flag("--intervals", a->intervals, "list the static intervals found");
+  cmd->add_flag("--still-only", a->still_only,
+                "the static intervals only: leave out the magnetometer's samples in motion "
+                "(taken by default: the field's magnitude holds while the device turns)");
+  cmd->add_option("--max-motion-points", a->max_motion_points,
+                  "at most this many magnetometer samples in motion (every k-th new value)")
+      ->check(CLI::Range(10, 1000000))
+      ->capture_default_str();
   cmd->add_flag("--json", a->json, "the result as JSON on stdout");
   cmd->add_option("--html", a->html, "write the report (with the coverage sphere) here");
   cmd->callback([a] { throw CLI::RuntimeError(Run(*a)); });

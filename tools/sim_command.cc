@@ -429,6 +429,19 @@ void SetSessionOptions(const SimCommandArgs& args, sim::SimCaptureOptions* optio
   // ppm per deg/s -> relative per rad/s.
   o.gyr_scale_nonlinearity = args.gyr_nonlinearity_ppm_per_dps * 1e-6 * kDegPerRad;
   o.seed = args.seed;
+  if (args.start_s >= 0) o.start_s = args.start_s;
+  o.mag_rate_hz = args.mag_rate_hz;
+  o.mag_bandwidth_hz = args.mag_bandwidth_hz;
+  if (args.hand_s > 0) {
+    sim::HandMotion hand;
+    hand.duration_s = args.hand_s;
+    hand.rate_dps = args.hand_rate_dps;
+    sim::HandPathByName(args.hand_path, &hand.path);
+    hand.pause_every_s = args.hand_pause_every_s;
+    hand.pause_s = args.hand_pause_s;
+    o.hand = hand;
+    options->poses.clear();
+  }
   options->baud = args.baud;
   options->faults = args.faults;
   options->burst_ms = args.burst_ms;

@@ -117,6 +117,36 @@ void AddNoiseAndTableOptions(CLI::App* cmd, SimCommandArgs* args) {
       ->capture_default_str();
   cmd->add_flag("--repeat-poses", args->repeat_poses,
                 "with --chamber: cycle the poses until the chamber's profile has run");
+  cmd->add_option("--hand", args->hand_s,
+                  "turn the device by hand for this many seconds instead of the poses: a "
+                  "continuous smooth rotation, no pose announced (free mode's data; "
+                  "docs/FREE.md \"In motion\")")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--hand-rate", args->hand_rate_dps, "with --hand: the RMS rate, deg/s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--hand-path", args->hand_path,
+                  "with --hand: tumble (every direction), figure8, or planar (about the vertical "
+                  "only, as a vehicle driven in a circle)")
+      ->check(CLI::IsMember({"tumble", "figure8", "planar"}))
+      ->capture_default_str();
+  cmd->add_option("--hand-pauses", args->hand_pause_every_s,
+                  "with --hand: stop and hold still after every this many seconds of motion "
+                  "(0: never)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--hand-pause", args->hand_pause_s, "with --hand-pauses: each pause, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--start", args->start_s,
+                  "seconds at rest before the first move (default 1; 0: no still moment)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--mag-rate", args->mag_rate_hz,
+                  "the magnetometer's own rate, Hz: below --rate the device repeats its last "
+                  "value between updates (default: a new value in every sample)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--mag-bandwidth", args->mag_bandwidth_hz,
+                  "the magnetometer's bandwidth, Hz (a first-order low-pass; default none)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_flag("--no-rate-segments", args->no_rate_segments,
                 "with a gyro model: a table without a rate mode, static poses only (the gyro model "
                 "then learns from the moves between them)");
@@ -223,6 +253,11 @@ void ValidateSimArgs(SimCommandArgs* args) {
                                "--bit-error-rate, --unplug and --lose-reply need --controller");
   } else if (args->lives.size() > 1 || args->protocols.size() > 1) {
     throw CLI::ValidationError("sim", "several --live devices need --controller");
+  }
+  if (args->hand_s > 0 && (!args->controller.empty() || !args->chamber.empty() ||
+                           !args->poses_file.empty() || args->faults)) {
+    throw CLI::ValidationError(
+        "sim", "--hand turns the device by hand: no --controller, --chamber, --poses or --faults");
   }
 }
 

@@ -58,6 +58,17 @@ struct SimCommandArgs {
   double temp_quantum_c = DieThermal{}.quantum_c;
   double temp_hysteresis_c = DieThermal{}.hysteresis_c;
   bool repeat_poses = false;
+  // A hand's continuous rotation instead of the poses (issue 37; sim/hand_motion.h): its length
+  // (0: none), RMS rate, path, pauses; the rest before it; the magnetometer's own rate and
+  // bandwidth (0: every sample, no filter).
+  double hand_s = 0;
+  double hand_rate_dps = 90;
+  std::string hand_path = "tumble";
+  double hand_pause_every_s = 0;
+  double hand_pause_s = 1.0;
+  double start_s = -1;  // negative: SessionSimOptions' (1 s)
+  double mag_rate_hz = 0;
+  double mag_bandwidth_hz = 0;
 };
 
 // Registers `turncal sim`'s options on `cmd`, filling `args`, in the order --help lists them.

@@ -220,7 +220,13 @@ std::vector<std::optional<OrientationAdvice>> NextOrientations(
     auto model = r.estimate.estimate.ok ? MakeFreeModel(r.model, context, &error) : nullptr;
     if (model) {
       FreeData data;
-      data.intervals = intervals;
+      // The magnetometer's samples in motion (issue 37) only for a model of the magnetometer:
+      // the others' hypothetical intervals follow the last still one (gyro9's move from it).
+      for (const auto& iv : intervals) {
+        if (!iv.in_motion || model->sensor() == SensorKind::kMagnetometer) {
+          data.intervals.push_back(iv);
+        }
+      }
       data.context = context;
       for (const auto& u : results) {
         if (u.model == model->upstream() && u.estimate.estimate.ok) {

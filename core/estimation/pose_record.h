@@ -101,6 +101,9 @@ struct PoseRecord {
   // core/sequencing/move_tracker.h): absent for the first pose, a rate segment, or a move the
   // sequencer dropped.
   std::optional<MoveRecord> move_in;
+  // A sample in motion rather than a still window (free mode's magnetometer in motion, issue
+  // 37; core/estimation/free_motion.h): one value, its covariance the sample's noise.
+  bool in_motion = false;
 
   double duration_s() const { return t_end_s - t_start_s; }
   bool has_sensor_window() const {

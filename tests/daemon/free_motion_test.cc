@@ -1,0 +1,183 @@
+// Issue 37: the magnetometer from a hand's continuous rotation. A hand rotation simulated as a
+// device's bytes (sim/hand_motion.h; the magnetometer slower than the stream, no still moment),
+// decoded as `turncal free` decodes a capture, then exactly what `turncal free` fits
+// (CollectFree, CalibrateFreeModels): the estimate against the free model's truth
+// (sim/free_truth.h) within 4 sigma, sigma from the Fisher information.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "core/estimation/free_calibrator.h"
+#include "core/estimation/free_motion.h"
+#include "core/estimation/sensor_class.h"
+#include "daemon/station/capture_replay.h"
+#include "sim/capture.h"
+#include "sim/free_truth.h"
+
+namespace turncal {
+namespace {
+
+// The samples of device 0, as `turncal free` collects them from a capture.
+class SampleSink : public daemon::ReplayTarget {
+ public:
+  void OnSample(int device, const Sample& s) override {
+    if (device == 0) samples.push_back(s);
+  }
+  bool OnAnnounce(const Announcement&, const std::vector<int>&, std::string*) override {
+    return true;
+  }
+  void OnTick(std::int64_t) override {}
+  void OnFinish(std::int64_t) override {}
+  std::vector<Sample> samples;
+};
+
+std::vector<Sample> Decode(const sim::SimCapture& c) {
+  std::vector<std::uint8_t> bytes;
+  const std::string header = drivers::EncodeCaptureHeader(c.header);
+  bytes.assign(header.begin(), header.end());
+  for (const auto& r : c.records) {
+    drivers::AppendCaptureRecord(r.type, r.device, r.t_ns, r.payload, &bytes);
+  }
+  drivers::CaptureReader reader;
+  std::string error;
+  EXPECT_TRUE(reader.Parse(std::move(bytes), &error)) << error;
+  SampleSink sink;
+  daemon::ReplayStats stats;
+  EXPECT_TRUE(daemon::ReplayInto(&reader, &sink, false, {}, &stats, &error)) << error;
+  return std::move(sink.samples);
+}
+
+struct HandCase {
+  drivers::Protocol protocol = drivers::Protocol::kMip;
+  double rate_hz = 1000, mag_rate_hz = 100;
+  std::string sensor_class = "industrial";
+  sim::HandMotion hand;
+  bool class_noise = true;  // the stillness tests' (and the points') noise from the class
+  std::uint64_t seed = 7;
+};
+
+struct HandFit {
+  sim::SimCapture capture;
+  FreeCollected collected;
+  std::vector<FreeModelResult> results;
+  FreeContext context;
+};
+
+HandFit Fit(const HandCase& k, const std::vector<std::string>& models) {
+  HandFit f;
+  sim::SimCaptureOptions o;
+  o.protocol = k.protocol;
+  o.accel_model = "accel13";
+  o.mag_model = "mag13";
+  o.poses.clear();
+  EXPECT_TRUE(SensorClassByName(k.sensor_class, &o.session.sensor));
+  o.session.rate_hz = k.rate_hz;
+  o.session.mag_rate_hz = k.mag_rate_hz;
+  o.session.start_s = 0.0;  // no still moment
+  o.session.hand = k.hand;
+  o.session.seed = k.seed;
+  std::string error;
+  EXPECT_TRUE(sim::BuildSimCapture(o, &f.capture, &error)) << error;
+  const std::vector<Sample> samples = Decode(f.capture);
+  SequencerOptions so;
+  so.dwell_s = 1.0;
+  if (k.class_noise) {
+    so.noise = NoiseProfileForClass(o.session.sensor, k.rate_hz, true);
+  }
+  MotionOptions mo;
+  f.collected = CollectFree(samples, so, &mo);
+  FreeCalibratorOptions co;
+  EXPECT_TRUE(CalibrateFreeModels(models, f.collected.data, f.context, co, &f.results, &error))
+      << error;
+  return f;
+}
+
+// Every parameter of `r` within 4 sigma of the truth for the capture's sensor (the bias as the
+// mean over the motion: no drift model).
+void ExpectHonest(const HandFit& f, const FreeModelResult& r, const std::string& label) {
+  ASSERT_TRUE(r.estimate.estimate.ok) << label << ": " << r.estimate.estimate.error;
+  Eigen::VectorXd truth;
+  std::string error;
+  const TimeWindow whole{0.0, f.capture.session.duration_s};
+  ASSERT_TRUE(sim::FreeTruth(f.capture, r.model, f.context, whole, &truth, &error)) << error;
+  const Estimate& e = r.estimate.estimate;
+  for (int i = 0; i < e.theta.size(); ++i) {
+    const double z = (e.theta[i] - truth[i]) / e.sigma[i];
+    EXPECT_LT(std::abs(z), 4.0) << label << ": " << e.parameters[static_cast<std::size_t>(i)].name
+                                << " estimate " << e.theta[i] << " truth " << truth[i] << " sigma "
+                                << e.sigma[i];
+  }
+}
+
+TEST(FreeMotion, AHandRotationOnAMipStreamGivesAnHonestEllipsoid) {
+  HandCase k;  // 10 s at 1 kHz, the magnetometer at 100 Hz, no still moment
+  const HandFit f = Fit(k, {"magellipsoid"});
+  ASSERT_TRUE(f.collected.motion);
+  const MotionPoints& m = *f.collected.motion;
+  EXPECT_EQ(f.collected.found.intervals.size(), 0u);
+  // 10 000 samples, 1000 new magnetometer values: 9000 held repeats dropped.
+  EXPECT_NEAR(static_cast<double>(m.points.size()), 1000.0, 2.0) << m.Summary();
+  EXPECT_NEAR(static_cast<double>(m.held), 9000.0, 2.0) << m.Summary();
+  EXPECT_NEAR(1.0 / m.period_s, 100.0, 0.1) << m.Summary();
+  ASSERT_EQ(f.results.size(), 1u);
+  const FreeModelResult& r = f.results[0];
+  EXPECT_EQ(r.model, "magellipsoid") << r.note;
+  EXPECT_TRUE(r.estimate.gate_passed);
+  EXPECT_GT(r.estimate.estimate.p_value, 1e-3) << r.estimate.estimate.chi2;
+  ExpectHonest(f, r, "mip 1 kHz");
+}
+
+TEST(FreeMotion, AnXbusConsumerWithPausesGivesAnHonestEllipsoid) {
+  HandCase k;
+  k.protocol = drivers::Protocol::kXbus;
+  k.rate_hz = 100;
+  k.mag_rate_hz = 0;  // a new value in every sample
+  k.sensor_class = "consumer";
+  k.hand.duration_s = 20;
+  k.hand.rate_dps = 60;
+  k.hand.pause_every_s = 4;
+  k.hand.pause_s = 3.0;
+  k.seed = 11;
+  const HandFit f = Fit(k, {"magellipsoid"});
+  ASSERT_TRUE(f.collected.motion);
+  // The pauses' still stretches are intervals; the samples in motion are the rest.
+  EXPECT_GE(f.collected.found.intervals.size(), 1u) << f.collected.found.summary;
+  EXPECT_GT(f.collected.motion->in_intervals, 50) << f.collected.motion->Summary();
+  ASSERT_EQ(f.results.size(), 1u);
+  EXPECT_EQ(f.results[0].model, "magellipsoid") << f.results[0].note;
+  EXPECT_GT(f.results[0].estimate.estimate.p_value, 1e-3);
+  ExpectHonest(f, f.results[0], "xbus consumer, pauses");
+}
+
+TEST(FreeMotion, WithoutAnyNoiseFigureTheNoiseIsTheScatterAndSaidSo) {
+  HandCase k;
+  k.class_noise = false;  // a stream never still: the noise meter never measures
+  const HandFit f = Fit(k, {"magellipsoid"});
+  ASSERT_TRUE(f.collected.motion);
+  const MotionPoints& m = *f.collected.motion;
+  EXPECT_FALSE(f.collected.found.noise.has_value());
+  EXPECT_NE(m.noise_source.find("scatter"), std::string::npos) << m.noise_source;
+  // The industrial class's 0.5 mG per sample, from 1000 points' robust scatter: within 10 %.
+  EXPECT_NEAR(m.sigma.x(), 5e-4, 5e-5) << m.Summary();
+  ASSERT_EQ(f.results.size(), 1u);
+  ExpectHonest(f, f.results[0], "noise from the scatter");
+}
+
+TEST(FreeMotion, ARotationAboutOneAxisCarriesNoCalibrationAndSaysWhy) {
+  HandCase k;
+  k.hand.path = sim::HandMotion::Path::kPlanar;
+  const HandFit f = Fit(k, {"magellipsoid"});
+  ASSERT_EQ(f.results.size(), 1u);
+  const FreeModelResult& r = f.results[0];
+  // The field sweeps one cone: neither an ellipsoid nor a sphere is determined.
+  EXPECT_FALSE(r.estimate.gate_passed) << r.model;
+  EXPECT_EQ(r.model, "magsphere") << r.note;
+  EXPECT_NE(r.note.find("cannot carry an ellipsoid"), std::string::npos) << r.note;
+  EXPECT_LT(r.estimate.coverage.fraction(), 0.1);
+}
+
+}  // namespace
+}  // namespace turncal
