@@ -16,7 +16,9 @@
 #include <thread>
 
 #include "core/estimation/free_calibrator.h"
+#include "core/estimation/free_motion.h"
 #include "core/estimation/sensor_class.h"
+#include "daemon/station/capture_replay.h"
 #include "daemon/station/free_pipeline.h"
 #include "daemon/station/replay_once.h"
 #include "montecarlo/parallel_runs.h"
@@ -72,6 +74,14 @@ class FreeMonteCarlo {
       *error = "the simulator's magnetometer is an ellipsoid";
       return false;
     }
+    if (o_.hand_s > 0 && model_->sensor() != SensorKind::kMagnetometer) {
+      *error = "a hand's rotation calibrates the magnetometer: --model magellipsoid or accmag";
+      return false;
+    }
+    if (o_.hand_s > 0 && !sim::HandPathByName(o_.hand_path, &hand_path_)) {
+      *error = "unknown hand path '" + o_.hand_path + "' (tumble, figure8, planar)";
+      return false;
+    }
     if (!station_.IsValid(error)) return false;
     error->clear();
     gyro_ = model_->sensor() == SensorKind::kGyroscope;
@@ -88,6 +98,10 @@ class FreeMonteCarlo {
   // against the truth. A step that fails leaves its error in `out`.
   void RunOne(int run, FreeRun* out) {
     const std::uint64_t seed = o_.seed * 1000003 + static_cast<std::uint64_t>(run);
+    if (o_.hand_s > 0) {
+      RunHand(run, seed, out);
+      return;
+    }
     sim::SimCapture capture;
     daemon::ReplayOnceOutcome replay;
     const std::string path = (dir_ / fmt::format("run-{}.tcap", run)).string();
@@ -112,6 +126,66 @@ class FreeMonteCarlo {
     if (o_.on_run) o_.on_run(run, *out, scored, parameters_);
   }
 
+  // One hand's rotation: simulated as bytes, decoded, then what `turncal free` fits (the still
+  // intervals and the magnetometer's samples in motion, the stillness tests' noise the class's
+  // as with --sensor-class) with the station's context; scored against the truth.
+  void RunHand(int run, std::uint64_t seed, FreeRun* out) {
+    sim::SimCapture capture;
+    if (!sim::BuildSimCapture(SimulationFor(seed), &capture, &out->error)) return;
+    std::vector<std::uint8_t> bytes;
+    const std::string header = drivers::EncodeCaptureHeader(capture.header);
+    bytes.assign(header.begin(), header.end());
+    for (const auto& r : capture.records) {
+      drivers::AppendCaptureRecord(r.type, r.device, r.t_ns, r.payload, &bytes);
+    }
+    drivers::CaptureReader reader;
+    std::vector<Sample> samples;
+    daemon::ReplayStats stats;
+    if (!reader.Parse(std::move(bytes), &out->error) ||
+        !daemon::DecodeCaptureSamples(&reader, 0, &samples, &stats, &out->error)) {
+      return;
+    }
+    SequencerOptions so;
+    so.dwell_s = 1.0;
+    so.noise = NoiseProfileForClass(sensor_, capture.session_options.rate_hz, true);
+    MotionOptions mo;
+    const FreeCollected collected = CollectFree(samples, so, &mo);
+    std::vector<FreeModelResult> results;
+    if (!CalibrateFreeModels({o_.model}, collected.data, context_, FreeCalibratorOptions{},
+                             &results, &out->error)) {
+      return;
+    }
+    const FreeModelResult& r = results.back();
+    const FreeEstimate& fe = r.estimate;
+    out->intervals = fe.intervals;
+    out->gated = true;
+    out->gate = fe.gate_passed;
+    for (const auto& why : fe.gate_reasons) out->reasons.push_back(GateReasonKind(why));
+    if (r.model != o_.model || !fe.estimate.ok) {
+      out->error = r.model != o_.model ? "fitted " + r.model + ": " + r.note : fe.estimate.error;
+      return;
+    }
+    // The bias over the estimate's window (a drift model's latest point), else over the motion.
+    TimeWindow window{0.0, capture.session.duration_s};
+    if (fe.bias_window) {
+      const SessionSimOptions& sim_options = capture.session_options;
+      const auto session_s = [&](double device_s) {
+        return (device_s - sim_options.clock_offset_s) / (1.0 + sim_options.clock_drift_ppm * 1e-6);
+      };
+      window = TimeWindow{session_s(fe.bias_window->t0_s), session_s(fe.bias_window->t1_s)};
+    }
+    if (!sim::FreeTruth(capture, o_.model, context_, window, &out->truth, &out->error)) return;
+    out->theta = fe.estimate.theta;
+    out->sigma = fe.estimate.sigma;
+    out->z = (out->theta - out->truth).cwiseQuotient(out->sigma);
+    out->p_value = fe.estimate.p_value;
+    out->ok = out->z.allFinite();
+    if (!out->ok) out->error = "a sigma is not finite";
+    std::lock_guard<std::mutex> lock(mutex_);
+    const int scored = ++done_;
+    if (o_.on_run) o_.on_run(run, *out, scored, parameters_);
+  }
+
   // The tumble a run simulates: random orientations within the cap, the class's noise, the
   // warm-up; a gyroscope model's runs simulate a gyro12 gyro.
   sim::SimCaptureOptions SimulationFor(std::uint64_t seed) const {
@@ -129,6 +203,19 @@ class FreeMonteCarlo {
     o.session.warmup_tau_s = o_.warmup_tau_s;
     o.session.dwell_s = o_.dwell_s;
     o.session.seed = seed;
+    if (o_.hand_s > 0) {
+      o.poses.clear();
+      sim::HandMotion hand;
+      hand.path = hand_path_;
+      hand.duration_s = o_.hand_s;
+      hand.rate_dps = o_.hand_rate_dps;
+      hand.pause_every_s = o_.hand_pause_every_s;
+      hand.pause_s = o_.hand_pause_s;
+      o.session.hand = hand;
+      o.session.start_s = 0.0;
+      o.session.mag_rate_hz = o_.mag_rate_hz;
+      if (o_.device_rate_hz > 0) o.session.rate_hz = o_.device_rate_hz;
+    }
     return o;
   }
 
@@ -212,6 +299,7 @@ class FreeMonteCarlo {
   std::unique_ptr<FreeModel> model_;
   std::vector<std::string> parameters_;
   bool gyro_ = false;
+  sim::HandMotion::Path hand_path_ = sim::HandMotion::Path::kTumble;
   std::filesystem::path dir_;
   int done_ = 0;  // runs scored, under mutex_
   std::mutex mutex_;

@@ -43,6 +43,20 @@ struct FreeMonteCarloOptions {
   // allows for the same ([station] warmup, warmup_tau_s). 0: none.
   double warmup = 0.0;
   double warmup_tau_s = 60.0;
+  // A hand's continuous rotation (issue 37; sim/hand_motion.h) instead of the table's static
+  // orientations: its length in s (0: the table's tumble), RMS rate, path and pauses (every
+  // pause_every_s of motion a pause of pause_s; 0: none), the device's rate and the
+  // magnetometer's own (0: the protocol's default; a new value in every sample). These runs go
+  // through what `turncal free` fits (the still intervals and the magnetometer's samples in
+  // motion, core/estimation/free_motion.h) with the station's context, not yet through the
+  // station itself.
+  double hand_s = 0.0;
+  double hand_rate_dps = 90.0;
+  std::string hand_path = "tumble";
+  double hand_pause_every_s = 0.0;
+  double hand_pause_s = 3.0;
+  double device_rate_hz = 0.0;
+  double mag_rate_hz = 0.0;
   // Called after each run that reached an estimate of the model, with the run's number, its
   // outcome, the number of such runs so far and the model's parameters (the outcome's order);
   // one call at a time (the runs run on `jobs` threads).

@@ -49,26 +49,6 @@ struct FreeArgs {
   std::string html;
 };
 
-// Samples of one device in time order.
-class FreeCollector : public daemon::ReplayTarget, public drivers::DecoderSink {
- public:
-  explicit FreeCollector(int device) : device_(device) {}
-  void OnSample(int device, const Sample& s) override {
-    if (device == device_) samples.push_back(s);
-  }
-  bool OnAnnounce(const Announcement&, const std::vector<int>&, std::string*) override {
-    return true;
-  }
-  void OnTick(std::int64_t) override {}
-  void OnFinish(std::int64_t) override {}
-  void OnFrame(const drivers::FrameView&) override {}
-  void OnSample(const Sample& s) override { samples.push_back(s); }
-  std::vector<Sample> samples;
-
- private:
-  int device_;
-};
-
 bool EndsWith(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() &&
          s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
@@ -134,7 +114,7 @@ bool ReadSamples(const FreeArgs& a, std::vector<Sample>* out, std::string* sourc
         stats.backwards ? fmt::format(", {} going back in time dropped", stats.backwards) : "");
     return true;
   }
-  FreeCollector collector(0);
+  std::vector<Sample> samples;
   if (format == "tcap") {
     drivers::CaptureReader reader;
     if (!reader.Open(a.files[0], error)) return false;
@@ -149,14 +129,13 @@ bool ReadSamples(const FreeArgs& a, std::vector<Sample>* out, std::string* sourc
         return false;
       }
     }
-    collector = FreeCollector(device);
     daemon::ReplayStats stats;
-    if (!daemon::ReplayInto(&reader, &collector, false, {}, &stats, error)) return false;
+    if (!daemon::DecodeCaptureSamples(&reader, device, &samples, &stats, error)) return false;
     *source = fmt::format("capture, device {}, {} samples ({} pose events ignored: free mode)",
                           reader.header().devices.empty()
                               ? std::string("?")
                               : reader.header().devices[static_cast<std::size_t>(device)].name,
-                          collector.samples.size(), stats.pose_commands);
+                          samples.size(), stats.pose_commands);
   } else if (format == "raw") {
     const auto protocol = drivers::ParseProtocol(a.protocol);
     if (!protocol) {
@@ -164,20 +143,19 @@ bool ReadSamples(const FreeArgs& a, std::vector<Sample>* out, std::string* sourc
       return false;
     }
     drivers::RawStreamStats stats;
-    if (!drivers::ReadRawStream(a.files[0], *protocol, a.rate_hz, &collector.samples, &stats,
-                                error)) {
+    if (!drivers::ReadRawStream(a.files[0], *protocol, a.rate_hz, &samples, &stats, error)) {
       if (error->find("carry no time") != std::string::npos) *error += ": --rate HZ";
       return false;
     }
     const auto& c = stats.decoder;
-    *source = fmt::format("{} stream, {} samples, {} bad frames", a.protocol,
-                          collector.samples.size(), c.bad_checksums + c.bad_structure);
+    *source = fmt::format("{} stream, {} samples, {} bad frames", a.protocol, samples.size(),
+                          c.bad_checksums + c.bad_structure);
   } else {
     *error = fmt::format("unknown format '{}' (auto, tcap, raw, text, imu_tk)", format);
     return false;
   }
-  Rescale(a, &collector.samples);
-  *out = std::move(collector.samples);
+  Rescale(a, &samples);
+  *out = std::move(samples);
   return true;
 }
 

@@ -25,10 +25,12 @@ constexpr Manual kFreeMonteCarloManual = {
     "Repeats simulated tumbles (random orientations of a three-axis table, as bytes, the "
     "announced poses ignored) through free mode, and checks a free model's sigma against "
     "its errors: mean and std of z per parameter, the count beyond 3 sigma, the chi^2 "
-    "p-values against uniform, the gate.",
+    "p-values against uniform, the gate. With --hand, a hand's continuous rotation instead "
+    "(the magnetometer's samples in motion as data, fitted as `turncal free` fits them).",
     "turncal free-montecarlo --model accel9 --runs 200\n"
     "turncal free-montecarlo --model gyro9 --class consumer --runs 200\n"
-    "turncal free-montecarlo --model magellipsoid --cap 20 --runs 50   # low coverage",
+    "turncal free-montecarlo --model magellipsoid --cap 20 --runs 50   # low coverage\n"
+    "turncal free-montecarlo --model magellipsoid --hand 10 --device-rate 1000 --mag-rate 100",
     "0 every parameter's std z in [0.9, 1.1] with |mean z| <= 0.15; 1 otherwise, or no run "
     "gave an estimate; 2 a command-line mistake",
     "docs/ACCURACY.md (\"Without a turntable\")"};
@@ -47,6 +49,12 @@ void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                                     {"protocol", o.protocol},
                                     {"drift", o.drift},
                                     {"warmup", o.warmup},
+                                    {"hand_s", o.hand_s},
+                                    {"hand_rate_dps", o.hand_rate_dps},
+                                    {"hand_path", o.hand_path},
+                                    {"hand_pause_every_s", o.hand_pause_every_s},
+                                    {"device_rate_hz", o.device_rate_hz},
+                                    {"mag_rate_hz", o.mag_rate_hz},
                                     {"runs", o.runs},
                                     {"ok", s.solved},
                                     {"orientations", o.orientations},
@@ -66,20 +74,28 @@ void PrintFreeText(const montecarlo::FreeMonteCarloOptions& o,
                    const montecarlo::FreeMonteCarloSummary& s) {
   int bad = 0;
   const std::string table = ZScoreTable(s.parameters, s.z, true, &bad);
+  const std::string what =
+      o.hand_s > 0
+          ? fmt::format(
+                "{} hand rotations ({}, {} s at {} deg/s RMS{}{})", o.runs, o.hand_path, o.hand_s,
+                o.hand_rate_dps,
+                o.hand_pause_every_s > 0
+                    ? fmt::format(", a {} s pause every {} s", o.hand_pause_s, o.hand_pause_every_s)
+                    : "",
+                o.mag_rate_hz > 0 ? fmt::format(", magnetometer at {} Hz", o.mag_rate_hz) : "")
+          : fmt::format("{} tumbles of {} orientations (up within {:.0f} deg of +z)", o.runs,
+                        o.orientations, o.cap_deg);
   fmt::print(
-      "free {} ({} class, {}, drift {}{}), {} tumbles of {} orientations (up within {:.0f} deg "
-      "of "
-      "+z), "
-      "each as bytes through free mode: {} estimated ({} failed{}), {:.1f} intervals on "
-      "average, gate passed {} of {}\n{}\n{}\nchi^2 p-values against uniform: KS D = {:.3f}, p = "
-      "{:.3g}; per tenth from 0 to 1: {}\nCriteria: std z in [0.9, 1.1] and |mean z| <= 0.15; "
-      "{} of {} parameters fail.\n",
+      "free {} ({} class, {}, drift {}{}), {}, each as bytes through free mode: {} estimated ({} "
+      "failed{}), {:.1f} intervals on average, gate passed {} of {}\n{}\n{}\nchi^2 p-values "
+      "against uniform: KS D = {:.3f}, p = {:.3g}; per tenth from 0 to 1: {}\nCriteria: std z in "
+      "[0.9, 1.1] and |mean z| <= 0.15; {} of {} parameters fail.\n",
       o.model, o.sensor_class, o.protocol, o.drift,
-      o.warmup > 0 ? fmt::format(", warm-up {} bias instabilities", o.warmup) : "", o.runs,
-      o.orientations, o.cap_deg, s.solved, o.runs - s.solved,
-      s.first_error.empty() ? "" : ", the first: " + s.first_error, s.intervals_mean, s.gate_passed,
-      s.gated, s.top_reasons.empty() ? "" : "refused for:\n" + ReasonsText(s), table, s.ks.d,
-      s.ks.p, fmt::join(s.p_value_deciles, " "), bad, s.parameters.size());
+      o.warmup > 0 ? fmt::format(", warm-up {} bias instabilities", o.warmup) : "", what, s.solved,
+      o.runs - s.solved, s.first_error.empty() ? "" : ", the first: " + s.first_error,
+      s.intervals_mean, s.gate_passed, s.gated,
+      s.top_reasons.empty() ? "" : "refused for:\n" + ReasonsText(s), table, s.ks.d, s.ks.p,
+      fmt::join(s.p_value_deciles, " "), bad, s.parameters.size());
 }
 
 // Every run's estimate, truth, sigma and z on standard error (--verbose), and the progress.
@@ -176,6 +192,30 @@ void AddFreeMonteCarloCommand(CLI::App* app) {
   cmd->add_option("--warmup-tau", o->warmup_tau_s, "the warm-up's time constant, s")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_option("--hand", o->hand_s,
+                  "a hand's continuous rotation of this many seconds instead of the table's "
+                  "orientations (magellipsoid, accmag): the magnetometer's samples in motion as "
+                  "data, as `turncal free` fits them")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--hand-rate", o->hand_rate_dps, "with --hand: the RMS rate, deg/s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--hand-path", o->hand_path, "with --hand: tumble, figure8 or planar")
+      ->check(CLI::IsMember({"tumble", "figure8", "planar"}))
+      ->capture_default_str();
+  cmd->add_option("--hand-pauses", o->hand_pause_every_s,
+                  "with --hand: a pause after every this many seconds of motion (0: none)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--hand-pause", o->hand_pause_s, "with --hand-pauses: each pause, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--device-rate", o->device_rate_hz,
+                  "the device's sample rate, Hz (default: the protocol's)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--mag-rate", o->mag_rate_hz,
+                  "the magnetometer's own rate, Hz: below the device's it holds its value "
+                  "between updates (default: a new value in every sample)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_flag("--verbose", a->verbose,
                 "every run's estimate, truth, sigma and z per parameter on standard error");
   cmd->add_flag("--json", a->json, "one JSON object");

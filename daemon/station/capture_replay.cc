@@ -214,4 +214,31 @@ bool ReplayCapture(drivers::CaptureReader* reader, const ReplayOptions& options,
   return true;
 }
 
+namespace {
+
+class SampleSink : public ReplayTarget {
+ public:
+  SampleSink(int device, std::vector<Sample>* out) : device_(device), out_(out) {}
+  void OnSample(int device, const Sample& s) override {
+    if (device == device_) out_->push_back(s);
+  }
+  bool OnAnnounce(const Announcement&, const std::vector<int>&, std::string*) override {
+    return true;
+  }
+  void OnTick(std::int64_t) override {}
+  void OnFinish(std::int64_t) override {}
+
+ private:
+  int device_;
+  std::vector<Sample>* out_;
+};
+
+}  // namespace
+
+bool DecodeCaptureSamples(drivers::CaptureReader* reader, int device, std::vector<Sample>* out,
+                          ReplayStats* stats, std::string* error) {
+  SampleSink sink(device, out);
+  return ReplayInto(reader, &sink, false, {}, stats, error);
+}
+
 }  // namespace turncal::daemon

@@ -53,6 +53,12 @@ bool ReplayInto(drivers::CaptureReader* reader, ReplayTarget* target, bool annou
                 const std::function<bool(int device, const Sample&)>& sample_filter,
                 ReplayStats* stats, std::string* error);
 
+// The samples of device `device` (an index of the header) in the records `reader` has left, in
+// time order, decoded as a replay decodes them (free mode's input: `turncal free`, the Monte
+// Carlo of a hand's rotation); pose events counted in `stats`, not announced.
+bool DecodeCaptureSamples(drivers::CaptureReader* reader, int device, std::vector<Sample>* out,
+                          ReplayStats* stats, std::string* error);
+
 struct ReplayOptions {
   SequencerOptions sequencer;
   // Schedule mode: poses in order, assigned to still segments; the capture's pose events are

@@ -20,20 +20,6 @@
 namespace turncal {
 namespace {
 
-// The samples of device 0, as `turncal free` collects them from a capture.
-class SampleSink : public daemon::ReplayTarget {
- public:
-  void OnSample(int device, const Sample& s) override {
-    if (device == 0) samples.push_back(s);
-  }
-  bool OnAnnounce(const Announcement&, const std::vector<int>&, std::string*) override {
-    return true;
-  }
-  void OnTick(std::int64_t) override {}
-  void OnFinish(std::int64_t) override {}
-  std::vector<Sample> samples;
-};
-
 std::vector<Sample> Decode(const sim::SimCapture& c) {
   std::vector<std::uint8_t> bytes;
   const std::string header = drivers::EncodeCaptureHeader(c.header);
@@ -44,10 +30,10 @@ std::vector<Sample> Decode(const sim::SimCapture& c) {
   drivers::CaptureReader reader;
   std::string error;
   EXPECT_TRUE(reader.Parse(std::move(bytes), &error)) << error;
-  SampleSink sink;
+  std::vector<Sample> samples;
   daemon::ReplayStats stats;
-  EXPECT_TRUE(daemon::ReplayInto(&reader, &sink, false, {}, &stats, &error)) << error;
-  return std::move(sink.samples);
+  EXPECT_TRUE(daemon::DecodeCaptureSamples(&reader, 0, &samples, &stats, &error)) << error;
+  return samples;
 }
 
 struct HandCase {
