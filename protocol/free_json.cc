@@ -165,6 +165,7 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
                       {"note", r.note},
                       {"ok", e.ok},
                       {"intervals", fe.intervals}};
+  if (fe.motion_points > 0) m["motion_points"] = fe.motion_points;
   nlohmann::json params = nlohmann::json::object();
   const bool values = e.ok && e.theta.size() == static_cast<Eigen::Index>(e.parameters.size()) &&
                       e.sigma.size() == e.theta.size();

@@ -95,10 +95,13 @@ std::string FreeReportText(const FreeReportInput& in, bool list_intervals) {
       continue;
     }
     o += fmt::format(
-        "  {} intervals, {} residuals; rank {} of {} (condition {:.3g}); chi2/dof {:.2f} (p "
+        "  {} intervals{}, {} residuals; rank {} of {} (condition {:.3g}); chi2/dof {:.2f} (p "
         "{:.2g})\n",
-        fe.intervals, fe.residuals, e.rank, e.parameters.size(), e.condition,
-        e.dof > 0 ? e.chi2 / e.dof : 0.0, e.p_value);
+        fe.intervals,
+        fe.motion_points > 0 ? fmt::format(" ({} of them samples in motion)", fe.motion_points)
+                             : "",
+        fe.residuals, e.rank, e.parameters.size(), e.condition, e.dof > 0 ? e.chi2 / e.dof : 0.0,
+        e.p_value);
     if (e.fit.verdict != FitVerdict::kOk) o += fmt::format("  fit: {}\n", e.fit.cause);
     for (const auto& w : e.warnings) o += fmt::format("  {}\n", w);
     if (const FreeModelResult* up = UpstreamOf(in, r.model)) {
@@ -297,10 +300,12 @@ std::string FreeReportBody(const FreeReportInput& in) {
       o += "</ul>\n";
     }
     o += fmt::format(
-        "<p>{} intervals, {} residuals; rank {} of {}; chi<sup>2</sup>/dof {:.2f} (p "
+        "<p>{} intervals{}, {} residuals; rank {} of {}; chi<sup>2</sup>/dof {:.2f} (p "
         "{:.2g}){}</p>\n",
-        fe.intervals, fe.residuals, e.rank, e.parameters.size(), e.dof > 0 ? e.chi2 / e.dof : 0.0,
-        e.p_value,
+        fe.intervals,
+        fe.motion_points > 0 ? fmt::format(" ({} of them samples in motion)", fe.motion_points)
+                             : "",
+        fe.residuals, e.rank, e.parameters.size(), e.dof > 0 ? e.chi2 / e.dof : 0.0, e.p_value,
         e.covariance_scale > 1 ? fmt::format("; covariance inflated x{:.2f}", e.covariance_scale)
                                : "");
     o += "<table><tr><th>parameter</th><th>value</th><th>1 sigma</th></tr>\n";

@@ -118,6 +118,8 @@ class FreeCalibration {
     out_.relative_scale =
         model_.sensor() == SensorKind::kMagnetometer && !(data_.context.field_magnitude > 0);
     out_.intervals = CountIntervals();
+    for (const auto& iv : data_.intervals)
+      out_.motion_points += iv.in_motion && iv.mag && model_.Needs(SensorKind::kMagnetometer);
     est_.poses = out_.intervals;
     if (!model_.Start(data_, &theta_, &est_.error)) return std::move(out_);
     ChooseDrifts();

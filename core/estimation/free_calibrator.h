@@ -72,8 +72,9 @@ struct FreeEstimate {
   Estimate estimate;
   RankAnalysis analysis;  // of the whitened Jacobian, columns scaled by FreeModel::Scales
   std::vector<FreeTermResidual> terms;
-  int intervals = 0;  // static intervals carrying the model's triads
-  int residuals = 0;  // scalar residuals
+  int intervals = 0;      // static intervals carrying the model's triads (and samples in motion)
+  int motion_points = 0;  // of them, the magnetometer's samples in motion (issue 37)
+  int residuals = 0;      // scalar residuals
   SphereCoverage coverage;
   std::vector<Eigen::Vector3d> directions;  // per interval used: the corrected triad's mean
   // Parameters that take part in a null direction (not determined at all) or a weak one.
