@@ -132,12 +132,7 @@ class FreeMonteCarlo {
   void RunHand(int run, std::uint64_t seed, FreeRun* out) {
     sim::SimCapture capture;
     if (!sim::BuildSimCapture(SimulationFor(seed), &capture, &out->error)) return;
-    std::vector<std::uint8_t> bytes;
-    const std::string header = drivers::EncodeCaptureHeader(capture.header);
-    bytes.assign(header.begin(), header.end());
-    for (const auto& r : capture.records) {
-      drivers::AppendCaptureRecord(r.type, r.device, r.t_ns, r.payload, &bytes);
-    }
+    std::vector<std::uint8_t> bytes = sim::EncodeSimCapture(capture);
     drivers::CaptureReader reader;
     std::vector<Sample> samples;
     daemon::ReplayStats stats;

@@ -398,6 +398,15 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
   return true;
 }
 
+std::vector<std::uint8_t> EncodeSimCapture(const SimCapture& capture) {
+  const std::string header = drivers::EncodeCaptureHeader(capture.header);
+  std::vector<std::uint8_t> bytes(header.begin(), header.end());
+  for (const auto& r : capture.records) {
+    drivers::AppendCaptureRecord(r.type, r.device, r.t_ns, r.payload, &bytes);
+  }
+  return bytes;
+}
+
 bool WriteSimCapture(const SimCapture& capture, const std::string& path, std::string* error) {
   auto writer = drivers::CaptureWriter::Create(path, capture.header, error);
   if (writer == nullptr) return false;

@@ -89,4 +89,7 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
 // with a message when the file cannot be written.
 bool WriteSimCapture(const SimCapture& capture, const std::string& path, std::string* error);
 
+// The capture's .tcap bytes (header and records), as WriteSimCapture writes them, in memory.
+std::vector<std::uint8_t> EncodeSimCapture(const SimCapture& capture);
+
 }  // namespace turncal::sim

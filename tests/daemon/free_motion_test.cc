@@ -21,12 +21,7 @@ namespace turncal {
 namespace {
 
 std::vector<Sample> Decode(const sim::SimCapture& c) {
-  std::vector<std::uint8_t> bytes;
-  const std::string header = drivers::EncodeCaptureHeader(c.header);
-  bytes.assign(header.begin(), header.end());
-  for (const auto& r : c.records) {
-    drivers::AppendCaptureRecord(r.type, r.device, r.t_ns, r.payload, &bytes);
-  }
+  std::vector<std::uint8_t> bytes = sim::EncodeSimCapture(c);
   drivers::CaptureReader reader;
   std::string error;
   EXPECT_TRUE(reader.Parse(std::move(bytes), &error)) << error;
