@@ -121,9 +121,7 @@ class FreeMonteCarlo {
     Gate(r, out);
     if (!Truth(capture, r, out)) return;
     Score(r, out);
-    std::lock_guard<std::mutex> lock(mutex_);
-    const int scored = ++done_;
-    if (o_.on_run) o_.on_run(run, *out, scored, parameters_);
+    Scored(run, *out);
   }
 
   // One hand's rotation: simulated as bytes, decoded, then what `turncal free` fits (the still
@@ -176,9 +174,14 @@ class FreeMonteCarlo {
     out->p_value = fe.estimate.p_value;
     out->ok = out->z.allFinite();
     if (!out->ok) out->error = "a sigma is not finite";
+    Scored(run, *out);
+  }
+
+  // A run that reached an estimate: counted, and told to on_run.
+  void Scored(int run, const FreeRun& out) {
     std::lock_guard<std::mutex> lock(mutex_);
     const int scored = ++done_;
-    if (o_.on_run) o_.on_run(run, *out, scored, parameters_);
+    if (o_.on_run) o_.on_run(run, out, scored, parameters_);
   }
 
   // The tumble a run simulates: random orientations within the cap, the class's noise, the

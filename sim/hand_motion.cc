@@ -6,28 +6,9 @@
 #include <cmath>
 #include <random>
 
-#include "core/frames/rotations.h"
+#include "sim/table_kinematics.h"
 
 namespace turncal::sim {
-namespace {
-
-// Smooth step 0 -> 1 with zero rate at both ends, and its integral from 0.
-double SCurve(double x) { return 0.5 * (1.0 - std::cos(M_PI * x)); }
-double SCurveIntegral(double x) { return x / 2 - std::sin(M_PI * x) / (2 * M_PI); }
-
-// The inner frame's angular rate, rad/s in q, for the angles and their rates ([w x] = -dC/dt
-// C^T, C = C_p^q; as the session simulator's table).
-Eigen::Vector3d BodyRate(const Eigen::Vector3d& angles, const Eigen::Vector3d& rates) {
-  const double h = 1e-5;
-  const Eigen::Vector3d plus = angles + h * rates, minus = angles - h * rates;
-  const Mat3<double> C = C_p_q(angles[0], angles[1], angles[2]);
-  const Mat3<double> dC =
-      (C_p_q(plus[0], plus[1], plus[2]) - C_p_q(minus[0], minus[1], minus[2])) / (2 * h);
-  const Mat3<double> W = -dC * C.transpose();
-  return Eigen::Vector3d(W(2, 1) - W(1, 2), W(0, 2) - W(2, 0), W(1, 0) - W(0, 1)) * 0.5;
-}
-
-}  // namespace
 
 bool HandMotion::IsValid(std::string* error) const {
   auto fail = [&](std::string why) {
@@ -107,7 +88,7 @@ HandPath::HandPath(const HandMotion& motion, std::uint64_t seed) : motion_(motio
   for (int i = 0; i < n; ++i) {
     Eigen::Vector3d a, r;
     Shape(200.0 * i / n, &a, &r);
-    sum += BodyRate(a, r).squaredNorm();
+    sum += TableBodyRate(a, r).squaredNorm();
   }
   scale_ = motion.rate_dps * M_PI / 180 / std::sqrt(sum / n);
 }

@@ -4,14 +4,14 @@
 #include <random>
 
 #include "sim/session_sim.h"
+#include "sim/table_kinematics.h"
 
 // SimulateSession (sim/session_sim.h): the table's schedule and the samples along it.
 namespace turncal {
 
 namespace {
 
-// Smooth step 0 -> 1 over [0, 1] with zero rate at both ends: (1 - cos(pi s)) / 2.
-double SCurve(double s) { return 0.5 * (1.0 - std::cos(M_PI * s)); }
+using sim::SCurve;
 double SCurveRate(double s) { return 0.5 * M_PI * std::sin(M_PI * s); }
 // Smooth step 0 -> 1 with zero rate and zero acceleration at both ends: s - sin(2 pi s) / (2 pi).
 double Cycloid(double s) { return s - std::sin(2 * M_PI * s) / (2 * M_PI); }
@@ -24,17 +24,7 @@ struct Angles {
 
 Eigen::Vector3d Vec(const TablePose& p) { return {p.phi_rad, p.gamma_rad, p.psi_rad}; }
 
-// Angular rate of the table's inner frame q with respect to p, expressed in q:
-// [w x] = -dC/dt C^T for C = C_p^q.
-Eigen::Vector3d BodyRate(const Angles& a) {
-  const double h = 1e-5;
-  const Eigen::Vector3d plus = a.value + h * a.rate, minus = a.value - h * a.rate;
-  const Mat3<double> C = C_p_q(a.value[0], a.value[1], a.value[2]);
-  const Mat3<double> dC =
-      (C_p_q(plus[0], plus[1], plus[2]) - C_p_q(minus[0], minus[1], minus[2])) / (2 * h);
-  const Mat3<double> W = -dC * C.transpose();
-  return Eigen::Vector3d(W(2, 1) - W(1, 2), W(0, 2) - W(2, 0), W(1, 0) - W(0, 1)) * 0.5;
-}
+Eigen::Vector3d BodyRate(const Angles& a) { return sim::TableBodyRate(a.value, a.rate); }
 
 double Quantise(double v, double q) { return q > 0 ? q * std::round(v / q) : v; }
 
@@ -68,8 +58,7 @@ struct Segment {
   // The rotating axis's angle and rate `since` seconds after t0.
   std::pair<double, double> AngleRate(double since) const {
     const double a0 = from[spin];
-    // Integral of SCurve over [0, u]: u/2 - sin(pi u) / (2 pi).
-    const auto ramp = [](double u) { return u / 2 - std::sin(M_PI * u) / (2 * M_PI); };
+    const auto ramp = sim::SCurveIntegral;
     if (since < up_s) {
       const double u = since / up_s;
       return {a0 + rate * up_s * ramp(u), rate * SCurve(u)};
