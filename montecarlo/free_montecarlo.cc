@@ -16,9 +16,7 @@
 #include <thread>
 
 #include "core/estimation/free_calibrator.h"
-#include "core/estimation/free_motion.h"
 #include "core/estimation/sensor_class.h"
-#include "daemon/station/capture_replay.h"
 #include "daemon/station/free_pipeline.h"
 #include "daemon/station/replay_once.h"
 #include "montecarlo/parallel_runs.h"
@@ -98,10 +96,6 @@ class FreeMonteCarlo {
   // against the truth. A step that fails leaves its error in `out`.
   void RunOne(int run, FreeRun* out) {
     const std::uint64_t seed = o_.seed * 1000003 + static_cast<std::uint64_t>(run);
-    if (o_.hand_s > 0) {
-      RunHand(run, seed, out);
-      return;
-    }
     sim::SimCapture capture;
     daemon::ReplayOnceOutcome replay;
     const std::string path = (dir_ / fmt::format("run-{}.tcap", run)).string();
@@ -121,59 +115,6 @@ class FreeMonteCarlo {
     Gate(r, out);
     if (!Truth(capture, r, out)) return;
     Score(r, out);
-    Scored(run, *out);
-  }
-
-  // One hand's rotation: simulated as bytes, decoded, then what `turncal free` fits (the still
-  // intervals and the magnetometer's samples in motion, the stillness tests' noise the class's
-  // as with --sensor-class) with the station's context; scored against the truth.
-  void RunHand(int run, std::uint64_t seed, FreeRun* out) {
-    sim::SimCapture capture;
-    if (!sim::BuildSimCapture(SimulationFor(seed), &capture, &out->error)) return;
-    std::vector<std::uint8_t> bytes = sim::EncodeSimCapture(capture);
-    drivers::CaptureReader reader;
-    std::vector<Sample> samples;
-    daemon::ReplayStats stats;
-    if (!reader.Parse(std::move(bytes), &out->error) ||
-        !daemon::DecodeCaptureSamples(&reader, 0, &samples, &stats, &out->error)) {
-      return;
-    }
-    SequencerOptions so;
-    so.dwell_s = 1.0;
-    so.noise = NoiseProfileForClass(sensor_, capture.session_options.rate_hz, true);
-    MotionOptions mo;
-    const FreeCollected collected = CollectFree(samples, so, &mo);
-    std::vector<FreeModelResult> results;
-    if (!CalibrateFreeModels({o_.model}, collected.data, context_, FreeCalibratorOptions{},
-                             &results, &out->error)) {
-      return;
-    }
-    const FreeModelResult& r = results.back();
-    const FreeEstimate& fe = r.estimate;
-    out->intervals = fe.intervals;
-    out->gated = true;
-    out->gate = fe.gate_passed;
-    for (const auto& why : fe.gate_reasons) out->reasons.push_back(GateReasonKind(why));
-    if (r.model != o_.model || !fe.estimate.ok) {
-      out->error = r.model != o_.model ? "fitted " + r.model + ": " + r.note : fe.estimate.error;
-      return;
-    }
-    // The bias over the estimate's window (a drift model's latest point), else over the motion.
-    TimeWindow window{0.0, capture.session.duration_s};
-    if (fe.bias_window) {
-      const SessionSimOptions& sim_options = capture.session_options;
-      const auto session_s = [&](double device_s) {
-        return (device_s - sim_options.clock_offset_s) / (1.0 + sim_options.clock_drift_ppm * 1e-6);
-      };
-      window = TimeWindow{session_s(fe.bias_window->t0_s), session_s(fe.bias_window->t1_s)};
-    }
-    if (!sim::FreeTruth(capture, o_.model, context_, window, &out->truth, &out->error)) return;
-    out->theta = fe.estimate.theta;
-    out->sigma = fe.estimate.sigma;
-    out->z = (out->theta - out->truth).cwiseQuotient(out->sigma);
-    out->p_value = fe.estimate.p_value;
-    out->ok = out->z.allFinite();
-    if (!out->ok) out->error = "a sigma is not finite";
     Scored(run, *out);
   }
 

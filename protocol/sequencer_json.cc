@@ -90,6 +90,7 @@ nlohmann::json ToJson(const PoseRecord& r, bool move_blocks) {
     j["t_sensor_end"] = r.sensor_t_end_s;
   }
   if (r.move_in) j["move_in"] = ToJson(*r.move_in, move_blocks);
+  if (r.in_motion) j["in_motion"] = true;
   return j;
 }
 
@@ -156,6 +157,10 @@ bool ParsePoseRecord(const nlohmann::json& j, PoseRecord* out, std::string* erro
     }
     r.temp_spread =
         TemperatureSpread{t["std"].get<double>(), t["min"].get<double>(), t["max"].get<double>()};
+  }
+  if (j.contains("in_motion")) {
+    if (!j["in_motion"].is_boolean()) return fail("in_motion is not true or false");
+    r.in_motion = j["in_motion"].get<bool>();
   }
   // A move without its blocks (an event's summary) is left out: nothing to calibrate from.
   if (j.contains("move_in") && j["move_in"].contains("increment_rad")) {

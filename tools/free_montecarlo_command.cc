@@ -26,7 +26,8 @@ constexpr Manual kFreeMonteCarloManual = {
     "announced poses ignored) through free mode, and checks a free model's sigma against "
     "its errors: mean and std of z per parameter, the count beyond 3 sigma, the chi^2 "
     "p-values against uniform, the gate. With --hand, a hand's continuous rotation instead "
-    "(the magnetometer's samples in motion as data, fitted as `turncal free` fits them).",
+    "(the magnetometer's samples in motion as data), through the station exactly as "
+    "`turncald --replay FILE --once --pose-source free` runs it.",
     "turncal free-montecarlo --model accel9 --runs 200\n"
     "turncal free-montecarlo --model gyro9 --class consumer --runs 200\n"
     "turncal free-montecarlo --model magellipsoid --cap 20 --runs 50   # low coverage\n"

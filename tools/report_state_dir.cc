@@ -45,7 +45,7 @@ std::vector<nlohmann::json> JournalRecords(const fs::path& journal, const std::s
   std::vector<nlohmann::json> records;
   if (!daemon::PoseJournal::LoadFile(journal.string(), &entries, &skipped, &why)) return records;
   for (auto& e : entries) {
-    if (e.device == device) records.push_back(std::move(e.record_json));
+    if (e.device == device && !e.is_motion()) records.push_back(std::move(e.record_json));
   }
   return records;
 }

@@ -173,6 +173,8 @@ class FreeCalibration {
     }
     const FreeInterval* latest = nullptr;
     for (const auto& iv : data_.intervals) {
+      // Samples in motion are only the magnetometer models' data (core/estimation/free_motion.h).
+      if (iv.in_motion && !model_.Needs(SensorKind::kMagnetometer)) continue;
       origin_s_ = std::min(origin_s_, iv.sensor_start_s());
       if (!latest || iv.sensor_end_s() > latest->sensor_end_s()) latest = &iv;
     }

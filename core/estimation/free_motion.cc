@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "core/models/free_common.h"
 
@@ -46,6 +47,7 @@ std::string MotionPoints::Summary() const {
       "magnetometer in motion: {} values taken (of {} samples with the field: {} held repeats "
       "dropped, {} in or next to still intervals",
       points.size(), samples_with_mag, held, in_intervals);
+  if (frozen) s += ": the value never changed -- a frozen magnetometer";
   if (decimated > 0) s += fmt::format(", {} left out to keep at most {}", decimated, points.size());
   s += ")";
   if (period_s > 0) s += fmt::format(" at {:.1f} Hz", 1.0 / period_s);
@@ -56,32 +58,60 @@ std::string MotionPoints::Summary() const {
   return s;
 }
 
-MotionPoints MagnetometerInMotion(const std::vector<Sample>& samples,
-                                  const std::vector<FreeInterval>& intervals,
-                                  const MotionOptions& options) {
-  MotionPoints out;
-  // The new values: a sample whose field is not the previous sample's exactly.
-  std::vector<const Sample*> fresh;
-  const Eigen::Vector3d* previous = nullptr;
-  for (const Sample& s : samples) {
-    if (!s.mag || !s.mag->allFinite()) continue;
-    ++out.samples_with_mag;
-    if (previous && *previous == *s.mag) {
-      ++out.held;
-    } else {
-      fresh.push_back(&s);
-    }
-    previous = &*s.mag;
+bool MotionCollector::Push(const Sample& s, std::optional<double> t_device_s) {
+  const std::int64_t sent_ns = clock_.Map(s.t_host_ns, s.t_device_s);
+  if (!s.mag || !s.mag->allFinite()) return false;
+  ++samples_with_mag_;
+  if (previous_ && *previous_ == *s.mag) {
+    ++held_;
+    return false;
   }
+  previous_ = *s.mag;
+  if (++since_kept_ < stride_) {
+    ++thinned_;
+    return false;
+  }
+  since_kept_ = 0;
+  MotionValue v;
+  v.t_host_s = static_cast<double>(sent_ns) * 1e-9;
+  v.t_device_s = t_device_s;
+  v.mag = *s.mag;
+  v.temp_c = s.temp_c;
+  Keep(v);
+  return true;
+}
+
+void MotionCollector::Add(const MotionValue& value) {
+  previous_ = value.mag;
+  Keep(value);
+}
+
+void MotionCollector::Keep(const MotionValue& value) {
+  values_.push_back(value);
+  if (values_.size() <= std::max<std::size_t>(max_values_, 2)) return;
+  // Every other value dropped, and from now on only every stride-th new one taken.
+  std::size_t w = 0;
+  for (std::size_t i = 0; i < values_.size(); i += 2) values_[w++] = values_[i];
+  thinned_ += static_cast<std::int64_t>(values_.size() - w);
+  values_.resize(w);
+  stride_ *= 2;
+}
+
+MotionPoints MotionCollector::Select(const std::vector<FreeInterval>& intervals,
+                                     const MotionOptions& options) const {
+  MotionPoints out;
+  out.samples_with_mag = samples_with_mag_;
+  out.held = held_;
+  const std::vector<MotionValue>& fresh = values_;
+  out.frozen = fresh.size() == 1 && samples_with_mag_ > 1;
   if (fresh.size() < 2) return out;
   // The period between new values (the median spacing on the host's clock, or the device's).
   std::vector<double> gaps;
   for (std::size_t i = 1; i < fresh.size(); ++i) {
-    const Sample& a = *fresh[i - 1];
-    const Sample& b = *fresh[i];
-    gaps.push_back(a.t_device_s && b.t_device_s
-                       ? *b.t_device_s - *a.t_device_s
-                       : static_cast<double>(b.t_host_ns - a.t_host_ns) * 1e-9);
+    const MotionValue& a = fresh[i - 1];
+    const MotionValue& b = fresh[i];
+    gaps.push_back(a.t_device_s && b.t_device_s ? *b.t_device_s - *a.t_device_s
+                                                : b.t_host_s - a.t_host_s);
   }
   out.period_s = std::max(Median(gaps), 1e-6);
   // Outside the still intervals, with a margin of two periods on each side.
@@ -90,59 +120,83 @@ MotionPoints MagnetometerInMotion(const std::vector<Sample>& samples,
     if (!iv.in_motion) still.emplace_back(iv.t_start_s, iv.t_end_s);
   }
   std::sort(still.begin(), still.end());
-  std::vector<const Sample*> moving;
+  std::vector<const MotionValue*> moving;
   std::size_t w = 0;
   const double margin = 2 * out.period_s;
-  for (const Sample* s : fresh) {
-    const double t = static_cast<double>(s->t_host_ns) * 1e-9;
-    while (w < still.size() && still[w].second + margin < t) ++w;
-    if (w < still.size() && t >= still[w].first - margin) {
+  for (const MotionValue& v : fresh) {
+    while (w < still.size() && still[w].second + margin < v.t_host_s) ++w;
+    if (w < still.size() && v.t_host_s >= still[w].first - margin) {
       ++out.in_intervals;
       continue;
     }
-    moving.push_back(s);
+    moving.push_back(&v);
   }
   // At most max_points, evenly spread over the new values in motion.
   const std::size_t max_points = static_cast<std::size_t>(std::max(options.max_points, 1));
-  std::vector<const Sample*> kept;
+  std::vector<const MotionValue*> kept;
   if (moving.size() <= max_points) {
     kept = moving;
   } else {
     for (std::size_t j = 0; j < max_points; ++j)
       kept.push_back(moving[j * moving.size() / max_points]);
   }
-  out.decimated = static_cast<std::int64_t>(moving.size() - kept.size());
+  out.decimated = static_cast<std::int64_t>(moving.size() - kept.size()) + thinned_;
   if (kept.empty()) return out;
 
-  if (options.mag_sigma) {
+  // The per-sample noise: pooled over the still intervals' own samples when they hold enough
+  // (thousands of samples: sigma to a per cent; the noise meter's second has a hundred, and a
+  // chi^2 over a thousand points would see its 7 %), else as given, else the points' scatter.
+  double dof = 0;
+  Eigen::Vector3d pooled = Eigen::Vector3d::Zero();
+  int pooled_intervals = 0;
+  for (const auto& iv : intervals) {
+    if (iv.in_motion || !iv.mag || iv.mag->count < 2) continue;
+    const double n = static_cast<double>(iv.mag->count - 1);
+    pooled += n * iv.mag->covariance.diagonal();
+    dof += n;
+    ++pooled_intervals;
+  }
+  if (dof >= options.min_pooled_samples && pooled.allFinite() && (pooled.array() > 0).all()) {
+    out.sigma = (pooled / dof).cwiseSqrt();
+    out.noise_source = fmt::format("pooled over the {} still intervals' {:.0f} samples",
+                                   pooled_intervals, dof + pooled_intervals);
+  } else if (options.mag_sigma) {
     out.sigma = *options.mag_sigma;
     out.noise_source = options.noise_source.empty() ? "given" : options.noise_source;
   } else {
     std::vector<Eigen::Vector3d> values;
-    for (const Sample* s : kept) values.push_back(*s->mag);
+    for (const MotionValue* v : kept) values.push_back(v->mag);
     out.sigma.setConstant(ScatterSigma(values));
     out.noise_source =
         "the points' scatter about an ellipsoid through them: the chi^2 is no check of the noise";
   }
   const Eigen::Matrix3d covariance = out.sigma.cwiseAbs2().cwiseMax(1e-300).asDiagonal();
-  for (const Sample* s : kept) {
+  for (const MotionValue* v : kept) {
     FreeInterval p;
     p.in_motion = true;
-    p.t_start_s = static_cast<double>(s->t_host_ns) * 1e-9;
+    p.t_start_s = v->t_host_s;
     p.t_end_s = p.t_start_s + out.period_s;
-    if (s->t_device_s) {
-      p.sensor_t_start_s = *s->t_device_s;
-      p.sensor_t_end_s = *s->t_device_s + out.period_s;
+    if (v->t_device_s) {
+      p.sensor_t_start_s = *v->t_device_s;
+      p.sensor_t_end_s = *v->t_device_s + out.period_s;
     }
     TriadStats m;
-    m.mean = *s->mag;
+    m.mean = v->mag;
     m.covariance = covariance;
     m.count = 1;
     p.mag = m;
-    p.temp_c = s->temp_c;
+    p.temp_c = v->temp_c;
     out.points.push_back(std::move(p));
   }
   return out;
+}
+
+MotionPoints MagnetometerInMotion(const std::vector<Sample>& samples,
+                                  const std::vector<FreeInterval>& intervals,
+                                  const MotionOptions& options) {
+  MotionCollector collector(std::numeric_limits<std::size_t>::max());
+  for (const Sample& s : samples) collector.Push(s);
+  return collector.Select(intervals, options);
 }
 
 FreeCollected CollectFree(const std::vector<Sample>& samples, const SequencerOptions& options,

@@ -10,10 +10,12 @@
 // What motion brings, and what is done about it:
 // - held repeats (a magnetometer slower than the stream: the device sends its last value again)
 //   are not new measurements and are dropped;
-// - the per-sample noise: the measured profile's or the sensor class's; with neither (a stream
-//   that never stood still, no --sensor-class) estimated from the scatter about an algebraic
-//   ellipsoid through the points (robust: 1.4826 x the median absolute deviation), and said so --
-//   the chi^2 is then no check of the noise;
+// - the per-sample noise: pooled over the still intervals' samples when they hold a thousand or
+//   more (the noise meter's one second would leave sigma 7 % uncertain, and the chi^2 of a
+//   thousand points sees that), else the measured profile's or the sensor class's; with neither
+//   (a stream that never stood still, no --sensor-class) estimated from the scatter about an
+//   algebraic ellipsoid through the points (robust: 1.4826 x the median absolute deviation), and
+//   said so -- the chi^2 is then no check of the noise;
 // - many points (a long stream): every k-th new value, at most max_points, so that the solve and
 //   its drift model stay fast; the rest are counted;
 // - the time: each point's window is its sample's, on the device clock when the sample has one
@@ -28,6 +30,7 @@
 
 #include "core/modeling/free_model.h"
 #include "core/sequencing/free_intervals.h"
+#include "core/sequencing/host_clock.h"
 #include "core/sequencing/sample.h"
 
 namespace turncal {
@@ -38,6 +41,9 @@ struct MotionOptions {
   // ("measured", "the industrial class"); unset: from the points' own scatter.
   std::optional<Eigen::Vector3d> mag_sigma;
   std::string noise_source;
+  // The still intervals' own samples, pooled, are the noise instead when they hold at least this
+  // many (their scatter about their means: sigma to sqrt(1 / 2n)).
+  double min_pooled_samples = 1000;
 };
 
 struct MotionPoints {
@@ -47,10 +53,52 @@ struct MotionPoints {
   std::int64_t in_intervals = 0;  // new values inside (or next to) a still interval
   std::int64_t decimated = 0;     // new values in motion left out to keep max_points
   double period_s = 0.0;          // between new values (the magnetometer's own rate's period)
+  bool frozen = false;            // every sample with the field held one value
   Eigen::Vector3d sigma = Eigen::Vector3d::Zero();
   std::string noise_source;  // as given, or "the points' scatter about an ellipsoid"
   // One line for the report: what was taken and how.
   std::string Summary() const;
+};
+
+// One new magnetometer value (held repeats dropped), as turncald keeps and journals them.
+struct MotionValue {
+  double t_host_s = 0.0;             // when the device sent it, on the host's clock
+  std::optional<double> t_device_s;  // its device (or the sequencer's sensor) clock
+  Eigen::Vector3d mag = Eigen::Vector3d::Zero();
+  std::optional<double> temp_c;
+};
+
+// The magnetometer's new values of a stream, sample by sample (turncald's free pose source keeps
+// one per device). At most `max_values` are kept: beyond that every other one is dropped and from
+// then on only every 2nd (4th, ...) new value taken, so that a long session's memory stays bounded
+// (counted in thinned()).
+class MotionCollector {
+ public:
+  explicit MotionCollector(std::size_t max_values = 30000) : max_values_(max_values) {}
+  // A sample (every one of the stream, with the field or not: its host time is mapped to when
+  // the device sent it, HostClock, as the still intervals' are): its field, when new, is kept
+  // (`t_device_s` overrides the sample's device time: the station's sensor clock). True when a
+  // value was kept.
+  bool Push(const Sample& sample, std::optional<double> t_device_s);
+  bool Push(const Sample& sample) { return Push(sample, sample.t_device_s); }
+  // A value kept earlier (a resumed journal's).
+  void Add(const MotionValue& value);
+  const std::vector<MotionValue>& values() const { return values_; }
+  std::int64_t samples_with_mag() const { return samples_with_mag_; }
+  std::int64_t held() const { return held_; }
+  std::int64_t thinned() const { return thinned_; }
+  // The points outside the still `intervals` (MagnetometerInMotion's rules).
+  MotionPoints Select(const std::vector<FreeInterval>& intervals,
+                      const MotionOptions& options) const;
+
+ private:
+  void Keep(const MotionValue& value);
+  std::size_t max_values_;
+  HostClock clock_;
+  std::vector<MotionValue> values_;
+  std::optional<Eigen::Vector3d> previous_;
+  std::int64_t samples_with_mag_ = 0, held_ = 0, thinned_ = 0;
+  std::int64_t stride_ = 1, since_kept_ = 0;
 };
 
 // The points of `samples` (in time order) outside the still `intervals`.

@@ -4,11 +4,13 @@
 // from, the norm residual |correct(raw)| = magnitude and its whitening.
 
 #include <ceres/autodiff_cost_function.h>
+#include <fmt/format.h>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <optional>
@@ -214,6 +216,47 @@ class NormFreeModel : public FreeModel {
     std::vector<Eigen::Vector3d> means;
     Means(data, sensor_, 0, &means, nullptr, nullptr);
     return means;
+  }
+  // Whether the triad turned: the means must spread about their centroid (the largest principal
+  // axis) by at least kMinTurnSpread times their own noise (the median per-axis sigma of a mean),
+  // or no sphere or ellipsoid is determined by them -- a tiny one about a cloud of noise fits as
+  // well (a frozen sensor, a device that was never turned, a capture of nothing but noise). False
+  // with the reason in *error.
+  static constexpr double kMinTurnSpread = 20.0;
+  bool Turned(const FreeData& data, std::string* error) const {
+    std::vector<Eigen::Vector3d> means;
+    std::vector<Eigen::Matrix3d> covariances;
+    std::vector<int> index;
+    Means(data, sensor_, 0.0, &means, &covariances, &index);
+    if (means.size() < 2) return true;  // the start and the rank test say what is missing
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (const auto& m : means) centroid += m;
+    centroid /= static_cast<double>(means.size());
+    Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+    for (const auto& m : means) scatter += (m - centroid) * (m - centroid).transpose();
+    scatter /= static_cast<double>(means.size());
+    const double spread = std::sqrt(std::max(
+        0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(scatter).eigenvalues().maxCoeff()));
+    std::vector<double> sigmas;
+    for (const auto& c : covariances) sigmas.push_back(std::sqrt(std::max(0.0, c.trace() / 3)));
+    std::nth_element(sigmas.begin(),
+                     sigmas.begin() + static_cast<std::ptrdiff_t>(sigmas.size() / 2), sigmas.end());
+    const double noise = sigmas[sigmas.size() / 2];
+    if (spread >= kMinTurnSpread * noise && spread > 0) return true;
+    if (error) {
+      const char* triad = sensor_ == SensorKind::kMagnetometer ? "magnetometer" : "accelerometer";
+      *error =
+          spread == 0
+              ? fmt::format("the {}'s {} values are all the same: a frozen sensor", triad,
+                            means.size())
+              : fmt::format(
+                    "the {} did not turn: its {} values spread {:.3g} about their mean, {:.1f} "
+                    "times their noise ({:.3g}; at least {:.0f} needed) -- a device that was "
+                    "not turned, or a capture of nothing but noise",
+                    triad, means.size(), spread, noise > 0 ? spread / noise : 0.0, noise,
+                    kMinTurnSpread);
+    }
+    return false;
   }
   // One "norm" term per interval that carries the triad, its cost `make(mean, covariance)` (the
   // mean's covariance with the triad's offset sigma).

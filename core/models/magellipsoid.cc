@@ -43,6 +43,7 @@ class MagEllipsoid final : public free::NormFreeModel {
   }
 
   bool Start(const FreeData& data, Eigen::VectorXd* theta, std::string* error) const override {
+    if (!Turned(data, error)) return false;
     const std::vector<Eigen::Vector3d> means = RawMeans(data);
     *theta = Eigen::VectorXd::Zero(9);
     if (auto e = free::FitEllipsoid(means)) {

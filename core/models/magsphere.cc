@@ -46,6 +46,7 @@ class MagSphere final : public free::NormFreeModel {
   }
 
   bool Start(const FreeData& data, Eigen::VectorXd* theta, std::string* error) const override {
+    if (!Turned(data, error)) return false;
     const std::vector<Eigen::Vector3d> means = RawMeans(data);
     *theta = Eigen::VectorXd::Zero(4);
     if (auto s = free::FitSphere(means)) {

@@ -233,12 +233,18 @@ bool ParseSequencer(const toml::table* t, const std::string& source, Config* out
   return true;
 }
 
-// [free]: the free pose source's coverage and field.
+bool GetBoolean(const toml::table& t, const char* key, bool* out, const std::string& source,
+                std::string* error);
+
+// [free]: the free pose source's coverage, field and samples in motion.
 bool ParseFree(const toml::table* t, const std::string& source, StationOptions* out,
                std::string* error) {
   StationOptions& st = *out;
-  if (!OnlyKeys(*t, {"min_coverage_percent", "field"}, "[free]", source, error) ||
-      !GetNumber(*t, "min_coverage_percent", &st.free.min_coverage_percent, source, error)) {
+  if (!OnlyKeys(*t, {"min_coverage_percent", "field", "motion", "max_motion_points"}, "[free]",
+                source, error) ||
+      !GetNumber(*t, "min_coverage_percent", &st.free.min_coverage_percent, source, error) ||
+      !GetBoolean(*t, "motion", &st.free.motion, source, error) ||
+      !GetInt(*t, "max_motion_points", &st.free.max_motion_points, source, error)) {
     return false;
   }
   std::string field = "reference";

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <ctime>
 #include <filesystem>
@@ -52,12 +53,49 @@ bool PoseJournal::Open(const std::string& state_dir, std::string* error) {
 }
 
 bool PoseJournal::Append(const std::string& device, const PoseRecord& record, std::string* error) {
+  return AppendLine(
+      nlohmann::json{{"device", device}, {"record", protocol::ToJson(record)}}.dump() + "\n",
+      error);
+}
+
+namespace {
+nlohmann::json OptionalNumber(const std::optional<double>& v) {
+  return v && std::isfinite(*v) ? nlohmann::json(*v) : nlohmann::json();
+}
+
+bool ParseMotion(const nlohmann::json& j, std::vector<MotionValue>* out) {
+  if (!j.is_array() || j.empty()) return false;
+  for (const auto& row : j) {
+    if (!row.is_array() || row.size() != 6) return false;
+    MotionValue v;
+    for (int k : {0, 2, 3, 4}) {
+      if (!row[static_cast<std::size_t>(k)].is_number()) return false;
+    }
+    v.t_host_s = row[0].get<double>();
+    if (row[1].is_number()) v.t_device_s = row[1].get<double>();
+    v.mag = {row[2].get<double>(), row[3].get<double>(), row[4].get<double>()};
+    if (row[5].is_number()) v.temp_c = row[5].get<double>();
+    out->push_back(v);
+  }
+  return true;
+}
+}  // namespace
+
+bool PoseJournal::AppendMotion(const std::string& device, const std::vector<MotionValue>& values,
+                               std::string* error) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (const MotionValue& v : values) {
+    rows.push_back({v.t_host_s, OptionalNumber(v.t_device_s), v.mag.x(), v.mag.y(), v.mag.z(),
+                    OptionalNumber(v.temp_c)});
+  }
+  return AppendLine(nlohmann::json{{"device", device}, {"motion", rows}}.dump() + "\n", error);
+}
+
+bool PoseJournal::AppendLine(const std::string& line, std::string* error) {
   if (fd_ < 0) {
     *error = "the journal is not open";
     return false;
   }
-  const std::string line =
-      nlohmann::json{{"device", device}, {"record", protocol::ToJson(record)}}.dump() + "\n";
   // Unbuffered: a failed write leaves nothing behind in a buffer to appear later.
   std::size_t done = 0;
   while (done < line.size()) {
@@ -99,6 +137,16 @@ bool PoseJournal::LoadFile(const std::string& path, std::vector<JournalEntry>* e
     const auto j = nlohmann::json::parse(line, nullptr, false);
     JournalEntry e;
     std::string why;
+    if (!j.is_discarded() && j.is_object() && j.contains("motion") && j.contains("device") &&
+        j["device"].is_string()) {
+      if (!ParseMotion(j["motion"], &e.motion)) {
+        ++*skipped;
+        continue;
+      }
+      e.device = j["device"].get<std::string>();
+      entries->push_back(std::move(e));
+      continue;
+    }
     if (j.is_discarded() || !j.is_object() || !j.contains("device") || !j["device"].is_string() ||
         !j.contains("record") || !protocol::ParsePoseRecord(j["record"], &e.record, &why)) {
       ++*skipped;

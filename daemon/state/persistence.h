@@ -2,7 +2,10 @@
 // The state directory (issue "The daemon"): what must survive a crash.
 //
 //   journal.jsonl                  every captured pose record, one JSON line each, appended and
-//                                  fsynced before the pose is used: a restart resumes the session
+//                                  fsynced before the pose is used: a restart resumes the session;
+//                                  in free mode also the magnetometer's new values in motion, a
+//                                  line per batch {"device", "motion": [[t_host, t_device|null,
+//                                  mx, my, mz, temp|null], ...]} (issue 37)
 //   calibrations/DEVICE.MODEL.json the active calibration (schema 1), written atomically
 //   history/DEVICE.MODEL.vN.json   every earlier active calibration
 //   noise/DEVICE.json              the noise profile this session measured
@@ -19,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "core/estimation/free_motion.h"
 #include "core/estimation/pose_record.h"
 #include "core/sequencing/stillness.h"
 
@@ -28,6 +32,9 @@ struct JournalEntry {
   std::string device;
   PoseRecord record;
   nlohmann::json record_json;  // the record as the journal holds it
+  // A batch of magnetometer values in motion (then `record` is empty and record_json null).
+  std::vector<MotionValue> motion;
+  bool is_motion() const { return !motion.empty(); }
 };
 
 class PoseJournal {
@@ -38,6 +45,9 @@ class PoseJournal {
   // Appends one record and fsyncs it. False with a message (the entry may be missing or torn
   // then; the next Open ends a torn line).
   bool Append(const std::string& device, const PoseRecord& record, std::string* error);
+  // Appends a batch of magnetometer values in motion (one line) and fsyncs it.
+  bool AppendMotion(const std::string& device, const std::vector<MotionValue>& values,
+                    std::string* error);
   // Every whole entry of the journal in `state_dir` (none when there is no journal). Lines that
   // do not parse (a torn last line) are counted in *skipped.
   static bool Load(const std::string& state_dir, std::vector<JournalEntry>* entries, int* skipped,
@@ -47,6 +57,7 @@ class PoseJournal {
                        std::string* error);
 
  private:
+  bool AppendLine(const std::string& line, std::string* error);
   int fd_ = -1;
 };
 

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "core/analysis/publish_gate.h"
+#include "core/estimation/free_motion.h"
 #include "core/estimation/pose_record.h"
 #include "core/estimation/sensor_class.h"
 #include "core/modeling/measurement_model.h"
@@ -117,6 +118,9 @@ class CalibrationHost {
                         const nlohmann::json& override_who) = 0;
   // The device's noise profile changed (a drift identified): its stored copy is rewritten.
   virtual void SaveNoiseProfile(DevicePipeline& device) = 0;
+  // The magnetometer's new values in motion (free mode) go into the journal, one fsynced line,
+  // on the worker in order with the fits queued after it.
+  virtual void JournalMotion(DevicePipeline& device, std::vector<MotionValue> values) = 0;
 };
 
 class CalibrationSet {
@@ -146,6 +150,15 @@ class CalibrationSet {
   // unless `resuming` (a journal replayed at start: the versions stored are applied again).
   virtual void OnRecord(DevicePipeline& d, const PoseRecord& record, double t_s, bool resuming,
                         CalibrationHost& host) = 0;
+  // Every sample of the device, after its sequencer has seen it (the free set keeps the
+  // magnetometer's values in motion, issue 37).
+  virtual void OnSample(DevicePipeline& d, const Sample& sample, CalibrationHost& host) {
+    (void)d, (void)sample, (void)host;
+  }
+  // A resumed journal's batch of magnetometer values in motion.
+  virtual void OnMotionValues(DevicePipeline& d, const std::vector<MotionValue>& values) {
+    (void)d, (void)values;
+  }
   // The journal's records are all in (work deferred while resuming may be done now).
   virtual void OnResumed(DevicePipeline& d, CalibrationHost& host) { (void)d, (void)host; }
   // The input has ended (a replay's capture): estimates deferred are computed now.

@@ -26,8 +26,17 @@ FreeCalibrations::FreeCalibrations(std::vector<std::string> configured,
   for (const auto& name : configured_) {
     auto model = MakeFreeModel(name, context_, &error);
     needs_moves_ = needs_moves_ || (model && model->Needs(SensorKind::kGyroscope));
+    motion_.enabled = motion_.enabled || (model && model->Needs(SensorKind::kMagnetometer));
     Get(name);
   }
+  // What the data carry may include a magnetometer model.
+  motion_.enabled = options.free.motion && (configured_.empty() || motion_.enabled);
+  motion_options_.max_points = options.free.max_motion_points;
+  // A stream never still long enough for the noise meter: the class's magnetometer noise.
+  const NoiseProfile class_noise = NoiseProfileForClass(sensor, 100.0, true);
+  class_mag_sigma_ = *class_noise.sigma[kTriadMag];
+  class_noise_source_ = fmt::format(
+      "the {} class's (no noise measured: the stream was never still long enough)", sensor.name);
 }
 
 std::vector<std::string> FreeCalibrations::StoredNames() const {
@@ -72,7 +81,56 @@ void FreeCalibrations::OnResumed(DevicePipeline& d, CalibrationHost& host) {
   // A resumed journal's intervals are fitted once, all together.
   if (!refit_due_) return;
   refit_due_ = false;
-  QueueFit(d, d.records_used.empty() ? 0.0 : d.records_used.back().t_end_s, true, host);
+  double t_s = d.records_used.empty() ? 0.0 : d.records_used.back().t_end_s;
+  if (!motion_.collector.values().empty()) {
+    t_s = std::max(t_s, motion_.collector.values().back().t_host_s);
+  }
+  QueueFit(d, t_s, true, host);
+}
+
+void FreeCalibrations::OnMotionValues(DevicePipeline& /*d*/,
+                                      const std::vector<MotionValue>& values) {
+  if (!motion_.enabled) return;
+  for (const MotionValue& v : values) motion_.collector.Add(v);
+  motion_.kept += static_cast<std::int64_t>(values.size());
+  motion_.kept_at_fit = motion_.kept;
+  refit_due_ = true;
+}
+
+void FreeCalibrations::FlushMotion(DevicePipeline& d, CalibrationHost& host) {
+  if (motion_.unjournaled.empty()) return;
+  host.JournalMotion(d, std::move(motion_.unjournaled));
+  motion_.unjournaled.clear();
+}
+
+void FreeCalibrations::OnSample(DevicePipeline& d, const Sample& sample, CalibrationHost& host) {
+  if (!motion_.enabled) return;
+  // The sequencer's sensor clock, as the still intervals' windows have it.
+  std::optional<double> t_device_s;
+  if (sample.t_device_s) t_device_s = d.sequencer->SensorTimeOfDevice(*sample.t_device_s);
+  if (!motion_.collector.Push(sample, t_device_s)) return;
+  ++motion_.kept;
+  motion_.unjournaled.push_back(motion_.collector.values().back());
+  const double t_s = static_cast<double>(sample.t_host_ns) * 1e-9;
+  if (t_s - motion_.flushed_s >= FreeMotionState::kFlushS) {
+    FlushMotion(d, host);
+    motion_.flushed_s = t_s;
+  }
+  if (fit_in_flight_ || motion_.kept < FreeMotionState::kFirstFit) return;
+  const bool doubled = motion_.kept >= 2 * motion_.kept_at_fit;
+  const bool due =
+      t_s - motion_.fitted_s >= FreeMotionState::kRefitS && motion_.kept > motion_.kept_at_fit;
+  if (doubled || due) QueueFit(d, t_s, false, host);
+}
+
+void FreeCalibrations::OnFinish(DevicePipeline& d, CalibrationHost& host) {
+  if (!motion_.enabled) return;
+  FlushMotion(d, host);
+  if (motion_.kept > motion_.kept_at_fit) {
+    QueueFit(d,
+             motion_.collector.values().empty() ? 0.0 : motion_.collector.values().back().t_host_s,
+             false, host);
+  }
 }
 
 void FreeCalibrations::OnSequencerEvent(const SequencerEvent& e) {
@@ -84,11 +142,48 @@ void FreeCalibrations::OnSequencerEvent(const SequencerEvent& e) {
 
 void FreeCalibrations::QueueFit(DevicePipeline& d, double t_s, bool resuming,
                                 CalibrationHost& host) {
+  if (fit_in_flight_) {
+    // One fit at a time: the latest data are fitted when it is done (a live stream's intervals
+    // and values arrive faster than a fit of thousands of points with the drift whitened).
+    pending_fit_ = PendingFit{t_s, resuming};
+    return;
+  }
   auto job = std::make_shared<FreeUpdate>();
+  std::shared_ptr<const MotionCollector> motion;
+  MotionOptions motion_options = motion_options_;
+  if (motion_.enabled) {
+    // Journaled before they are used (the worker runs in order).
+    FlushMotion(d, host);
+    motion_.flushed_s = t_s;
+    motion_.kept_at_fit = motion_.kept;
+    motion_.fitted_s = t_s;
+    motion = std::make_shared<const MotionCollector>(motion_.collector);
+    // The noise per sample: the profile's the sequencer uses (measured or the class's).
+    const NoiseProfile* noise = d.sequencer->noise();
+    if (noise && noise->sigma[kTriadMag]) {
+      motion_options.mag_sigma = *noise->sigma[kTriadMag];
+      motion_options.noise_source = noise->source;
+    } else {
+      motion_options.mag_sigma = class_mag_sigma_;
+      motion_options.noise_source = class_noise_source_;
+    }
+  }
+  fit_in_flight_ = true;
   // The worker fits copies: the loop goes on capturing meanwhile.
-  host.Defer([job, configured = configured_, intervals = d.records_used, context = context_,
-              options = options_] { job->Run(configured, intervals, context, options); },
-             [this, &d, job, t_s, resuming, &host] { ApplyUpdate(d, *job, t_s, resuming, host); });
+  host.Defer(
+      [job, configured = configured_, intervals = d.records_used, motion, motion_options,
+       context = context_, options = options_] {
+        job->Run(configured, intervals, motion.get(), motion_options, context, options);
+      },
+      [this, &d, job, t_s, resuming, &host] {
+        fit_in_flight_ = false;
+        ApplyUpdate(d, *job, t_s, resuming, host);
+        if (pending_fit_) {
+          const PendingFit next = *pending_fit_;
+          pending_fit_.reset();
+          QueueFit(d, next.t_s, next.resuming, host);
+        }
+      });
 }
 
 std::vector<FreeModelState*> FreeCalibrations::Take(const FreeUpdate& update) {
@@ -107,6 +202,7 @@ std::vector<FreeModelState*> FreeCalibrations::Take(const FreeUpdate& update) {
                    ? update.advice[static_cast<std::size_t>(found)]
                    : std::nullopt;
     m.estimate_intervals = update.intervals;
+    m.estimate_data = update.data;
     m.upstream.reset();
     std::string error;
     auto model = MakeFreeModel(m.result.model, context_, &error);
@@ -121,6 +217,7 @@ std::vector<FreeModelState*> FreeCalibrations::Take(const FreeUpdate& update) {
 
 void FreeCalibrations::ApplyUpdate(DevicePipeline& d, const FreeUpdate& job, double t_s,
                                    bool resuming, CalibrationHost& host) {
+  if (job.motion) motion_.last = job.motion;
   if (!job.error.empty()) {
     host.Publish(
         {{"class", "ERROR"}, {"device", d.name}, {"message", "free models: " + job.error}});
@@ -150,6 +247,9 @@ void FreeCalibrations::PublishEstimate(const DevicePipeline& d, const FreeModelS
                          m.result.model, fe.intervals, e.rank, e.parameters.size(),
                          e.dof > 0 ? e.chi2 / e.dof : 0.0, 100 * fe.coverage.fraction())
            : fmt::format("{}: no estimate: {}", m.result.model, e.error);
+  if (e.ok && fe.motion_points > 0) {
+    summary += fmt::format(" ({} of the intervals samples in motion)", fe.motion_points);
+  }
   nlohmann::json event = {{"class", "ESTIMATE"},
                           {"t", t_s},
                           {"device", d.name},
@@ -164,22 +264,22 @@ void FreeCalibrations::PublishEstimate(const DevicePipeline& d, const FreeModelS
                           {"gate", gate}};
   if (!m.result.note.empty()) event["note"] = m.result.note;
   if (m.advice) event["advice"] = m.advice->text;
+  if (fe.motion_points > 0) event["motion_points"] = fe.motion_points;
   host.Publish(event);
 }
 
 nlohmann::json FreeCalibrations::SourceResultJson(const DevicePipeline& d) const {
-  return {{"pose_source", "free"},
-          {"intervals", d.records_used.size()},
-          {"skipped", skipped_},
-          {"skip_reasons", skip_reasons_},
-          {"context", protocol::ToJson(context_)}};
+  return {{"pose_source", "free"},    {"intervals", d.records_used.size()},
+          {"skipped", skipped_},      {"skip_reasons", skip_reasons_},
+          {"motion", motion_.Json()}, {"context", protocol::ToJson(context_)}};
 }
 
 nlohmann::json FreeCalibrations::SourceStatusJson(const DevicePipeline& d) const {
   return {{"pose_source", "free"},
           {"intervals", d.records_used.size()},
           {"skipped", skipped_},
-          {"last_skip", skip_reasons_.empty() ? "" : skip_reasons_.back()}};
+          {"last_skip", skip_reasons_.empty() ? "" : skip_reasons_.back()},
+          {"motion", motion_.Json()}};
 }
 
 nlohmann::json FreeCalibrations::NextPose(const DevicePipeline& /*d*/,

@@ -52,13 +52,37 @@ int MovesUsed(const FreeEstimate& estimate) {
 }
 
 void FreeUpdate::Run(const std::vector<std::string>& configured,
-                     const std::vector<FreeInterval>& all, const FreeContext& context,
+                     const std::vector<FreeInterval>& still, const MotionCollector* collector,
+                     const MotionOptions& motion_options, const FreeContext& context,
                      const FreeCalibratorOptions& options) {
-  intervals = all.size();
-  models = configured.empty() ? DefaultFreeModels(all) : configured;
+  intervals = still.size();
+  auto all = std::make_shared<std::vector<FreeInterval>>(still);
+  if (collector) {
+    motion = collector->Select(still, motion_options);
+    all->insert(all->end(), motion->points.begin(), motion->points.end());
+  }
+  data = all;
+  models = configured.empty() ? DefaultFreeModels(*all) : configured;
   results.clear();
-  if (!CalibrateFreeModels(models, all, context, options, &results, &error)) return;
-  advice = NextOrientations(results, all, context);
+  if (!CalibrateFreeModels(models, *all, context, options, &results, &error)) return;
+  advice = NextOrientations(results, *all, context);
+}
+
+nlohmann::json FreeMotionState::Json() const {
+  nlohmann::json j = {{"enabled", enabled},
+                      {"values", kept},
+                      {"samples_with_mag", collector.samples_with_mag()},
+                      {"held", collector.held()},
+                      {"thinned", collector.thinned()}};
+  if (last) {
+    j["points"] = last->points.size();
+    j["in_intervals"] = last->in_intervals;
+    j["decimated"] = last->decimated;
+    j["rate_hz"] = last->period_s > 0 ? nlohmann::json(1.0 / last->period_s) : nlohmann::json();
+    j["noise_source"] = last->noise_source;
+    j["summary"] = last->Summary();
+  }
+  return j;
 }
 
 int FreeModelState::triad() const { return TriadOfSensor(sensor); }
@@ -133,9 +157,19 @@ Activation FreeModelState::Activate(const DevicePipeline& d, const ActivationCon
   in.context = owner->context();
   in.options = owner->options();
   in.sensor_class = context.sensor_class;
-  in.intervals.assign(d.records_used.begin(),
-                      d.records_used.begin() + static_cast<std::ptrdiff_t>(std::min(
-                                                   estimate_intervals, d.records_used.size())));
+  if (estimate_data) {
+    // The evidence the model used: the samples in motion only for a magnetometer model.
+    std::string error;
+    auto model = MakeFreeModel(result.model, owner->context(), &error);
+    const bool mag = model && model->Needs(SensorKind::kMagnetometer);
+    for (const FreeInterval& iv : *estimate_data) {
+      if (!iv.in_motion || mag) in.intervals.push_back(iv);
+    }
+  } else {
+    in.intervals.assign(d.records_used.begin(),
+                        d.records_used.begin() + static_cast<std::ptrdiff_t>(std::min(
+                                                     estimate_intervals, d.records_used.size())));
+  }
   in.identity = d.identity;
   Activation a;
   a.document = protocol::FreeCalibrationJson(in);

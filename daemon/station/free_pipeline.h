@@ -17,6 +17,7 @@
 #include "core/analysis/free_advice.h"
 #include "core/analysis/publish_gate.h"
 #include "core/estimation/free_calibrator.h"
+#include "core/estimation/free_motion.h"
 #include "core/estimation/sensor_class.h"
 #include "daemon/station/calibration.h"
 
@@ -47,10 +48,32 @@ struct FreeUpdate {
   std::string error;                     // the models could not be made
   std::vector<FreeModelResult> results;  // upstreams first (CalibrateFreeModels)
   std::vector<std::optional<OrientationAdvice>> advice;  // per result
+  // What was fitted: the still intervals, then the magnetometer's points in motion (issue 37).
+  std::shared_ptr<const std::vector<FreeInterval>> data;
+  std::optional<MotionPoints> motion;  // when the magnetometer's values in motion were looked at
 
-  // Fits `configured` (empty: DefaultFreeModels of the intervals) to `intervals`.
+  // Fits `configured` (empty: DefaultFreeModels of the data) to `intervals` and, with `motion`,
+  // the magnetometer's values in motion outside them (MotionCollector::Select).
   void Run(const std::vector<std::string>& configured, const std::vector<FreeInterval>& intervals,
+           const MotionCollector* motion, const MotionOptions& motion_options,
            const FreeContext& context, const FreeCalibratorOptions& options);
+};
+
+// The magnetometer's values in motion of a free-mode device's stream ([free] motion): kept, put in
+// the journal at least every kFlushS, and fitted with the still intervals -- when their count has
+// doubled since the last fit, at least every kRefitS while new ones arrive, and at the input's end.
+struct FreeMotionState {
+  static constexpr double kFlushS = 1.0;
+  static constexpr double kRefitS = 10.0;
+  static constexpr std::int64_t kFirstFit = 50;  // values before the first fit in motion
+  bool enabled = false;
+  MotionCollector collector;
+  std::vector<MotionValue> unjournaled;
+  std::int64_t kept = 0,
+               kept_at_fit = 0;  // values kept in all (thinned or not), and at the last fit
+  double flushed_s = -1e300, fitted_s = -1e300;  // host times
+  std::optional<MotionPoints> last;              // the last fit's selection
+  nlohmann::json Json() const;                   // status/RESULT "motion"
 };
 
 class FreeCalibrations;
@@ -64,7 +87,8 @@ struct FreeModelState : Calibration {
   std::optional<FreeModelResult> upstream;  // the estimate it built on (gyro9's accel9)
   std::optional<OrientationAdvice> advice;
   std::size_t estimate_intervals = 0;  // the device's intervals `result` saw
-  int active_version_ = 0;             // 0: no active calibration
+  std::shared_ptr<const std::vector<FreeInterval>> estimate_data;  // and all it fitted
+  int active_version_ = 0;                                         // 0: no active calibration
 
   // The calibration live samples are corrected with (version 0: none): the active one, or the
   // one stored in the state directory when the station started.
@@ -131,6 +155,10 @@ class FreeCalibrations : public CalibrationSet {
   void OnRecord(DevicePipeline& d, const PoseRecord& record, double t_s, bool resuming,
                 CalibrationHost& host) override;
   void OnResumed(DevicePipeline& d, CalibrationHost& host) override;
+  // The magnetometer's values in motion ([free] motion): kept, journaled, refitted.
+  void OnSample(DevicePipeline& d, const Sample& sample, CalibrationHost& host) override;
+  void OnMotionValues(DevicePipeline& d, const std::vector<MotionValue>& values) override;
+  void OnFinish(DevicePipeline& d, CalibrationHost& host) override;
   void OnSequencerEvent(const SequencerEvent& event) override;  // counts skipped segments
   // The orientation to add per model, and the gates.
   nlohmann::json NextPose(const DevicePipeline& d, const StationOptions& options) const override;
@@ -164,6 +192,17 @@ class FreeCalibrations : public CalibrationSet {
   // A resumed journal's intervals are fitted once, at the end of the resume.
   bool refit_due_ = false;
   bool needs_moves_ = false;
+  FreeMotionState motion_;
+  MotionOptions motion_options_;
+  Eigen::Vector3d class_mag_sigma_ = Eigen::Vector3d::Zero();  // per sample, the class's
+  std::string class_noise_source_;
+  bool fit_in_flight_ = false;
+  struct PendingFit {
+    double t_s;
+    bool resuming;
+  };
+  std::optional<PendingFit> pending_fit_;  // asked for while one was in flight
+  void FlushMotion(DevicePipeline& d, CalibrationHost& host);
 };
 
 }  // namespace turncal::daemon

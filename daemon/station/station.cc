@@ -129,6 +129,10 @@ void Station::Resume() {
   for (const auto& e : entries) {
     for (std::size_t i = 0; i < devices_.size(); ++i) {
       if (devices_[i]->name != e.device) continue;
+      if (e.is_motion()) {
+        devices_[i]->calibrations->OnMotionValues(*devices_[i], e.motion);
+        continue;
+      }
       Update(i, e.record, e.record.t_end_s);
       ++resumed[i];
     }
@@ -180,7 +184,20 @@ nlohmann::json Station::PersistenceStatus() const {
 }
 
 void Station::OnSample(int device, const Sample& sample) {
-  devices_[static_cast<std::size_t>(device)]->sequencer->Push(sample);
+  DeviceState& d = *devices_[static_cast<std::size_t>(device)];
+  d.sequencer->Push(sample);
+  d.calibrations->OnSample(d, sample, *this);
+}
+
+void Station::JournalMotion(DeviceState& d, std::vector<MotionValue> values) {
+  if (values.empty() || !EnsureJournal()) return;
+  auto error = std::make_shared<std::string>();
+  Defer([journal = journal_, name = d.name, values = std::move(values),
+         error] { journal->AppendMotion(name, values, error.get()); },
+        [this, name = d.name, error] {
+          NoteWrite(name, *error);
+          if (!error->empty()) journal_.reset();  // reopened before the next append
+        });
 }
 
 void Station::TickDevice(int device, std::int64_t now_ns) {

@@ -70,6 +70,10 @@ struct FreeStationOptions {
   // The field's magnitude from [reference] (true), or unknown (false: the magnetometer models'
   // soft iron is then relative, |h| = 1, and the result says so).
   bool field_known = true;
+  // The magnetometer's samples in motion as data (issue 37, docs/FREE.md "In motion"): every new
+  // value outside the still intervals one norm equation, at most max_motion_points of them.
+  bool motion = true;
+  int max_motion_points = 600;  // a fit with the drift whitened grows as n^3: 0.2 s here
 };
 
 struct StationOptions {
@@ -237,6 +241,7 @@ class Station : public ReplayTarget, private CalibrationHost {
   void Activate(DeviceState& d, Calibration& c, double t_s,
                 const nlohmann::json& override_who) override;
   void SaveNoiseProfile(DeviceState& d) override;
+  void JournalMotion(DeviceState& d, std::vector<MotionValue> values) override;
   void Resume();
   void LoadApplied();
   // Counts a state-directory write's outcome; publishes ERROR when it failed.

@@ -50,6 +50,10 @@ bool StationOptions::IsValid(std::string* error) const {
     if (error) *error = "[free] min_coverage_percent must be in [0, 100]";
     return false;
   }
+  if (!(free.max_motion_points >= 10 && free.max_motion_points <= 100000)) {
+    if (error) *error = "[free] max_motion_points must be in [10, 100000]";
+    return false;
+  }
   // A model of the pose source: a free model without poses, a pose model with them.
   auto known = [&](const std::string& m) {
     std::string base;

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -158,6 +159,49 @@ TEST(FreeMotion, ARotationAboutOneAxisCarriesNoCalibrationAndSaysWhy) {
   EXPECT_EQ(r.model, "magsphere") << r.note;
   EXPECT_NE(r.note.find("cannot carry an ellipsoid"), std::string::npos) << r.note;
   EXPECT_LT(r.estimate.coverage.fraction(), 0.1);
+}
+
+// A device that was never turned: every value is the same field plus the sensor's noise. A tiny
+// sphere about the cloud fits it as well as any (chi^2/dof below 1, small sigma by the Fisher
+// information): refused by name before it is fitted, and a frozen magnetometer named as such.
+TEST(FreeMotion, NoiseOnlyAndAFrozenMagnetometerAreRefusedByName) {
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> noise(0.0, 5e-4);
+  const Eigen::Vector3d field(0.25, 0.09, 0.44);
+  std::vector<Sample> samples;
+  for (int i = 0; i < 500; ++i) {
+    Sample s;
+    s.t_host_ns = 1'000'000'000 + i * 10'000'000LL;
+    s.t_device_s = 1.0 + i * 0.01;
+    s.mag = field + Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+    samples.push_back(s);
+  }
+  MotionOptions mo;
+  mo.mag_sigma = Eigen::Vector3d::Constant(5e-4);
+  const MotionPoints points = MagnetometerInMotion(samples, {}, mo);
+  ASSERT_EQ(points.points.size(), 500u);
+  FreeContext context;
+  std::vector<FreeModelResult> results;
+  std::string error;
+  for (const char* model : {"magellipsoid", "magsphere"}) {
+    SCOPED_TRACE(model);
+    results.clear();
+    error.clear();
+    const bool made = CalibrateFreeModels({model}, points.points, context, FreeCalibratorOptions{},
+                                          &results, &error);
+    const std::string why = made && !results.empty()
+                                ? results.back().estimate.estimate.error + " " + results.back().note
+                                : error;
+    EXPECT_TRUE(!made || results.empty() || !results.back().estimate.estimate.ok) << why;
+    EXPECT_NE(why.find("did not turn"), std::string::npos) << why;
+  }
+
+  // Frozen: one value held over every sample.
+  for (Sample& s : samples) s.mag = field;
+  const MotionPoints frozen = MagnetometerInMotion(samples, {}, mo);
+  EXPECT_TRUE(frozen.frozen);
+  EXPECT_TRUE(frozen.points.empty());
+  EXPECT_NE(frozen.Summary().find("frozen magnetometer"), std::string::npos) << frozen.Summary();
 }
 
 }  // namespace
