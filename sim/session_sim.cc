@@ -89,7 +89,18 @@ Eigen::Vector3d WindowMean(const std::vector<Sample>& samples,
         samples.begin());
   };
   const std::size_t a = at(t0_s), b = std::max(a, at(t1_s));
-  if (b == a) return Eigen::Vector3d::Zero();
+  if (b == a) {
+    // No sample inside (a window one sample period long, shifted by a clock's microseconds):
+    // the drift at the sample nearest the window's middle, not nothing.
+    if (samples.empty()) return Eigen::Vector3d::Zero();
+    const double mid = 0.5 * (t0_s + t1_s);
+    std::size_t k = std::min(a, samples.size() - 1);
+    if (k > 0 && std::abs(static_cast<double>(samples[k - 1].t_host_ns) * 1e-9 - mid) <
+                     std::abs(static_cast<double>(samples[k].t_host_ns) * 1e-9 - mid)) {
+      --k;
+    }
+    return sums[k + 1] - sums[k];
+  }
   return (sums[b] - sums[a]) / static_cast<double>(b - a);
 }
 

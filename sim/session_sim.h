@@ -147,7 +147,8 @@ struct SimulatedSession {
   Eigen::Vector3d LastPoseMagBiasOffset() const;
   // The bias's departure from the turn-on bias averaged over the samples in [t0_s, t1_s]
   // (session time): the truth of a bias estimated over that window, e.g. a calibration's
-  // bias_window (zero when no sample falls inside).
+  // bias_window (when no sample falls inside -- a window one sample long, shifted by a clock's
+  // microseconds -- the drift at the sample nearest the window's middle).
   Eigen::Vector3d AccDriftMean(double t0_s, double t1_s) const;
   Eigen::Vector3d MagDriftMean(double t0_s, double t1_s) const;
   Eigen::Vector3d GyrDriftMean(double t0_s, double t1_s) const;
