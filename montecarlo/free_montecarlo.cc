@@ -17,6 +17,7 @@
 
 #include "core/estimation/free_calibrator.h"
 #include "core/estimation/sensor_class.h"
+#include "core/models/free_common.h"
 #include "daemon/station/free_pipeline.h"
 #include "daemon/station/replay_once.h"
 #include "montecarlo/parallel_runs.h"
@@ -115,6 +116,7 @@ class FreeMonteCarlo {
     Gate(r, out);
     if (!Truth(capture, r, out)) return;
     Score(r, out);
+    if (o_.hand_s > 0 && o_.model == "magellipsoid") CompareHardIron(capture, out);
     Scored(run, *out);
   }
 
@@ -142,6 +144,11 @@ class FreeMonteCarlo {
     o.session.warmup_tau_s = o_.warmup_tau_s;
     o.session.dwell_s = o_.dwell_s;
     o.session.seed = seed;
+    if (o_.magnet_at_s >= 0) {
+      o.session.magnet_at_s = o_.magnet_at_s;
+      o.session.magnet_s = o_.magnet_s;
+      o.session.magnet_peak = o_.magnet_peak;
+    }
     if (o_.hand_s > 0) {
       o.poses.clear();
       sim::HandMotion hand;
@@ -205,6 +212,54 @@ class FreeMonteCarlo {
     if (!out->ok) out->error = "a sigma is not finite";
   }
 
+  // The hard iron's error of the estimate and of the plain sphere and ellipsoid fits through
+  // every new magnetometer value (held repeats left out, as the station does), against the same
+  // truth.
+  void CompareHardIron(const sim::SimCapture& capture, FreeRun* out) const {
+    std::vector<Eigen::Vector3d> values;
+    for (const Sample& sample : capture.session.samples) {
+      if (sample.mag && (values.empty() || *sample.mag != values.back())) {
+        values.push_back(*sample.mag);
+      }
+    }
+    const auto& names = model_->parameters();
+    Eigen::Vector3d estimate, truth;
+    for (int k = 0; k < 3; ++k) {
+      const char* name = k == 0 ? "bx" : k == 1 ? "by" : "bz";
+      const auto it =
+          std::find_if(names.begin(), names.end(), [&](const auto& p) { return p.name == name; });
+      if (it == names.end()) return;
+      const auto i = static_cast<Eigen::Index>(it - names.begin());
+      estimate[k] = out->theta[i];
+      truth[k] = out->truth[i];
+    }
+    out->hard_iron_error = (estimate - truth).norm();
+    if (const auto sphere = free::FitSphere(values)) {
+      out->sphere_error = (sphere->center - truth).norm();
+    }
+    if (const auto ellipsoid = free::FitEllipsoid(values)) {
+      out->ellipsoid_error = (ellipsoid->center - truth).norm();
+    }
+  }
+
+  // RMS, median and largest of one method's hard-iron errors over the runs that have one.
+  static HardIronErrors SummariseErrors(const std::vector<FreeRun>& runs, double FreeRun::*error) {
+    std::vector<double> e;
+    for (const FreeRun& r : runs) {
+      if (r.ok && std::isfinite(r.*error)) e.push_back(r.*error);
+    }
+    HardIronErrors out;
+    out.runs = static_cast<int>(e.size());
+    if (e.empty()) return out;
+    std::sort(e.begin(), e.end());
+    double sum2 = 0;
+    for (double x : e) sum2 += x * x;
+    out.rms = std::sqrt(sum2 / static_cast<double>(e.size()));
+    out.median = e[e.size() / 2];
+    out.max = e.back();
+    return out;
+  }
+
   // The gate over every run it judged, then the z-scores, p-values and intervals over the runs
   // with finite z.
   void Summarise(FreeMonteCarloSummary* s) const {
@@ -223,6 +278,9 @@ class FreeMonteCarlo {
         AddSolvedRuns(s, [&](const FreeRun& r) { intervals += r.intervals; });
     if (s->solved < 2) return;
     s->intervals_mean = intervals / s->solved;
+    s->hard_iron = SummariseErrors(s->runs, &FreeRun::hard_iron_error);
+    s->plain_sphere = SummariseErrors(s->runs, &FreeRun::sphere_error);
+    s->plain_ellipsoid = SummariseErrors(s->runs, &FreeRun::ellipsoid_error);
     s->ks = KsUniform(p_values);
     s->p_value_deciles.assign(10, 0);
     for (double p : p_values) {

@@ -10,6 +10,7 @@
 // (docs/ACCURACY.md "Without a turntable").
 
 #include <Eigen/Core>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -57,6 +58,10 @@ struct FreeMonteCarloOptions {
   double hand_pause_s = 3.0;
   double device_rate_hz = 0.0;
   double mag_rate_hz = 0.0;
+  // A magnet passing by at magnet_at_s (s into the session; < 0: none) for magnet_s, its
+  // field's peak magnet_peak (Gauss; SessionSimOptions::magnet_*): the station must leave the
+  // disturbed values out and stay honest.
+  double magnet_at_s = -1.0, magnet_s = 1.0, magnet_peak = 0.1;
   // Called after each run that reached an estimate of the model, with the run's number, its
   // outcome, the number of such runs so far and the model's parameters (the outcome's order);
   // one call at a time (the runs run on `jobs` threads).
@@ -74,6 +79,17 @@ struct FreeRun {
   bool gate = false;                 // and passed it
   std::vector<std::string> reasons;  // why it refused, numbers as '#' (GateReasonKind)
   int intervals = 0;
+  // A hand's rotation with magellipsoid: the hard iron's error |b - b_true| (device unit) of
+  // turncal's estimate and of the plain least-squares fits the vendors' tools make (a sphere by
+  // Kasa's linear fit, an algebraic ellipsoid: core/models/free_common.h) through every new
+  // magnetometer value of the session, unweighted; NaN where a fit failed or was not made.
+  double hard_iron_error = NAN, sphere_error = NAN, ellipsoid_error = NAN;
+};
+
+// The hard iron's error over the runs that have it, for one method: RMS, median and the largest.
+struct HardIronErrors {
+  int runs = 0;
+  double rms = NAN, median = NAN, max = NAN;
 };
 
 struct FreeMonteCarloSummary {
@@ -94,6 +110,9 @@ struct FreeMonteCarloSummary {
   // 0: chi^2 too large; near 1: too small).
   std::vector<int> p_value_deciles;
   double intervals_mean = 0.0;
+  // With a hand's rotation and magellipsoid: the hard iron's error, turncal's against the plain
+  // fits on the same values (FreeRun::hard_iron_error ...).
+  HardIronErrors hard_iron, plain_sphere, plain_ellipsoid;
 
   bool Passed() const;  // every parameter honest (ZScoreSummary::Honest)
 };

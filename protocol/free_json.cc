@@ -203,6 +203,16 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
   m["relative_scale"] = fe.relative_scale;
   m["bias_window"] = fe.bias_window_host ? ToJson(*fe.bias_window_host) : nlohmann::json();
   m["warnings"] = e.warnings;
+  if (fe.field_wander > 0) m["field_wander"] = fe.field_wander;
+  if (fe.disturbance) {
+    const FieldDisturbance& d = *fe.disturbance;
+    m["disturbed"] = {{"values", d.values},
+                      {"of", d.of},
+                      {"t0_s", d.t0_s},
+                      {"t1_s", d.t1_s},
+                      {"largest_percent", d.largest_percent},
+                      {"largest_sigmas", d.largest_sigmas}};
+  }
   if (advice) m["advice"] = {{"text", advice->text}, {"sigma_ratio", advice->sigma_ratio}};
   return m;
 }

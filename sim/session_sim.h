@@ -97,6 +97,12 @@ struct SessionSimOptions {
   // field's magnitude is then attenuated by 1 / sqrt(1 + (w / (2 pi bandwidth))^2)).
   double mag_rate_hz = 0.0;
   double mag_bandwidth_hz = 0.0;
+  // A magnet passing by (issue 37's bad input): from magnet_at_s (session time) for magnet_s, a
+  // field along magnet_direction (the sensor's frame; normalised) rising and falling as a raised
+  // cosine to magnet_peak (the magnetometer's unit) at its middle; 0: none. It is not the
+  // sensor's: the truth does not hold it.
+  double magnet_at_s = 0.0, magnet_s = 1.0, magnet_peak = 0.0;
+  Eigen::Vector3d magnet_direction = Eigen::Vector3d(1.0, 1.0, 1.0);
   std::uint64_t seed = 1;
 
   bool IsValid(std::string* error) const;

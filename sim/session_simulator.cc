@@ -428,6 +428,11 @@ class SessionSimulator {
     Eigen::Vector3d acc = accel_model_.Predict(*acc_theta, pose) + drift_acc;
     if (!o_.lever_arm_q_m.isZero()) acc += accel_model_.context().mounting * lever_q;
     Eigen::Vector3d mag = mag_model_.Predict(*mag_theta, pose) + drift_mag;
+    if (o_.magnet_peak > 0 && tk >= o_.magnet_at_s && tk <= o_.magnet_at_s + o_.magnet_s) {
+      // A magnet passing by: a raised cosine over its time.
+      const double phase = 2 * M_PI * (tk - o_.magnet_at_s) / o_.magnet_s;
+      mag += o_.magnet_peak * 0.5 * (1.0 - std::cos(phase)) * o_.magnet_direction.normalized();
+    }
     if (o_.mag_bandwidth_hz > 0) {
       // The magnetometer's first-order low-pass, started at the first value.
       const double alpha = 1.0 - std::exp(-2 * M_PI * o_.mag_bandwidth_hz * dt_);

@@ -43,6 +43,30 @@ std::string ReasonsText(const montecarlo::FreeMonteCarloSummary& s) {
   return text;
 }
 
+// One method's hard-iron errors in mG (the simulator's field is in Gauss): RMS / median / max.
+std::string ErrorsText(const montecarlo::HardIronErrors& e) {
+  return e.runs == 0 ? "no fit"
+                     : fmt::format("{:.3f} / {:.3f} / {:.3f} ({} runs)", 1e3 * e.rms,
+                                   1e3 * e.median, 1e3 * e.max, e.runs);
+}
+
+// The hard iron's error of turncal's fit against the plain fits on the same values.
+std::string HardIronText(const montecarlo::FreeMonteCarloSummary& s) {
+  return fmt::format(
+      "Hard iron's error |b - b_true|, mG, RMS / median / largest, on the same values:\n"
+      "  turncal (its model, weighted):  {}\n"
+      "  plain sphere (Kasa):            {}\n"
+      "  plain ellipsoid (algebraic):    {}\n",
+      ErrorsText(s.hard_iron), ErrorsText(s.plain_sphere), ErrorsText(s.plain_ellipsoid));
+}
+
+nlohmann::json ErrorsJson(const montecarlo::HardIronErrors& e) {
+  return {{"runs", e.runs},
+          {"rms_mG", e.runs ? nlohmann::json(1e3 * e.rms) : nlohmann::json()},
+          {"median_mG", e.runs ? nlohmann::json(1e3 * e.median) : nlohmann::json()},
+          {"max_mG", e.runs ? nlohmann::json(1e3 * e.max) : nlohmann::json()}};
+}
+
 void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                    const montecarlo::FreeMonteCarloSummary& s) {
   fmt::print("{}\n", nlohmann::json{{"model", o.model},
@@ -56,6 +80,7 @@ void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                                     {"hand_pause_every_s", o.hand_pause_every_s},
                                     {"device_rate_hz", o.device_rate_hz},
                                     {"mag_rate_hz", o.mag_rate_hz},
+                                    {"magnet_at_s", o.magnet_at_s},
                                     {"runs", o.runs},
                                     {"ok", s.solved},
                                     {"orientations", o.orientations},
@@ -67,6 +92,10 @@ void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                                     {"ks_d", s.ks.d},
                                     {"ks_p", s.ks.p},
                                     {"p_value_deciles", s.p_value_deciles},
+                                    {"hard_iron_error",
+                                     {{"turncal", ErrorsJson(s.hard_iron)},
+                                      {"plain_sphere", ErrorsJson(s.plain_sphere)},
+                                      {"plain_ellipsoid", ErrorsJson(s.plain_ellipsoid)}}},
                                     {"params", ZScoreRows(s.parameters, s.z, true)}}
                          .dump());
 }
@@ -97,6 +126,7 @@ void PrintFreeText(const montecarlo::FreeMonteCarloOptions& o,
       s.intervals_mean, s.gate_passed, s.gated,
       s.top_reasons.empty() ? "" : "refused for:\n" + ReasonsText(s), table, s.ks.d, s.ks.p,
       fmt::join(s.p_value_deciles, " "), bad, s.parameters.size());
+  if (s.hard_iron.runs > 0) fmt::print("{}", HardIronText(s));
 }
 
 // Every run's estimate, truth, sigma and z on standard error (--verbose), and the progress.
@@ -207,6 +237,16 @@ void AddFreeMonteCarloCommand(CLI::App* app) {
   cmd->add_option("--hand-pauses", o->hand_pause_every_s,
                   "with --hand: a pause after every this many seconds of motion (0: none)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--magnet", o->magnet_at_s,
+                  "a magnet passes by this many seconds into each session (turncal sim "
+                  "--magnet): the disturbed values must be left out")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--magnet-s", o->magnet_s, "with --magnet: how long it is near, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--magnet-peak", o->magnet_peak, "with --magnet: its peak field, Gauss")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd->add_option("--hand-pause", o->hand_pause_s, "with --hand-pauses: each pause, s")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

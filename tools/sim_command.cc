@@ -432,6 +432,11 @@ void SetSessionOptions(const SimCommandArgs& args, sim::SimCaptureOptions* optio
   if (args.start_s >= 0) o.start_s = args.start_s;
   o.mag_rate_hz = args.mag_rate_hz;
   o.mag_bandwidth_hz = args.mag_bandwidth_hz;
+  if (args.magnet_at_s >= 0) {
+    o.magnet_at_s = args.magnet_at_s;
+    o.magnet_s = args.magnet_s;
+    o.magnet_peak = args.magnet_peak;
+  }
   if (args.hand_s > 0) {
     sim::HandMotion hand;
     hand.duration_s = args.hand_s;

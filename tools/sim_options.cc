@@ -137,6 +137,18 @@ void AddNoiseAndTableOptions(CLI::App* cmd, SimCommandArgs* args) {
   cmd->add_option("--hand-pause", args->hand_pause_s, "with --hand-pauses: each pause, s")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_option("--magnet", args->magnet_at_s,
+                  "a magnet passes by this many seconds into the session: a field the sensor "
+                  "does not own, rising and falling over --magnet-s to --magnet-peak (a bad "
+                  "input free mode must name and leave out)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--magnet-s", args->magnet_s, "with --magnet: how long it is near, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--magnet-peak", args->magnet_peak,
+                  "with --magnet: its field at the closest, Gauss")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd->add_option("--start", args->start_s,
                   "seconds at rest before the first move (default 1; 0: no still moment)")
       ->check(CLI::NonNegativeNumber);

@@ -66,6 +66,8 @@ struct SimCommandArgs {
   std::string hand_path = "tumble";
   double hand_pause_every_s = 0;
   double hand_pause_s = 1.0;
+  // A magnet passing by at magnet_at_s for magnet_s, its field's peak magnet_peak (Gauss).
+  double magnet_at_s = -1.0, magnet_s = 1.0, magnet_peak = 0.1;
   double start_s = -1;  // negative: SessionSimOptions' (1 s)
   double mag_rate_hz = 0;
   double mag_bandwidth_hz = 0;

@@ -28,6 +28,11 @@ bool FreeCalibratorOptions::IsValid(std::string* error) const {
   if (!(min_relative_singular >= 0) || !(min_coverage >= 0 && min_coverage <= 1)) {
     return fail("the gate's limits must be a relative singular value >= 0 and a share in [0, 1]");
   }
+  if (!(disturbance_sigmas >= 0) || !(max_disturbed_share >= 0 && max_disturbed_share <= 1) ||
+      !(max_field_wander > 1)) {
+    return fail(
+        "the disturbance's limits must be sigmas >= 0, a share in [0, 1] and a wander above 1");
+  }
   if (precision && !precision->IsValid(error)) return false;
   return observability.IsValid(error);
 }
@@ -467,7 +472,9 @@ class FreeCalibration {
 
 FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
                            const FreeCalibratorOptions& options) {
-  return FreeCalibration(model, data, options).Run();
+  return LeaveOutDisturbedMotion(model, data, options, [&](const FreeData& d) {
+    return FreeCalibration(model, d, options).Run();
+  });
 }
 
 bool CalibrateFreeModels(const std::vector<std::string>& models,

@@ -21,6 +21,7 @@
 #include "core/analysis/publish_gate.h"
 #include "core/analysis/sphere_coverage.h"
 #include "core/estimation/calibrator.h"
+#include "core/estimation/free_disturbance.h"
 #include "core/modeling/free_model.h"
 
 namespace turncal {
@@ -33,6 +34,14 @@ struct FreeCalibratorOptions {
   bool inflate_covariance_by_chi2 = true;
   double chi2_inflation_p_value = 0.01;
   double outlier_threshold = 4.0;
+  // The magnetometer's samples in motion whose field magnitude departs from the fit beyond this
+  // many robust sigmas (or the count's Bonferroni bound, when larger) are left out as disturbed
+  // and the fit repeated; more than max_disturbed_share of them disturbed refuses the
+  // calibration, and departures scattering more than max_field_wander times their step noise
+  // refuse it too (core/estimation/free_disturbance.h). 0: none left out.
+  double disturbance_sigmas = 5.0;
+  double max_disturbed_share = 0.1;
+  double max_field_wander = 5.0;
   ObservabilityOptions observability;
 
   // The gate: the model's parameters all determined (full rank), the weakest direction's
@@ -87,6 +96,11 @@ struct FreeEstimate {
   std::optional<TimeWindow> bias_window, bias_window_host;
   // What the raw triad leaves (FreeModel::Identity) and what the calibration leaves, per kind.
   std::vector<MisfitFigure> before, after;
+  // The samples in motion left out as disturbed, when any (the fit is the one without them).
+  std::optional<FieldDisturbance> disturbance;
+  // With samples in motion: their departures' robust scatter over their step noise at the fit
+  // (1 for white noise; FreeCalibratorOptions::max_field_wander); 0 when not judged.
+  double field_wander = 0.0;
 };
 
 // Fits `model` to `data`. !estimate.ok with a message when the model cannot start (too few

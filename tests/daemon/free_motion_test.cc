@@ -39,6 +39,10 @@ struct HandCase {
   sim::HandMotion hand;
   bool class_noise = true;  // the stillness tests' (and the points') noise from the class
   std::uint64_t seed = 7;
+  // A magnet passing by (SessionSimOptions::magnet_*; peak 0: none) and the calibrator's
+  // options.
+  double magnet_at_s = 0.0, magnet_s = 1.0, magnet_peak = 0.0;
+  FreeCalibratorOptions calibrator;
 };
 
 struct HandFit {
@@ -61,6 +65,9 @@ HandFit Fit(const HandCase& k, const std::vector<std::string>& models) {
   o.session.start_s = 0.0;  // no still moment
   o.session.hand = k.hand;
   o.session.seed = k.seed;
+  o.session.magnet_at_s = k.magnet_at_s;
+  o.session.magnet_s = k.magnet_s;
+  o.session.magnet_peak = k.magnet_peak;
   std::string error;
   EXPECT_TRUE(sim::BuildSimCapture(o, &f.capture, &error)) << error;
   const std::vector<Sample> samples = Decode(f.capture);
@@ -71,8 +78,8 @@ HandFit Fit(const HandCase& k, const std::vector<std::string>& models) {
   }
   MotionOptions mo;
   f.collected = CollectFree(samples, so, &mo);
-  FreeCalibratorOptions co;
-  EXPECT_TRUE(CalibrateFreeModels(models, f.collected.data, f.context, co, &f.results, &error))
+  EXPECT_TRUE(
+      CalibrateFreeModels(models, f.collected.data, f.context, k.calibrator, &f.results, &error))
       << error;
   return f;
 }
@@ -109,7 +116,97 @@ TEST(FreeMotion, AHandRotationOnAMipStreamGivesAnHonestEllipsoid) {
   EXPECT_EQ(r.model, "magellipsoid") << r.note;
   EXPECT_TRUE(r.estimate.gate_passed);
   EXPECT_GT(r.estimate.estimate.p_value, 1e-3) << r.estimate.estimate.chi2;
+  EXPECT_FALSE(r.estimate.disturbance) << DisturbanceText(*r.estimate.disturbance);
   ExpectHonest(f, r, "mip 1 kHz");
+}
+
+// The largest |z| over the parameters of `r` against the truth.
+double LargestZ(const HandFit& f, const FreeModelResult& r) {
+  Eigen::VectorXd truth;
+  std::string error;
+  const TimeWindow whole{0.0, f.capture.session.duration_s};
+  EXPECT_TRUE(sim::FreeTruth(f.capture, r.model, f.context, whole, &truth, &error)) << error;
+  const Estimate& e = r.estimate.estimate;
+  return (e.theta - truth).cwiseQuotient(e.sigma).cwiseAbs().maxCoeff();
+}
+
+// A magnet passing the device for half a second (a field of 0.1 G at its closest, a fifth of
+// the Earth's) in the middle of a hand rotation: the values it disturbed are named (how many,
+// when, how far) and left out, and the ellipsoid from the rest is honest. Fitted with them, the
+// estimate is many sigma off: the test can fail.
+TEST(FreeMotion, AMagnetPassingByIsNamedAndLeftOut) {
+  HandCase k;
+  k.magnet_at_s = 4.0;
+  k.magnet_s = 0.5;
+  k.magnet_peak = 0.1;
+  const HandFit f = Fit(k, {"magellipsoid"});
+  ASSERT_EQ(f.results.size(), 1u);
+  const FreeModelResult& r = f.results[0];
+  ASSERT_EQ(r.model, "magellipsoid") << r.note;
+  ASSERT_TRUE(r.estimate.disturbance);
+  const FieldDisturbance& d = *r.estimate.disturbance;
+  // 50 values at 100 Hz while it is near; its tails (below the noise's bound) stay in.
+  EXPECT_GE(d.values, 20) << DisturbanceText(d);
+  EXPECT_LE(d.values, 50) << DisturbanceText(d);
+  EXPECT_EQ(d.of, 1000);
+  EXPECT_GE(d.t0_s, 3.95) << DisturbanceText(d);
+  EXPECT_LE(d.t1_s, 4.55) << DisturbanceText(d);
+  EXPECT_GT(d.largest_sigmas, 20.0) << DisturbanceText(d);
+  bool named = false;
+  for (const auto& w : r.estimate.estimate.warnings) {
+    named |= w.find("a magnet or steel nearby") != std::string::npos;
+  }
+  EXPECT_TRUE(named);
+  EXPECT_TRUE(r.estimate.gate_passed);
+  EXPECT_GT(r.estimate.estimate.p_value, 1e-3) << r.estimate.estimate.chi2;
+  ExpectHonest(f, r, "magnet left out");
+
+  HandCase all = k;
+  all.calibrator.disturbance_sigmas = 0;  // nothing left out
+  const HandFit g = Fit(all, {"magellipsoid"});
+  ASSERT_EQ(g.results.size(), 1u);
+  ASSERT_TRUE(g.results[0].estimate.estimate.ok);
+  EXPECT_FALSE(g.results[0].estimate.disturbance);
+  EXPECT_GT(LargestZ(g, g.results[0]), 5.0) << "the magnet should spoil a fit that keeps it";
+}
+
+// A magnet near for four seconds of ten: it pulls the fit and widens the scatter until nothing
+// stands out (chi^2/dof 222), but its departures wander far more than they step from one value
+// to the next: refused with the reason, where the plain fit passed.
+TEST(FreeMotion, AFieldDisturbedForLongIsRefused) {
+  HandCase k;
+  k.magnet_at_s = 3.0;
+  k.magnet_s = 4.0;
+  k.magnet_peak = 0.1;
+  const HandFit f = Fit(k, {"magellipsoid"});
+  ASSERT_EQ(f.results.size(), 1u);
+  const FreeModelResult& r = f.results[0];
+  EXPECT_FALSE(r.estimate.gate_passed);
+  bool refused = false;
+  std::string reasons;
+  for (const auto& why : r.estimate.gate_reasons) {
+    refused |= why.find("the field was disturbed in") != std::string::npos ||
+               why.find("the field's magnitude wanders") != std::string::npos;
+    reasons += why + "; ";
+  }
+  EXPECT_TRUE(refused) << reasons;
+  EXPECT_GT(r.estimate.field_wander, 5.0) << reasons;
+}
+
+// No magnet: no value is left out over several captures (the bound is set for one false alarm
+// in a thousand captures).
+TEST(FreeMotion, AnUndisturbedRotationLosesNoValue) {
+  for (std::uint64_t seed = 20; seed < 25; ++seed) {
+    HandCase k;
+    k.seed = seed;
+    const HandFit f = Fit(k, {"magellipsoid"});
+    ASSERT_EQ(f.results.size(), 1u);
+    EXPECT_FALSE(f.results[0].estimate.disturbance)
+        << "seed " << seed << ": " << DisturbanceText(*f.results[0].estimate.disturbance);
+    // White noise: the departures scatter as much as they step (1 within the medians' error).
+    EXPECT_GT(f.results[0].estimate.field_wander, 0.8) << "seed " << seed;
+    EXPECT_LT(f.results[0].estimate.field_wander, 1.3) << "seed " << seed;
+  }
 }
 
 TEST(FreeMotion, AnXbusConsumerWithPausesGivesAnHonestEllipsoid) {

@@ -1,0 +1,134 @@
+#include "core/estimation/free_disturbance.h"
+
+#include "core/estimation/free_calibrator.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <boost/math/special_functions/erf.hpp>
+#include <cmath>
+
+namespace turncal {
+namespace {
+
+double MedianOfCopy(std::vector<double> v) {
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+}  // namespace
+
+MotionDepartures FindDisturbedMotion(const FreeModel& model, const FreeData& data,
+                                     const Eigen::VectorXd& theta, double sigmas) {
+  MotionDepartures out;
+  std::vector<int> index;
+  std::vector<double> departure;
+  for (const auto& m : model.Misfits(data, theta)) {
+    if (m.kind != "norm" || m.interval < 0 ||
+        m.interval >= static_cast<int>(data.intervals.size()) ||
+        !data.intervals[static_cast<std::size_t>(m.interval)].in_motion ||
+        !std::isfinite(m.value)) {
+      continue;
+    }
+    index.push_back(m.interval);
+    departure.push_back(m.value);
+  }
+  const std::size_t n = departure.size();
+  if (n < 20) return out;
+  const double centre = MedianOfCopy(departure);
+  std::vector<double> absolute(n), step(n - 1);
+  for (std::size_t i = 0; i < n; ++i) absolute[i] = std::abs(departure[i] - centre);
+  for (std::size_t i = 0; i + 1 < n; ++i) step[i] = std::abs(departure[i + 1] - departure[i]);
+  out.scatter = 1.4826 * MedianOfCopy(absolute);
+  out.step_noise = 1.4826 * MedianOfCopy(step) / std::sqrt(2.0);
+  if (!(out.scatter > 0)) return out;
+  // P(|z| > k) = erfc(k / sqrt 2) = 1e-3 / n.
+  const double bound = std::sqrt(2.0) * boost::math::erfc_inv(1e-3 / static_cast<double>(n));
+  const double limit = std::max(sigmas, bound);
+  const double field =
+      data.context.field_magnitude > 0 ? data.context.field_magnitude : 1.0;  // relative: 1
+  for (std::size_t i = 0; i < n; ++i) {
+    const double z = absolute[i] / out.scatter;
+    if (z <= limit) continue;
+    out.disturbed.push_back(index[i]);
+    if (z > out.largest_sigmas) {
+      out.largest_sigmas = z;
+      out.largest_percent = 100.0 * std::abs(departure[i]) / field;
+    }
+  }
+  return out;
+}
+
+FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& data,
+                                     const FreeCalibratorOptions& options,
+                                     const std::function<FreeEstimate(const FreeData&)>& fit) {
+  FreeEstimate out = fit(data);
+  if (!(options.disturbance_sigmas > 0) || out.motion_points == 0 || !out.estimate.ok) return out;
+  const int motion_points = out.motion_points;
+  // The samples in motion disturbed at the latest fit, always judged over all of them (a value
+  // left out may come back); the fit without them; until the set stops changing (four rounds).
+  std::vector<int> left_out;
+  MotionDepartures at =
+      FindDisturbedMotion(model, data, out.estimate.theta, options.disturbance_sigmas);
+  for (int round = 0; round < 4 && at.disturbed != left_out; ++round) {
+    std::vector<bool> drop(data.intervals.size(), false);
+    for (int i : at.disturbed) drop[static_cast<std::size_t>(i)] = true;
+    FreeData rest;
+    rest.context = data.context;
+    rest.upstream_theta = data.upstream_theta;
+    rest.upstream_covariance = data.upstream_covariance;
+    for (std::size_t i = 0; i < data.intervals.size(); ++i) {
+      if (!drop[i]) rest.intervals.push_back(data.intervals[i]);
+    }
+    FreeEstimate again = fit(rest);
+    if (!again.estimate.ok) break;  // keep the last fit that worked, with what it left out
+    out = std::move(again);
+    left_out = std::move(at.disturbed);
+    at = FindDisturbedMotion(model, data, out.estimate.theta, options.disturbance_sigmas);
+  }
+  // A disturbance as long as a good part of the capture pulls the fit and widens the scatter it
+  // is judged by until nothing stands out; but the departures then wander far more than they
+  // change from one value to the next, which white noise and the bias's slow drift cannot do.
+  const double wander = at.step_noise > 0 ? at.scatter / at.step_noise : 0.0;
+  out.field_wander = wander;
+  if (wander > options.max_field_wander) {
+    out.gate_reasons.push_back(fmt::format(
+        "the field's magnitude wanders: its departures from the fit scatter {:.1f} times as much "
+        "as they change from one value to the next (at most {:.0f}): a magnet, steel or a motor "
+        "near for a long part of the capture, or a magnetometer the model does not fit",
+        wander, options.max_field_wander));
+    out.gate_passed = false;
+  }
+  if (left_out.empty()) return out;
+  FieldDisturbance d;
+  d.values = static_cast<int>(left_out.size());
+  d.of = motion_points;
+  const double origin_s = data.intervals.front().t_start_s;
+  d.t0_s = data.intervals[static_cast<std::size_t>(left_out.front())].t_start_s - origin_s;
+  d.t1_s = data.intervals[static_cast<std::size_t>(left_out.back())].t_end_s - origin_s;
+  // The largest departure among those left out, at the final fit, against its scatter.
+  const MotionDepartures all = FindDisturbedMotion(model, data, out.estimate.theta, 0.0);
+  d.largest_percent = all.largest_percent;
+  d.largest_sigmas = all.largest_sigmas;
+  out.estimate.warnings.push_back(DisturbanceText(d));
+  if (d.share() > options.max_disturbed_share) {
+    out.gate_reasons.push_back(fmt::format(
+        "the field was disturbed in {:.0f} % of the values in motion (more than {:.0f} %): "
+        "calibrate away from magnets, steel and motors",
+        100 * d.share(), 100 * options.max_disturbed_share));
+    out.gate_passed = false;
+  }
+  out.disturbance = d;
+  return out;
+}
+
+std::string DisturbanceText(const FieldDisturbance& d) {
+  return fmt::format(
+      "the field's magnitude departed from the fit by up to {:.3g} % ({:.0f} robust sigmas) in "
+      "{} of {} values in motion between {:.2f} and {:.2f} s: a magnet or steel nearby? Left out "
+      "of the fit",
+      d.largest_percent, d.largest_sigmas, d.values, d.of, d.t0_s, d.t1_s);
+}
+
+}  // namespace turncal
