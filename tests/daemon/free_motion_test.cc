@@ -134,11 +134,17 @@ double LargestZ(const HandFit& f, const FreeModelResult& r) {
 // the Earth's) in the middle of a hand rotation: the values it disturbed are named (how many,
 // when, how far) and left out, and the ellipsoid from the rest is honest. Fitted with them, the
 // estimate is many sigma off: the test can fail.
-TEST(FreeMotion, AMagnetPassingByIsNamedAndLeftOut) {
+// The default hand rotation with a magnet of 0.1 G at its closest near from at_s for near_s.
+HandCase WithMagnet(double at_s, double near_s) {
   HandCase k;
-  k.magnet_at_s = 4.0;
-  k.magnet_s = 0.5;
+  k.magnet_at_s = at_s;
+  k.magnet_s = near_s;
   k.magnet_peak = 0.1;
+  return k;
+}
+
+TEST(FreeMotion, AMagnetPassingByIsNamedAndLeftOut) {
+  const HandCase k = WithMagnet(4.0, 0.5);
   const HandFit f = Fit(k, {"magellipsoid"});
   ASSERT_EQ(f.results.size(), 1u);
   const FreeModelResult& r = f.results[0];
@@ -174,11 +180,7 @@ TEST(FreeMotion, AMagnetPassingByIsNamedAndLeftOut) {
 // stands out (chi^2/dof 222), but its departures wander far more than they step from one value
 // to the next: refused with the reason, where the plain fit passed.
 TEST(FreeMotion, AFieldDisturbedForLongIsRefused) {
-  HandCase k;
-  k.magnet_at_s = 3.0;
-  k.magnet_s = 4.0;
-  k.magnet_peak = 0.1;
-  const HandFit f = Fit(k, {"magellipsoid"});
+  const HandFit f = Fit(WithMagnet(3.0, 4.0), {"magellipsoid"});
   ASSERT_EQ(f.results.size(), 1u);
   const FreeModelResult& r = f.results[0];
   EXPECT_FALSE(r.estimate.gate_passed);
