@@ -222,14 +222,10 @@ class FreeMonteCarlo {
         values.push_back(*sample.mag);
       }
     }
-    const auto& names = model_->parameters();
     Eigen::Vector3d estimate, truth;
     for (int k = 0; k < 3; ++k) {
-      const char* name = k == 0 ? "bx" : k == 1 ? "by" : "bz";
-      const auto it =
-          std::find_if(names.begin(), names.end(), [&](const auto& p) { return p.name == name; });
-      if (it == names.end()) return;
-      const auto i = static_cast<Eigen::Index>(it - names.begin());
+      const int i = model_->index_of(k == 0 ? "bx" : k == 1 ? "by" : "bz");
+      if (i < 0) return;
       estimate[k] = out->theta[i];
       truth[k] = out->truth[i];
     }

@@ -1,6 +1,7 @@
 #include "core/estimation/free_disturbance.h"
 
 #include "core/estimation/free_calibrator.h"
+#include "core/estimation/free_motion.h"
 
 #include <fmt/format.h>
 
@@ -9,15 +10,6 @@
 #include <cmath>
 
 namespace turncal {
-namespace {
-
-double MedianOfCopy(std::vector<double> v) {
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
-
-}  // namespace
 
 MotionDepartures FindDisturbedMotion(const FreeModel& model, const FreeData& data,
                                      const Eigen::VectorXd& theta, double sigmas) {
@@ -36,12 +28,12 @@ MotionDepartures FindDisturbedMotion(const FreeModel& model, const FreeData& dat
   }
   const std::size_t n = departure.size();
   if (n < 20) return out;
-  const double centre = MedianOfCopy(departure);
+  const double centre = MedianOf(departure);
   std::vector<double> absolute(n), step(n - 1);
   for (std::size_t i = 0; i < n; ++i) absolute[i] = std::abs(departure[i] - centre);
   for (std::size_t i = 0; i + 1 < n; ++i) step[i] = std::abs(departure[i + 1] - departure[i]);
-  out.scatter = 1.4826 * MedianOfCopy(absolute);
-  out.step_noise = 1.4826 * MedianOfCopy(step) / std::sqrt(2.0);
+  out.scatter = 1.4826 * MedianOf(absolute);
+  out.step_noise = 1.4826 * MedianOf(step) / std::sqrt(2.0);
   if (!(out.scatter > 0)) return out;
   // P(|z| > k) = erfc(k / sqrt 2) = 1e-3 / n.
   const double bound = std::sqrt(2.0) * boost::math::erfc_inv(1e-3 / static_cast<double>(n));

@@ -9,14 +9,15 @@
 #include "core/models/free_common.h"
 
 namespace turncal {
-namespace {
 
-double Median(std::vector<double> v) {
+double MedianOf(std::vector<double> v) {
   if (v.empty()) return 0.0;
   const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
   std::nth_element(v.begin(), mid, v.end());
   return *mid;
 }
+
+namespace {
 
 // The robust 1 sigma of the points' distance from an algebraic ellipsoid (or sphere) through
 // them, in the points' unit; 0 when neither can be fitted.
@@ -35,9 +36,9 @@ double ScatterSigma(const std::vector<Eigen::Vector3d>& points) {
   } else {
     return 0.0;
   }
-  const double m = Median(d);
+  const double m = MedianOf(d);
   for (double& v : d) v = std::abs(v - m);
-  return 1.4826 * Median(d);
+  return 1.4826 * MedianOf(d);
 }
 
 }  // namespace
@@ -113,7 +114,7 @@ MotionPoints MotionCollector::Select(const std::vector<FreeInterval>& intervals,
     gaps.push_back(a.t_device_s && b.t_device_s ? *b.t_device_s - *a.t_device_s
                                                 : b.t_host_s - a.t_host_s);
   }
-  out.period_s = std::max(Median(gaps), 1e-6);
+  out.period_s = std::max(MedianOf(gaps), 1e-6);
   // Outside the still intervals, with a margin of two periods on each side.
   std::vector<std::pair<double, double>> still;
   for (const auto& iv : intervals) {

@@ -35,6 +35,9 @@
 
 namespace turncal {
 
+// The median of `values` (the upper of the middle two for an even count; 0 for none).
+double MedianOf(std::vector<double> values);
+
 struct MotionOptions {
   int max_points = 1500;
   // The magnetometer's per-sample noise, 1 sigma per axis (device unit), and where it came from
