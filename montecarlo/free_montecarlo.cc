@@ -207,6 +207,15 @@ class FreeMonteCarlo {
       out->sigma[i] = p["sigma"].is_number() ? p["sigma"].get<double>() : INFINITY;
     }
     out->z = (out->theta - out->truth).cwiseQuotient(out->sigma);
+    if (const auto it = r.find("norm_bias"); it != r.end() && it->is_object()) {
+      for (int i = 0; i < n; ++i) {
+        const auto& name = model_->parameters()[static_cast<std::size_t>(i)].name;
+        if (it->contains(name) && (*it)[name].is_number()) {
+          out->norm_bias_sigmas =
+              std::max(out->norm_bias_sigmas, std::abs((*it)[name].get<double>()) / out->sigma[i]);
+        }
+      }
+    }
     out->p_value = r.value("p_value", 1.0);
     out->ok = out->z.allFinite();
     if (!out->ok) out->error = "a sigma is not finite";
@@ -277,6 +286,15 @@ class FreeMonteCarlo {
     s->hard_iron = SummariseErrors(s->runs, &FreeRun::hard_iron_error);
     s->plain_sphere = SummariseErrors(s->runs, &FreeRun::sphere_error);
     s->plain_ellipsoid = SummariseErrors(s->runs, &FreeRun::ellipsoid_error);
+    std::vector<double> removed;
+    for (const FreeRun& r : s->runs) {
+      if (r.ok && std::isfinite(r.norm_bias_sigmas)) removed.push_back(r.norm_bias_sigmas);
+    }
+    if (!removed.empty()) {
+      std::sort(removed.begin(), removed.end());
+      s->norm_bias_median = removed[removed.size() / 2];
+      s->norm_bias_max = removed.back();
+    }
     s->ks = KsUniform(p_values);
     s->p_value_deciles.assign(10, 0);
     for (double p : p_values) {

@@ -84,6 +84,9 @@ struct FreeRun {
   // Kasa's linear fit, an algebraic ellipsoid: core/models/free_common.h) through every new
   // magnetometer value of the session, unweighted; NaN where a fit failed or was not made.
   double hard_iron_error = NAN, sphere_error = NAN, ellipsoid_error = NAN;
+  // The largest second-order bias the fit removed, in sigmas (core/estimation/free_bias.h); 0
+  // when none.
+  double norm_bias_sigmas = 0.0;
 };
 
 // The hard iron's error over the runs that have it, for one method: RMS, median and the largest.
@@ -113,6 +116,8 @@ struct FreeMonteCarloSummary {
   // With a hand's rotation and magellipsoid: the hard iron's error, turncal's against the plain
   // fits on the same values (FreeRun::hard_iron_error ...).
   HardIronErrors hard_iron, plain_sphere, plain_ellipsoid;
+  // The largest second-order bias removed per run, in sigmas: median and largest over the runs.
+  double norm_bias_median = 0.0, norm_bias_max = 0.0;
 
   bool Passed() const;  // every parameter honest (ZScoreSummary::Honest)
 };

@@ -204,6 +204,13 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
   m["bias_window"] = fe.bias_window_host ? ToJson(*fe.bias_window_host) : nlohmann::json();
   m["warnings"] = e.warnings;
   if (fe.field_wander > 0) m["field_wander"] = fe.field_wander;
+  if (fe.norm_bias.size() == static_cast<Eigen::Index>(e.parameters.size())) {
+    nlohmann::json bias = nlohmann::json::object();
+    for (std::size_t i = 0; i < e.parameters.size(); ++i) {
+      bias[e.parameters[i].name] = fe.norm_bias[static_cast<Eigen::Index>(i)];
+    }
+    m["norm_bias"] = bias;  // removed from the values above (core/estimation/free_bias.h)
+  }
   if (fe.disturbance) {
     const FieldDisturbance& d = *fe.disturbance;
     m["disturbed"] = {{"values", d.values},

@@ -128,6 +128,12 @@ std::string FreeReportText(const FreeReportInput& in, bool list_intervals) {
           a.count, b ? fmt::format("{:.4g}", b->rms * f) : "-",
           b ? fmt::format("{:.4g}", b->max_abs * f) : "-", a.rms * f, a.max_abs * f, unit);
     }
+    if (const auto b = LargestNormBias(fe); b.second >= 0.1) {
+      o += fmt::format(
+          "  second-order bias from the values' noise removed: {:.2f} sigma on {} (the largest; "
+          "the coverage is weak)\n",
+          b.second, b.first);
+    }
     o +=
         fmt::format("  coverage: {} of {} bins ({:.1f} %) from {} directions\n", fe.coverage.filled,
                     fe.coverage.total, 100 * fe.coverage.fraction(), fe.coverage.directions);

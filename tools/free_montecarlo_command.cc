@@ -91,6 +91,8 @@ void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                                     {"gate_reasons", s.top_reasons},
                                     {"ks_d", s.ks.d},
                                     {"ks_p", s.ks.p},
+                                    {"norm_bias_sigmas_median", s.norm_bias_median},
+                                    {"norm_bias_sigmas_max", s.norm_bias_max},
                                     {"p_value_deciles", s.p_value_deciles},
                                     {"hard_iron_error",
                                      {{"turncal", ErrorsJson(s.hard_iron)},
@@ -126,6 +128,13 @@ void PrintFreeText(const montecarlo::FreeMonteCarloOptions& o,
       s.intervals_mean, s.gate_passed, s.gated,
       s.top_reasons.empty() ? "" : "refused for:\n" + ReasonsText(s), table, s.ks.d, s.ks.p,
       fmt::join(s.p_value_deciles, " "), bad, s.parameters.size());
+  if (s.norm_bias_max > 0) {
+    fmt::print(
+        "Second-order bias from the values' noise, removed from each fit (its largest parameter, "
+        "in "
+        "sigmas): median {:.2f}, largest {:.2f}\n",
+        s.norm_bias_median, s.norm_bias_max);
+  }
   if (s.hard_iron.runs > 0) fmt::print("{}", HardIronText(s));
 }
 
@@ -134,8 +143,14 @@ void ReportRun(const FreeMonteCarloArgs& args, const std::vector<std::string>& n
                const montecarlo::FreeRun& r, int scored) {
   for (std::size_t i = 0; args.verbose && i < names.size(); ++i) {
     const auto k = static_cast<Eigen::Index>(i);
-    fmt::print(stderr, "run {} {} est {:.9g} truth {:.9g} sigma {:.3g} z {:+.2f}\n", run, names[i],
-               r.theta[k], r.truth[k], r.sigma[k], r.z[k]);
+    fmt::print(stderr,
+               "run {} {} est {:.9g} truth {:.9g} sigma {:.3g} z {:+.2f} gate {} bias removed "
+               "{:.2f} sigma\n",
+               run, names[i], r.theta[k], r.truth[k], r.sigma[k], r.z[k],
+               !r.gated ? "none"
+               : r.gate ? "pass"
+                        : "refused",
+               r.norm_bias_sigmas);
   }
   if (!args.json && scored % std::max(1, args.engine.runs / 10) == 0) {
     fmt::print(stderr, "  {} of {} runs\n", scored, args.engine.runs);

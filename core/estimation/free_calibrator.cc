@@ -1,5 +1,6 @@
 #include "core/estimation/free_calibrator.h"
 
+#include "core/estimation/free_bias.h"
 #include "core/estimation/free_drift.h"
 
 #include <ceres/ceres.h>
@@ -33,6 +34,8 @@ bool FreeCalibratorOptions::IsValid(std::string* error) const {
     return fail(
         "the disturbance's limits must be sigmas >= 0, a share in [0, 1] and a wander above 1");
   }
+  if (!(max_norm_bias_sigmas > 0))
+    return fail("the largest second-order bias must be above 0 sigma");
   if (precision && !precision->IsValid(error)) return false;
   return observability.IsValid(error);
 }
@@ -131,6 +134,7 @@ class FreeCalibration {
     for (int pass = 0; pass < options_.passes; ++pass) {
       if (!SolvePass()) return std::move(out_);
     }
+    RemoveNormBias();
     if (!EvaluateAtSolution()) return std::move(out_);
     RankAndCovariance();
     CheckFit();
@@ -250,6 +254,16 @@ class FreeCalibration {
       return false;
     }
     return true;
+  }
+
+  // The estimate less its second-order bias from the values' noise (core/estimation/free_bias.h),
+  // for the norm models; kept in the estimate.
+  void RemoveNormBias() {
+    if (!options_.remove_norm_bias) return;
+    const std::optional<Eigen::VectorXd> bias = NormFitBias(model_, data_, theta_);
+    if (!bias) return;
+    theta_ -= *bias;
+    out_.norm_bias = *bias;
   }
 
   // The terms at the solution (with a joint whitening: the innovations, the terms whitened
@@ -410,6 +424,12 @@ class FreeCalibration {
           out_.analysis.weak.empty() ? 0.0 : out_.analysis.weak.back().relative_singular_value,
           Join(out_.weak)));
     }
+    if (const auto [name, sigmas] = LargestNormBias(out_); sigmas > options_.max_norm_bias_sigmas) {
+      Refuse(fmt::format(
+          "the second-order bias removed from {} is {:.2f} sigma: the coverage is too weak for "
+          "the sigma to hold (a linear sigma needs the bias well within it); turn it further",
+          name, sigmas));
+    }
     if (options_.min_coverage > 0 && out_.coverage.fraction() < options_.min_coverage) {
       Refuse(fmt::format("coverage {:.1f} % of the sphere is below the {:.1f} % required",
                          100 * out_.coverage.fraction(), 100 * options_.min_coverage));
@@ -469,6 +489,20 @@ class FreeCalibration {
 };
 
 }  // namespace
+
+std::pair<std::string, double> LargestNormBias(const FreeEstimate& estimate) {
+  const Estimate& e = estimate.estimate;
+  std::pair<std::string, double> out{"", 0.0};
+  if (estimate.norm_bias.size() != e.sigma.size()) return out;
+  for (Eigen::Index i = 0; i < e.sigma.size(); ++i) {
+    const double ratio = std::abs(estimate.norm_bias[i]) / e.sigma[i];
+    if (std::isfinite(ratio) && ratio > out.second &&
+        i < static_cast<Eigen::Index>(e.parameters.size())) {
+      out = {e.parameters[static_cast<std::size_t>(i)].name, ratio};
+    }
+  }
+  return out;
+}
 
 FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
                            const FreeCalibratorOptions& options) {

@@ -42,6 +42,12 @@ struct FreeCalibratorOptions {
   double disturbance_sigmas = 5.0;
   double max_disturbed_share = 0.1;
   double max_field_wander = 5.0;
+  // Remove the norm models' second-order bias from the values' noise (core/estimation/free_bias.h:
+  // half a sigma on the gains where the coverage is weak); false: the plain least squares.
+  bool remove_norm_bias = true;
+  // ... and refuse when it was larger than this many sigmas of its parameter: the expansion, and
+  // with it the sigma, no longer holds (1: in 200 tumbles the one run beyond was refused anyway).
+  double max_norm_bias_sigmas = 1.0;
   ObservabilityOptions observability;
 
   // The gate: the model's parameters all determined (full rank), the weakest direction's
@@ -101,10 +107,17 @@ struct FreeEstimate {
   // With samples in motion: their departures' robust scatter over their step noise at the fit
   // (1 for white noise; FreeCalibratorOptions::max_field_wander); 0 when not judged.
   double field_wander = 0.0;
+  // The second-order bias from the values' noise, removed from the estimate (parameter units;
+  // empty when not computed: FreeCalibratorOptions::remove_norm_bias, a model without norm terms).
+  Eigen::VectorXd norm_bias;
 };
 
 // Fits `model` to `data`. !estimate.ok with a message when the model cannot start (too few
 // intervals, no upstream estimate) or the solve fails.
+// The parameter whose removed second-order bias (FreeEstimate::norm_bias) is the largest in sigmas,
+// and how many; ("", 0) when none was removed.
+std::pair<std::string, double> LargestNormBias(const FreeEstimate& estimate);
+
 FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
                            const FreeCalibratorOptions& options);
 

@@ -272,11 +272,12 @@ TEST(FreeCalibrator, ALowCoverageTumbleNamesItsWeakDirectionsAndIsRefused) {
       EXPECT_TRUE(has("bz") && has("s33")) << e.gate_reasons[0];
     }
     EXPECT_LT(e.coverage.fraction(), 0.06) << name;
-    // The advice points away from the cap: a direction well below +z, and it would shrink the
-    // weakest direction's sigma by more than half.
+    // The advice points away from the cap: a direction more than 45 degrees from +z (+x+y+z up
+    // and +x up are near-equal here: which one wins moves with the estimate's last digits), and it
+    // would shrink the weakest direction's sigma by more than half.
     const auto advice = NextOrientation(*model, data, e);
     ASSERT_TRUE(advice) << name;
-    EXPECT_LT(advice->axis.z(), 0.5) << advice->text;
+    EXPECT_LT(advice->axis.normalized().z(), std::cos(M_PI / 4)) << advice->text;
     EXPECT_LT(advice->sigma_ratio, 0.5) << advice->text;
   }
 }
