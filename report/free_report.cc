@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "protocol/free_json.h"
+#include "report/free_sphere.h"
 #include "report/svg.h"
 
 namespace turncal::report {
@@ -346,6 +347,9 @@ std::string FreeReportBody(const FreeReportInput& in) {
       o += "<p>Next orientation: " + svg::Escape(AdviceText(*in.advice[i])) + "</p>\n";
     }
     o += CoverageSphereSvg(fe, "coverage-" + r.model);
+    if (const auto values = BeforeAfterValues(in, r)) {
+      o += BeforeAfterSvg(*values, "sphere-" + r.model);
+    }
   }
   return o;
 }

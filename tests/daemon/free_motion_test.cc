@@ -15,6 +15,7 @@
 #include "core/estimation/free_motion.h"
 #include "core/estimation/sensor_class.h"
 #include "daemon/station/capture_replay.h"
+#include "report/free_sphere.h"
 #include "sim/capture.h"
 #include "sim/free_truth.h"
 
@@ -118,6 +119,42 @@ TEST(FreeMotion, AHandRotationOnAMipStreamGivesAnHonestEllipsoid) {
   EXPECT_GT(r.estimate.estimate.p_value, 1e-3) << r.estimate.estimate.chi2;
   EXPECT_FALSE(r.estimate.disturbance) << DisturbanceText(*r.estimate.disturbance);
   ExpectHonest(f, r, "mip 1 kHz");
+}
+
+// The HTML report draws the values before and after the calibration (issue 37, item 4): the raw
+// values off the sphere (hard and soft iron), the corrected ones on it, every other one of the
+// 1000 drawn in three projections.
+TEST(FreeMotion, TheReportDrawsTheValuesBeforeAndAfterOnTheSphere) {
+  const HandFit f = Fit(HandCase{}, {"magellipsoid"});
+  ASSERT_TRUE(f.collected.motion);
+  ASSERT_EQ(f.results.size(), 1u);
+  report::FreeReportInput in;
+  in.found = f.collected.found;
+  in.motion = f.collected.motion;
+  in.context = f.context;
+  in.results = f.results;
+  const auto values = report::BeforeAfterValues(in, f.results[0]);
+  ASSERT_TRUE(values);
+  EXPECT_EQ(values->of, 1000);
+  ASSERT_EQ(values->before.size(), 500u);  // every 2nd: at most 600 drawn
+  EXPECT_EQ(values->unit, "relative");     // no --field: the sphere of radius 1
+  double before_lo = 1e9, before_hi = 0, after_worst = 0;
+  for (std::size_t i = 0; i < values->before.size(); ++i) {
+    before_lo = std::min(before_lo, values->before[i].norm());
+    before_hi = std::max(before_hi, values->before[i].norm());
+    after_worst = std::max(after_worst, std::abs(values->after[i].norm() - values->radius));
+  }
+  // The consumer class's soft iron and hard iron spread the raw magnitudes by percents; the
+  // corrected ones are on the sphere to the noise (0.5 mG of 0.5 G: 0.1 %, 5 sigma 0.5 %).
+  EXPECT_GT(before_hi - before_lo, 0.02 * before_hi);
+  EXPECT_LT(after_worst, 0.005 * values->radius);
+  const std::string html = report::FreeReportHtml(in);
+  EXPECT_NE(html.find("id=\"sphere-magellipsoid\""), std::string::npos);
+  std::size_t after = 0;
+  for (std::size_t at = 0; (at = html.find("class=\"after\"", at)) != std::string::npos; ++at) {
+    ++after;
+  }
+  EXPECT_EQ(after, 3 * values->after.size());  // three projections
 }
 
 // A magnet passing the device for half a second (a field of 0.1 G at its closest, a fifth of
