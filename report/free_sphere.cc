@@ -42,16 +42,18 @@ std::optional<SphereValues> BeforeAfterValues(const FreeReportInput& in, const F
   if (triad == SensorKind::kMagnetometer) {
     v.radius = in.context.field_magnitude > 0 ? in.context.field_magnitude : 1.0;
     v.unit = in.context.field_magnitude > 0 ? "the field's unit" : "relative";
+    v.distortion = "the hard and soft iron";
   } else {
     v.radius = in.context.gravity_mps2;
     v.unit = "m/s^2";
+    v.distortion = "the biases, gains and misalignments";
   }
   if (v.before.empty()) return std::nullopt;
   return v;
 }
 
 std::string BeforeAfterSvg(const SphereValues& v, const std::string& id) {
-  const double P = 240, gap = 30, top = 40;
+  const double P = 240, gap = 30, top = 64;
   double extent = v.radius;
   for (const auto* set : {&v.before, &v.after}) {
     for (const auto& x : *set) extent = std::max(extent, x.cwiseAbs().maxCoeff());
@@ -65,9 +67,12 @@ std::string BeforeAfterSvg(const SphereValues& v, const std::string& id) {
                   "as a dashed circle",
                   v.before.size(), v.of, svg::Num(v.radius), v.unit));
   o += fmt::format(
-      "<text x=\"0\" y=\"14\">before (grey: raw, offset and squashed by the hard and soft iron) "
-      "and after calibration (red: on the sphere of radius {} {}); {} of {} values</text>\n",
-      svg::Num(v.radius), svg::Escape(v.unit), v.before.size(), v.of);
+      "<text x=\"0\" y=\"14\">before: the raw values (grey), squashed into an ellipsoid by "
+      "{}</text>\n<text x=\"0\" y=\"32\">after: the same corrected (red), on the dashed sphere "
+      "of radius {} {}</text>\n<text x=\"0\" y=\"50\">{} of {} values drawn</text>\n",
+      svg::Escape(v.distortion), svg::Num(v.radius),
+      svg::Escape(v.unit == "relative" ? "(relative: no field given)" : v.unit), v.before.size(),
+      v.of);
   for (int k = 0; k < 3; ++k) {
     const double x0 = k * (P + gap), cx = x0 + P / 2, cy = top + P / 2, s = P / 2 / extent;
     const int a = axes[k][0], b = axes[k][1];

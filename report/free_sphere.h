@@ -20,6 +20,7 @@ struct SphereValues {
   std::vector<Eigen::Vector3d> after;   // corrected, the same values
   double radius = 1.0;                  // the magnitude they are corrected to
   std::string unit;                     // of radius ("G", "relative", "m/s^2")
+  std::string distortion;               // what squashes the raw values ("the hard and soft iron")
   std::int64_t of = 0;                  // values there were (every k-th drawn beyond max_values)
 };
 
