@@ -16,6 +16,7 @@
 #include <thread>
 
 #include "core/estimation/free_calibrator.h"
+#include "core/estimation/free_motion.h"
 #include "core/estimation/sensor_class.h"
 #include "core/models/free_common.h"
 #include "daemon/station/free_pipeline.h"
@@ -291,9 +292,8 @@ class FreeMonteCarlo {
       if (r.ok && std::isfinite(r.norm_bias_sigmas)) removed.push_back(r.norm_bias_sigmas);
     }
     if (!removed.empty()) {
-      std::sort(removed.begin(), removed.end());
-      s->norm_bias_median = removed[removed.size() / 2];
-      s->norm_bias_max = removed.back();
+      s->norm_bias_max = *std::max_element(removed.begin(), removed.end());
+      s->norm_bias_median = MedianOf(std::move(removed));
     }
     s->ks = KsUniform(p_values);
     s->p_value_deciles.assign(10, 0);

@@ -28,11 +28,13 @@ bool EvaluateScalarTerms(const std::vector<FreeTerm>& terms, const Eigen::Vector
   return r->allFinite() && J->allFinite();
 }
 
-TriadStats* StatsOf(FreeInterval* interval, SensorKind triad) {
-  std::optional<TriadStats>& s = triad == SensorKind::kAccelerometer  ? interval->acc
-                                 : triad == SensorKind::kMagnetometer ? interval->mag
-                                                                      : interval->gyr;
-  return s ? &*s : nullptr;
+std::optional<TriadStats>& StatsOf(FreeInterval& interval, SensorKind triad) {
+  return triad == SensorKind::kAccelerometer  ? interval.acc
+         : triad == SensorKind::kMagnetometer ? interval.mag
+                                              : interval.gyr;
+}
+const std::optional<TriadStats>& StatsOf(const FreeInterval& interval, SensorKind triad) {
+  return StatsOf(const_cast<FreeInterval&>(interval), triad);
 }
 
 }  // namespace
@@ -63,8 +65,7 @@ std::optional<Eigen::VectorXd> NormFitBias(const FreeModel& model, const FreeDat
   // Each value's noise, whitened: m = m0 + R z (R R' its covariance, the drift's offset left out).
   std::vector<Eigen::Matrix3d> root(data.intervals.size(), Eigen::Matrix3d::Zero());
   for (std::size_t i = 0; i < data.intervals.size(); ++i) {
-    FreeInterval copy = data.intervals[i];
-    if (const TriadStats* s = StatsOf(&copy, triad)) {
+    if (const auto& s = StatsOf(data.intervals[i], triad)) {
       const Eigen::LLT<Eigen::Matrix3d> llt(MeanCovariance(*s, 0.0));
       if (llt.info() == Eigen::Success) root[i] = llt.matrixL();
     }
@@ -80,7 +81,7 @@ std::optional<Eigen::VectorXd> NormFitBias(const FreeModel& model, const FreeDat
       FreeData moved = data;
       const double step = side == 0 ? 1.0 : -1.0;
       for (std::size_t i = 0; i < moved.intervals.size(); ++i) {
-        if (TriadStats* s = StatsOf(&moved.intervals[i], triad)) s->mean += step * root[i].col(k);
+        if (auto& s = StatsOf(moved.intervals[i], triad)) s->mean += step * root[i].col(k);
       }
       const std::vector<FreeTerm> t = model.Terms(moved, theta);
       if (static_cast<Eigen::Index>(t.size()) != m) return std::nullopt;
