@@ -195,6 +195,13 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
   m["coverage"] = {{"filled", fe.coverage.filled},
                    {"total", fe.coverage.total},
                    {"fraction", fe.coverage.fraction()}};
+  if (!fe.gap.empty()) {
+    m["coverage"]["gap"] = {
+        {"direction", {fe.gap.direction.x(), fe.gap.direction.y(), fe.gap.direction.z()}},
+        {"name", CaseDirectionName(fe.gap.direction)},
+        {"radius_deg", fe.gap.radius_deg},
+        {"empty_area_fraction", fe.gap.empty_area_fraction}};
+  }
   m["weak"] = fe.weak;
   m["undetermined"] = fe.undetermined;
   m["weakest_direction"] = fe.analysis.weak.empty() ? "" : fe.analysis.weak.back().text;

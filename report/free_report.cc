@@ -22,6 +22,9 @@ const FreeModelResult* UpstreamOf(const FreeReportInput& in, const std::string& 
   return nullptr;
 }
 
+// A gap narrower than this is the spacing of a hand's sweeps, not a region left out.
+constexpr double kGapWorthSayingDeg = 25.0;
+
 // The unit a misfit kind is shown in, and the factor to it.
 std::pair<std::string, double> MisfitUnit(const std::string& kind, SensorKind sensor,
                                           bool relative) {
@@ -138,6 +141,9 @@ std::string FreeReportText(const FreeReportInput& in, bool list_intervals) {
     o +=
         fmt::format("  coverage: {} of {} bins ({:.1f} %) from {} directions\n", fe.coverage.filled,
                     fe.coverage.total, 100 * fe.coverage.fraction(), fe.coverage.directions);
+    if (fe.gap.radius_deg >= kGapWorthSayingDeg) {
+      o += "  uncovered: " + CoverageGapText(fe.gap, sensor, in.context.dip_deg) + "\n";
+    }
     if (!fe.analysis.weak.empty()) {
       const auto& w = fe.analysis.weak.back();
       o += fmt::format("  weakest direction ({:.2g} of the strongest): {}\n",
@@ -347,6 +353,11 @@ std::string FreeReportBody(const FreeReportInput& in) {
       o += "<p>Next orientation: " + svg::Escape(AdviceText(*in.advice[i])) + "</p>\n";
     }
     o += CoverageSphereSvg(fe, "coverage-" + r.model);
+    if (fe.gap.radius_deg >= kGapWorthSayingDeg) {
+      o += "<p>Uncovered: " +
+           svg::Escape(CoverageGapText(fe.gap, SensorOf(in, r.model), in.context.dip_deg)) +
+           "</p>\n";
+    }
     if (const auto values = BeforeAfterValues(in, r)) {
       o += BeforeAfterSvg(*values, "sphere-" + r.model);
     }

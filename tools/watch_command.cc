@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <map>
 #include <memory>
 #include <vector>
@@ -17,7 +18,9 @@ namespace {
 
 // The codes RunWatch returns.
 constexpr Manual kWatchManual = {
-    "Live view: pose progress, poses captured, each parameter's sigma against its tolerance. "
+    "Live view: pose progress, poses captured, each parameter's sigma against its tolerance; in "
+    "free mode the magnetometer's coverage of the sphere filling, the largest region without a "
+    "value and how to turn into it, each fit's error and the orientation to add. "
     "On a terminal the view redraws in place; otherwise one line per event (a log). With "
     "--corrected / --raw it also prints samples; --json prints the daemon's messages "
     "unchanged. {socket}",
@@ -35,6 +38,8 @@ struct WatchView {
     int captured = 0, rejected = 0;
     std::string last;
     std::map<std::string, nlohmann::json> estimates;  // model -> ESTIMATE
+    nlohmann::json coverage;                          // the latest COVERAGE (free mode)
+    int coverage_logged = -1;                         // the tenth of the sphere last logged
   };
   std::map<std::string, Device> devices;
   std::vector<std::string> log;
@@ -59,6 +64,8 @@ struct WatchView {
       d.last = fmt::format("pose {} REJECTED: {}", e.value("index", -1), e.value("reason", ""));
     } else if (kind == "ESTIMATE") {
       d.estimates[e.value("model", "")] = e;
+    } else if (kind == "COVERAGE") {
+      d.coverage = e;
     } else if (kind == "CALIBRATION_ACTIVE") {
       log.push_back(fmt::format("{} {} calibration v{} active", name, e.value("model", ""),
                                 e.value("version", 0)));
@@ -72,11 +79,21 @@ struct WatchView {
   }
 
   // One line for a log (standard output not a terminal): what happened, in words; empty for the
-  // events a log does not need (progress, samples, the watch confirmation).
-  static std::string Describe(const nlohmann::json& e) {
+  // events a log does not need (progress, samples, the watch confirmation, a coverage that has
+  // not filled another tenth of the sphere). After Take(e).
+  std::string Describe(const nlohmann::json& e) {
     const std::string kind = e.value("class", "");
     const std::string name = e.value("device", "");
     if (kind == "POSE_PROGRESS" || kind == "WATCH" || kind == "POSE_COLLECTING") return "";
+    if (kind == "COVERAGE") {
+      Device& d = devices[name];
+      const int tenth = static_cast<int>(std::floor(10 * e.value("fraction", 0.0)));
+      if (tenth == d.coverage_logged) return "";
+      d.coverage_logged = tenth;
+      std::string line = fmt::format("{}: {}", name, CoverageLine(e));
+      if (e.contains("gap")) line += "; " + e["gap"].value("text", "");
+      return line;
+    }
     if (kind == "POSE_STARTED") {
       return fmt::format("{}: pose {} ({}) started", name, e.value("index", -1),
                          PoseJsonText(e.value("pose", nlohmann::json())));
@@ -87,15 +104,19 @@ struct WatchView {
     }
     if (kind == "ESTIMATE") {
       const nlohmann::json gate = e.value("gate", nlohmann::json::object());
-      std::string line =
-          fmt::format("{}: {} after {} {}: gate {}", name, e.value("model", ""),
-                      e.value("poses", 0), e.contains("intervals") ? "intervals" : "poses",
-                      gate.value("pass", false) ? "PASS" : "fail");
+      std::string line = fmt::format("{}: {} after {}: gate {}", name, e.value("model", ""),
+                                     WhatWasFitted(e), gate.value("pass", false) ? "PASS" : "fail");
       const auto reasons = gate.value("reasons", nlohmann::json::array());
       if (!reasons.empty() && reasons[0].is_string()) {
         line += " (" + reasons[0].get<std::string>();
         if (reasons.size() > 1) line += fmt::format("; {} more", reasons.size() - 1);
         line += ")";
+      }
+      if (e.contains("fit_error_percent")) {
+        line += fmt::format("; fit error {:.2f} %", e.value("fit_error_percent", 0.0));
+      }
+      if (!gate.value("pass", false) && e.contains("advice")) {
+        line += "; next: " + e.value("advice", "");
       }
       return line;
     }
@@ -117,6 +138,37 @@ struct WatchView {
     return brief.dump().substr(0, 300);
   }
 
+  // What an ESTIMATE fitted: "12 poses", "3 intervals", "0 intervals and 600 values in motion".
+  static std::string WhatWasFitted(const nlohmann::json& e) {
+    const int poses = e.value("poses", 0), motion = e.value("motion_points", 0);
+    if (!e.contains("intervals")) return fmt::format("{} poses", poses);
+    if (motion <= 0) return fmt::format("{} intervals", poses);
+    return fmt::format("{} intervals and {} values in motion", poses - motion, motion);
+  }
+
+  // "magnetometer coverage 34.2 % (197 of 576 bins) from 1200 values".
+  static std::string CoverageLine(const nlohmann::json& e) {
+    return fmt::format("{} coverage {:.1f} % ({} of {} bins) from {} values",
+                       e.value("triad", "magnetometer"), 100 * e.value("fraction", 0.0),
+                       e.value("filled", 0), e.value("total", 576), e.value("values", 0));
+  }
+
+  // The coverage's 18 latitude rows drawn two to a line (half blocks), +z's pole at the top.
+  static std::string CoverageMap(const nlohmann::json& e) {
+    const auto rows = e.value("rows", std::vector<std::string>());
+    std::string out;
+    for (std::size_t r = 0; r + 1 < rows.size(); r += 2) {
+      out += fmt::format("    {:>4} ", r == 0 ? "+z" : (r + 2 >= rows.size() ? "-z" : ""));
+      for (std::size_t c = 0; c < rows[r].size() && c < rows[r + 1].size(); ++c) {
+        const bool upper = rows[r][c] == '#', lower = rows[r + 1][c] == '#';
+        out += upper && lower ? "\u2588" : upper ? "\u2580" : lower ? "\u2584" : "\u00b7";
+      }
+      out += "\n";
+    }
+    out += "         -x      -y      +x      +y      (longitude about z from -x)\n";
+    return out;
+  }
+
   std::string Render() const {
     std::string out;
     for (const auto& [name, d] : devices) {
@@ -129,10 +181,25 @@ struct WatchView {
                            PoseJsonText(d.current["pose"]), d.current.value("class", ""),
                            ProgressBar(collected / needed, 30), 100 * collected / needed);
       }
+      if (d.coverage.is_object()) {
+        out += "  " + CoverageLine(d.coverage) + ", centred by " + d.coverage.value("centre", "") +
+               "\n";
+        out += CoverageMap(d.coverage);
+        if (d.coverage.contains("gap"))
+          out += "  next: " + d.coverage["gap"].value("text", "") + "\n";
+      }
       for (const auto& [model, e] : d.estimates) {
-        out += fmt::format("  {} after {} {}: gate {}\n", model, e.value("poses", 0),
-                           e.contains("intervals") ? "intervals" : "poses",
-                           e["gate"].value("pass", false) ? "PASS" : "fail");
+        const bool pass = e["gate"].value("pass", false);
+        out += fmt::format(
+            "  {} after {}: gate {}{}\n", model, WhatWasFitted(e), pass ? "PASS" : "fail",
+            e.contains("fit_error_percent")
+                ? fmt::format(", fit error {:.2f} %", e.value("fit_error_percent", 0.0))
+                : std::string());
+        const auto reasons = e["gate"].value("reasons", nlohmann::json::array());
+        if (!pass && !reasons.empty() && reasons[0].is_string()) {
+          out += "    refused: " + reasons[0].get<std::string>() + "\n";
+        }
+        if (!pass && e.contains("advice")) out += "    next: " + e.value("advice", "") + "\n";
         if (!e.contains("precision")) continue;
         for (const auto& [p, v] : e["precision"].items()) {
           if (v["sigma"].is_null()) {
@@ -204,7 +271,7 @@ int RunWatch(const WatchArgs& a) {
     }
     view.Take(e);
     if (!tty) {
-      const std::string text = WatchView::Describe(e);
+      const std::string text = view.Describe(e);
       if (!text.empty()) fmt::print("{}\n", text);
       std::fflush(stdout);
       continue;

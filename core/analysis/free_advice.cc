@@ -241,4 +241,17 @@ std::vector<std::optional<OrientationAdvice>> NextOrientations(
   return out;
 }
 
+std::string CoverageGapText(const CoverageGap& gap, SensorKind sensor, double dip_deg) {
+  if (gap.empty()) return "";
+  const std::string name = CaseDirectionName(gap.direction);
+  const std::string where = sensor == SensorKind::kMagnetometer
+                                ? fmt::format("along the field (north and {:.0f} deg {})",
+                                              std::abs(dip_deg), dip_deg >= 0 ? "down" : "up")
+                                : std::string("up");
+  return fmt::format(
+      "the largest region without a value is about {} (none within {:.0f} deg; {:.0f} % of the "
+      "sphere empty): turn it so that {} points {}",
+      name, gap.radius_deg, 100 * gap.empty_area_fraction, name, where);
+}
+
 }  // namespace turncal

@@ -41,4 +41,10 @@ std::vector<std::optional<OrientationAdvice>> NextOrientations(
     const std::vector<FreeModelResult>& results, const std::vector<FreeInterval>& intervals,
     const FreeContext& context);
 
+// The largest uncovered region in the words of a hand (issue 37): "the largest region without a
+// value is about -z (none within 90 deg; 50 % of the sphere empty): turn it so that -z points
+// along the field (north and 60 deg down)" for a magnetometer (`dip_deg` the field's dip below
+// the horizontal), "... so that -z points up" for an accelerometer. Empty for an empty gap.
+std::string CoverageGapText(const CoverageGap& gap, SensorKind sensor, double dip_deg);
+
 }  // namespace turncal

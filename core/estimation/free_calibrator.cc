@@ -401,6 +401,7 @@ class FreeCalibration {
       if (d.squaredNorm() > 0) out_.directions.push_back(d);
     }
     out_.coverage = CoverageOf(out_.directions);
+    out_.gap = LargestGap(out_.coverage);
     out_.before = SummarizeMisfits(model_.Misfits(data_, model_.Identity(data_)));
     out_.after = SummarizeMisfits(model_.Misfits(data_, theta_));
   }
@@ -591,6 +592,20 @@ std::vector<std::string> DefaultFreeModels(const std::vector<FreeInterval>& inte
   if (mag) out.push_back("magellipsoid");
   if (acc && mag) out.push_back("accmag");
   return out;
+}
+
+double FitErrorPercent(const FreeEstimate& fe, SensorKind model_sensor, SensorKind triad,
+                       const FreeContext& context) {
+  const bool mag = triad == SensorKind::kMagnetometer;
+  const std::string kind = mag && model_sensor != SensorKind::kMagnetometer ? "mag norm" : "norm";
+  if (mag != (model_sensor == SensorKind::kMagnetometer) && kind == "norm") return NAN;
+  const double magnitude =
+      mag ? (fe.relative_scale || !(context.field_magnitude > 0) ? 1.0 : context.field_magnitude)
+          : context.gravity_mps2;
+  for (const auto& f : fe.after) {
+    if (f.kind == kind && f.count > 0) return 100 * f.rms / magnitude;
+  }
+  return NAN;
 }
 
 }  // namespace turncal

@@ -91,6 +91,7 @@ struct FreeEstimate {
   int motion_points = 0;  // of them, the magnetometer's samples in motion (issue 37)
   int residuals = 0;      // scalar residuals
   SphereCoverage coverage;
+  CoverageGap gap;  // the largest region of the coverage without a direction
   std::vector<Eigen::Vector3d> directions;  // per interval used: the corrected triad's mean
   // Parameters that take part in a null direction (not determined at all) or a weak one.
   std::vector<std::string> undetermined, weak;
@@ -111,6 +112,12 @@ struct FreeEstimate {
   // empty when not computed: FreeCalibratorOptions::remove_norm_bias, a model without norm terms).
   Eigen::VectorXd norm_bias;
 };
+
+// The norm misfit's RMS after the fit in per cent of the magnitude it is fitted to (the field's,
+// 1 for a relative scale, or gravity's), the "fit error" of the vendors' tools: the magnetometer's
+// ("mag norm", or "norm" of a magnetometer model) or the accelerometer's; NaN when `fe` has none.
+double FitErrorPercent(const FreeEstimate& fe, SensorKind model_sensor, SensorKind triad,
+                       const FreeContext& context);
 
 // Fits `model` to `data`. !estimate.ok with a message when the model cannot start (too few
 // intervals, no upstream estimate) or the solve fails.

@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include "core/sequencing/sequencer.h"
 #include "daemon/station/device_pipeline.h"
@@ -112,6 +113,10 @@ void FreeCalibrations::OnSample(DevicePipeline& d, const Sample& sample, Calibra
   ++motion_.kept;
   motion_.unjournaled.push_back(motion_.collector.values().back());
   const double t_s = static_cast<double>(sample.t_host_ns) * 1e-9;
+  if (motion_.collector.values().size() >= FreeMotionState::kFirstFit &&
+      t_s - motion_.coverage_published_s >= FreeMotionState::kCoverageEveryS) {
+    PublishCoverage(d, t_s, host);
+  }
   if (t_s - motion_.flushed_s >= FreeMotionState::kFlushS) {
     FlushMotion(d, host);
     motion_.flushed_s = t_s;
@@ -126,6 +131,9 @@ void FreeCalibrations::OnSample(DevicePipeline& d, const Sample& sample, Calibra
 void FreeCalibrations::OnFinish(DevicePipeline& d, CalibrationHost& host) {
   if (!motion_.enabled) return;
   FlushMotion(d, host);
+  if (!motion_.collector.values().empty()) {
+    PublishCoverage(d, motion_.collector.values().back().t_host_s, host);
+  }
   if (motion_.kept > motion_.kept_at_fit) {
     QueueFit(d,
              motion_.collector.values().empty() ? 0.0 : motion_.collector.values().back().t_host_s,
@@ -215,9 +223,60 @@ std::vector<FreeModelState*> FreeCalibrations::Take(const FreeUpdate& update) {
   return updated;
 }
 
+void FreeCalibrations::TakeCoverageCorrection(const FreeUpdate& update) {
+  // The magnetometer model with the most parameters that has an estimate (an ellipsoid before a
+  // sphere); its correction of a raw value is the value's direction.
+  const FreeModelResult* best = nullptr;
+  std::shared_ptr<const FreeModel> best_model;
+  for (const auto& r : update.results) {
+    if (!r.estimate.estimate.ok) continue;
+    std::string error;
+    std::shared_ptr<const FreeModel> model = MakeFreeModel(r.model, context_, &error);
+    if (!model || model->sensor() != SensorKind::kMagnetometer) continue;
+    if (best &&
+        best->estimate.estimate.parameters.size() >= r.estimate.estimate.parameters.size()) {
+      continue;
+    }
+    best = &r;
+    best_model = model;
+  }
+  if (!best) return;
+  motion_.coverage.SetCorrection(
+      [model = best_model, theta = best->estimate.estimate.theta](const Eigen::Vector3d& raw) {
+        return model->Correct(theta, raw);
+      },
+      "the " + best->model + " fit");
+}
+
+void FreeCalibrations::PublishCoverage(const DevicePipeline& d, double t_s, CalibrationHost& host) {
+  motion_.coverage_published_s = t_s;
+  const SphereCoverage& c =
+      motion_.coverage.Update(motion_.collector.values(), motion_.collector.thinned());
+  nlohmann::json event = {{"class", "COVERAGE"},
+                          {"t", t_s},
+                          {"device", d.name},
+                          {"triad", "magnetometer"},
+                          {"values", c.directions},
+                          {"filled", c.filled},
+                          {"total", c.total},
+                          {"fraction", c.fraction()},
+                          {"centre", motion_.coverage.source()},
+                          {"rows", CoverageRows(c)}};
+  const CoverageGap gap = LargestGap(c);
+  if (!gap.empty()) {
+    event["gap"] = {{"name", CaseDirectionName(gap.direction)},
+                    {"direction", {gap.direction.x(), gap.direction.y(), gap.direction.z()}},
+                    {"radius_deg", gap.radius_deg},
+                    {"empty_area_fraction", gap.empty_area_fraction},
+                    {"text", CoverageGapText(gap, SensorKind::kMagnetometer, context_.dip_deg)}};
+  }
+  host.Publish(event);
+}
+
 void FreeCalibrations::ApplyUpdate(DevicePipeline& d, const FreeUpdate& job, double t_s,
                                    bool resuming, CalibrationHost& host) {
   if (job.motion) motion_.last = job.motion;
+  if (job.error.empty() && motion_.enabled) TakeCoverageCorrection(job);
   if (!job.error.empty()) {
     host.Publish(
         {{"class", "ERROR"}, {"device", d.name}, {"message", "free models: " + job.error}});
@@ -265,6 +324,21 @@ void FreeCalibrations::PublishEstimate(const DevicePipeline& d, const FreeModelS
   if (!m.result.note.empty()) event["note"] = m.result.note;
   if (m.advice) event["advice"] = m.advice->text;
   if (fe.motion_points > 0) event["motion_points"] = fe.motion_points;
+  if (e.ok) {
+    // The fit error as the vendors' tools give it: the norm misfit's RMS in per cent of the
+    // magnitude fitted to (the field's, or gravity's).
+    std::string error;
+    const auto model = MakeFreeModel(m.result.model, context_, &error);
+    const SensorKind triad = model && model->Needs(SensorKind::kMagnetometer)
+                                 ? SensorKind::kMagnetometer
+                                 : SensorKind::kAccelerometer;
+    const double fit_error = model ? FitErrorPercent(fe, model->sensor(), triad, context_) : NAN;
+    if (std::isfinite(fit_error)) event["fit_error_percent"] = fit_error;
+    if (fe.gap.radius_deg > 0) {
+      event["uncovered"] =
+          CoverageGapText(fe.gap, model ? model->sensor() : m.sensor, context_.dip_deg);
+    }
+  }
   host.Publish(event);
 }
 

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/analysis/free_advice.h"
+#include "core/analysis/live_coverage.h"
 #include "core/analysis/publish_gate.h"
 #include "core/estimation/free_calibrator.h"
 #include "core/estimation/free_motion.h"
@@ -66,8 +67,12 @@ struct FreeMotionState {
   static constexpr double kFlushS = 1.0;
   static constexpr double kRefitS = 10.0;
   static constexpr std::int64_t kFirstFit = 50;  // values before the first fit in motion
+  // COVERAGE events while values arrive, from kFirstFit values (fewer have no centre).
+  static constexpr double kCoverageEveryS = 0.5;
   bool enabled = false;
   MotionCollector collector;
+  LiveCoverage coverage;  // the collector's values' directions, for the live guidance
+  double coverage_published_s = -1e300;
   std::vector<MotionValue> unjournaled;
   std::int64_t kept = 0,
                kept_at_fit = 0;  // values kept in all (thinned or not), and at the last fit
@@ -179,6 +184,11 @@ class FreeCalibrations : public CalibrationSet {
                    CalibrationHost& host);
   void PublishEstimate(const DevicePipeline& d, const FreeModelState& m, double t_s,
                        CalibrationHost& host) const;
+  // The magnetometer's coverage so far (COVERAGE, docs/protocol.md): the bins, the largest
+  // region without a value and what to do about it.
+  void PublishCoverage(const DevicePipeline& d, double t_s, CalibrationHost& host);
+  // The latest fit of a magnetometer model corrects the values' directions from now on.
+  void TakeCoverageCorrection(const FreeUpdate& update);
 
   std::vector<std::string> configured_;  // empty: what the data carry
   FreeContext context_;

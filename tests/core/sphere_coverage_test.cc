@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -57,6 +58,46 @@ TEST(SphereCoverage, SixPositionsFillSixBinsAndAUniformTumbleFillsNearlyAll) {
   int sum = 0;
   for (int v : cr.counts) sum += v;
   EXPECT_EQ(sum, 1000);
+}
+
+// The largest region without a direction: for a hand that only ever turned the upper half (+z
+// within 80 degrees of the field) the empty cap is about -z, 90 degrees from the nearest filled bin
+// centre (the south pole bin's centre at -85 degrees to the band at +5); half of the sphere's
+// area is empty. The rows draw it: the top 9 filled, the bottom 9 empty.
+TEST(SphereCoverage, TheLargestGapIsNamedInTheCaseDirections) {
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> n;
+  std::vector<Eigen::Vector3d> upper;
+  for (int i = 0; i < 20000; ++i) {
+    Eigen::Vector3d d(n(rng), n(rng), n(rng));
+    d.z() = std::abs(d.z());
+    upper.push_back(d);
+  }
+  const SphereCoverage c = CoverageOf(upper);
+  const CoverageGap gap = LargestGap(c);
+  ASSERT_FALSE(gap.empty());
+  EXPECT_EQ(CaseDirectionName(gap.direction), "-z");
+  EXPECT_LT(gap.direction.z(), -0.99);
+  EXPECT_NEAR(gap.radius_deg, 90.0, 0.5);
+  EXPECT_NEAR(gap.empty_area_fraction, 0.5, 0.01);
+  const auto rows = CoverageRows(c);
+  ASSERT_EQ(rows.size(), 18u);
+  EXPECT_EQ(rows[0].size(), 32u);
+  EXPECT_EQ(rows[17], std::string(32, '.'));
+  EXPECT_EQ(std::count(rows[8].begin(), rows[8].end(), '#'), 32);
+  // The ring about z: the caps about both poles are empty, the south's 90 degrees from the band.
+  std::vector<Eigen::Vector3d> ring;
+  for (int i = 0; i < 1000; ++i) {
+    ring.emplace_back(std::cos(2 * M_PI * i / 1000), std::sin(2 * M_PI * i / 1000), 0.0);
+  }
+  const CoverageGap ring_gap = LargestGap(CoverageOf(ring));
+  EXPECT_NEAR(ring_gap.radius_deg, 90.0, 0.5);  // the band is [0, 10): centre +5 to -85
+  EXPECT_EQ(CaseDirectionName(ring_gap.direction), "-z");
+  EXPECT_NEAR(ring_gap.empty_area_fraction, 1.0 - (std::sin(10 * M_PI / 180)) / 2, 1e-9);
+  // Nothing and everything have no gap; edges and corners have their names.
+  EXPECT_TRUE(LargestGap(CoverageOf({})).empty());
+  EXPECT_EQ(CaseDirectionName({1, 1, 0.1}), "+x+y");
+  EXPECT_EQ(CaseDirectionName({-1, 1, -1}), "-x+y-z");
 }
 
 }  // namespace

@@ -71,6 +71,10 @@ configure = false
     check(wait_for(f"{d}/t.sock", 30), "turncald's socket is up")
     watch = subprocess.Popen([TURNCAL, "watch", "--json", "--corrected", "--raw", "--uncertainty",
                               "--socket", f"{d}/t.sock"], stdout=open(f"{d}/watch.jsonl", "w"))
+    # The live guidance as an operator's log (standard output not a terminal): a line per tenth of
+    # the sphere the magnetometer's coverage fills, with what to do next.
+    watch_log = subprocess.Popen([TURNCAL, "watch", "--socket", f"{d}/t.sock"],
+                                 stdout=open(f"{d}/watch.log", "w"))
     time.sleep(0.5)  # the watch subscribed (its first line comes back at once)
     sim = subprocess.run(
         [TURNCAL, "sim", "--protocol", "mip", "--live", f"{d}/sim", "--live-speed", str(SPEED),
@@ -128,6 +132,22 @@ configure = false
 
     watch.terminate()
     watch.wait()
+    watch_log.terminate()
+    watch_log.wait()
+    # The magnetometer's coverage while it filled (COVERAGE, every half second of values).
+    coverage = [j for j in map(json.loads, open(f"{d}/watch.jsonl")) if j.get("class") == "COVERAGE"]
+    check(len(coverage) >= 10 and all(len(j["rows"]) == 18 for j in coverage) and
+          coverage[-1]["fraction"] > coverage[0]["fraction"] and
+          coverage[-1]["centre"] == "the magellipsoid fit",
+          f"{len(coverage)} COVERAGE events, "
+          f"{coverage[0]['fraction'] if coverage else 0:.3f} to "
+          f"{coverage[-1]['fraction'] if coverage else 0:.3f} of the sphere, centred by "
+          f"{coverage[-1]['centre'] if coverage else None}")
+    log = open(f"{d}/watch.log").read()
+    check("imu: magnetometer coverage" in log and "points along the field" in log and
+          "values in motion: gate" in log,
+          "turncal watch logs the coverage, the region to turn into and the fits: " +
+          " | ".join(line[:120] for line in log.splitlines() if "coverage" in line)[:400])
     # Corrected samples after both calibrations applied.
     rows = []
     for line in open(f"{d}/watch.jsonl"):

@@ -8,9 +8,12 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <string>
 
+#include "core/analysis/sphere_coverage.h"
 #include "daemon/service/config.h"
 #include "daemon/state/persistence.h"
 #include "daemon/station/free_pipeline.h"
@@ -164,6 +167,91 @@ TEST(FreeMotionStation, AHandRotationCalibratesTheMagnetometerThroughThePipeline
   fs::remove_all(state);
   fs::remove(path);
   fs::remove(empty);
+}
+
+// Live guidance (issue 37): while the values arrive the station publishes the magnetometer's
+// coverage every half second of the stream -- the 18 x 32 bins, centred by the values' midpoint
+// until a fit, then by the latest magnetometer fit -- and the largest region without a value with
+// what to do about it. The last event's bins are the final fit's directions of every value (to a
+// few bins: it is centred by the fit before the last), and no value lies inside the region it
+// names (to a bin's size).
+TEST(FreeMotionStation, TheCoverageFillsAsTheValuesArriveAndNamesTheLargestGap) {
+  const sim::SimCapture capture = Hand(drivers::Protocol::kMip, 1000, 100, "industrial", 21);
+  const std::string path = WriteSimCaptureFile(capture, "free_motion_coverage");
+  const std::string state = FreshTempDir("free_motion_coverage_state");
+  const daemon::StationOptions options = MotionOptions(state, "industrial");
+  std::vector<nlohmann::json> events;
+  daemon::ReplayOnceOutcome outcome;
+  std::string error;
+  ASSERT_TRUE(daemon::ReplayOnce(
+      path, options, "",
+      [&](const nlohmann::json& e) {
+        if (e["class"] == "COVERAGE") events.push_back(e);
+      },
+      &outcome, &error))
+      << error;
+  ASSERT_GE(events.size(), 18u) << "every half second of a 10-s rotation from 50 values, and at its end";
+  int previous_values = 0;
+  bool fitted = false;
+  for (const auto& e : events) {
+    EXPECT_EQ(e["device"], "imu");
+    const auto rows = e["rows"].get<std::vector<std::string>>();
+    ASSERT_EQ(rows.size(), 18u);
+    int marked = 0;
+    for (const auto& r : rows) {
+      ASSERT_EQ(r.size(), 32u);
+      marked += static_cast<int>(std::count(r.begin(), r.end(), '#'));
+    }
+    EXPECT_EQ(marked, e["filled"].get<int>());
+    EXPECT_NEAR(e["fraction"].get<double>(), marked / 576.0, 1e-12);
+    EXPECT_GE(e["values"].get<int>(), previous_values);
+    previous_values = e["values"].get<int>();
+    fitted = fitted || e["centre"] == "the magellipsoid fit";
+  }
+  EXPECT_EQ(events.front()["centre"], "the values' midpoint (no fit yet)");
+  EXPECT_TRUE(fitted);
+  const nlohmann::json& last = events.back();
+  EXPECT_EQ(last["values"].get<int>(), 1000);
+
+  // The final fit's directions of every journaled value.
+  nlohmann::json stored;
+  ASSERT_TRUE(daemon::ReadActiveCalibration(state, "imu", "magellipsoid", &stored));
+  protocol::FreeCalibrationDocument doc;
+  ASSERT_TRUE(protocol::ParseFreeCalibration(stored, &doc, &error)) << error;
+  const auto model = MakeFreeModel(doc.model, doc.context, &error);
+  ASSERT_TRUE(model) << error;
+  std::vector<daemon::JournalEntry> entries;
+  int skipped = 0;
+  ASSERT_TRUE(daemon::PoseJournal::Load(state, &entries, &skipped, &error)) << error;
+  std::vector<Eigen::Vector3d> directions;
+  for (const auto& e : entries) {
+    for (const auto& v : e.motion) directions.push_back(model->Correct(doc.theta, v.mag));
+  }
+  ASSERT_EQ(directions.size(), 1000u);
+  const SphereCoverage final_coverage = CoverageOf(directions);
+  EXPECT_NEAR(last["filled"].get<int>(), final_coverage.filled,
+              std::max(3.0, 0.05 * final_coverage.filled));
+  // A hand's 10 s leave most of the sphere empty: the region is named, and holds no value.
+  ASSERT_TRUE(last.contains("gap")) << last.dump();
+  const nlohmann::json& gap = last["gap"];
+  const Eigen::Vector3d centre(gap["direction"][0].get<double>(), gap["direction"][1].get<double>(),
+                               gap["direction"][2].get<double>());
+  const double radius_deg = gap["radius_deg"].get<double>();
+  EXPECT_GT(radius_deg, 25.0);
+  EXPECT_GT(gap["empty_area_fraction"].get<double>(), 0.5);
+  const std::string text = gap["text"].get<std::string>();
+  EXPECT_NE(
+      text.find("turn it so that " + gap["name"].get<std::string>() + " points along the field"),
+      std::string::npos)
+      << text;
+  double nearest_deg = 180.0;
+  for (const auto& d : directions) {
+    nearest_deg = std::min(
+        nearest_deg, std::acos(std::clamp(d.normalized().dot(centre), -1.0, 1.0)) * 180 / M_PI);
+  }
+  EXPECT_GT(nearest_deg, radius_deg - 12.0) << "a bin is 10 x 11.25 degrees";
+  fs::remove_all(state);
+  fs::remove(path);
 }
 
 TEST(FreeMotionStation, AnXbusConsumerStreamAndTheMotionSwitchedOff) {

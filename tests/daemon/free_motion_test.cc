@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
@@ -15,6 +16,7 @@
 #include "core/estimation/free_motion.h"
 #include "core/estimation/sensor_class.h"
 #include "daemon/station/capture_replay.h"
+#include "report/free_report.h"
 #include "report/free_sphere.h"
 #include "sim/capture.h"
 #include "sim/free_truth.h"
@@ -155,6 +157,28 @@ TEST(FreeMotion, TheReportDrawsTheValuesBeforeAndAfterOnTheSphere) {
     ++after;
   }
   EXPECT_EQ(after, 3 * values->after.size());  // three projections
+
+  // The largest region without a value (issue 37, guidance): no corrected direction inside it
+  // (to a bin's size), named in the text and the HTML. The fit error: the norm misfit's RMS in
+  // per cent of the field, the per-sample noise's share of the field's magnitude (to 25 %).
+  const FreeEstimate& fe = f.results[0].estimate;
+  ASSERT_FALSE(fe.gap.empty());
+  EXPECT_GT(fe.gap.radius_deg, 25.0);
+  for (const auto& d : fe.directions) {
+    EXPECT_GT(std::acos(std::clamp(d.normalized().dot(fe.gap.direction), -1.0, 1.0)) * 180 / M_PI,
+              fe.gap.radius_deg - 12.0);
+  }
+  const std::string name = CaseDirectionName(fe.gap.direction);
+  const std::string text = report::FreeReportText(in, false);
+  EXPECT_NE(text.find("uncovered: the largest region without a value is about " + name),
+            std::string::npos)
+      << text;
+  EXPECT_NE(html.find("Uncovered: the largest region"), std::string::npos);
+  std::vector<double> raw_norms;
+  for (const auto& p : f.collected.motion->points) raw_norms.push_back(p.mag->mean.norm());
+  const double expected_percent = 100 * f.collected.motion->sigma.mean() / MedianOf(raw_norms);
+  EXPECT_NEAR(FitErrorPercent(fe, SensorKind::kMagnetometer, SensorKind::kMagnetometer, f.context),
+              expected_percent, 0.25 * expected_percent);
 }
 
 // A magnet passing the device for half a second (a field of 0.1 G at its closest, a fifth of
