@@ -100,12 +100,15 @@ std::string FreeReportText(const FreeReportInput& in, bool list_intervals) {
     }
     o += fmt::format(
         "  {} intervals{}, {} residuals; rank {} of {} (condition {:.3g}); chi2/dof {:.2f} (p "
-        "{:.2g})\n",
+        "{:.2g}{})\n",
         fe.intervals,
         fe.motion_points > 0 ? fmt::format(" ({} of them samples in motion)", fe.motion_points)
                              : "",
         fe.residuals, e.rank, e.parameters.size(), e.condition, e.dof > 0 ? e.chi2 / e.dof : 0.0,
-        e.p_value);
+        e.p_value,
+        std::isfinite(e.fit.noise_dof)
+            ? fmt::format(", the F test against a noise measured with {:.0f} dof", e.fit.noise_dof)
+            : std::string());
     if (e.fit.verdict != FitVerdict::kOk) o += fmt::format("  fit: {}\n", e.fit.cause);
     for (const auto& w : e.warnings) o += fmt::format("  {}\n", w);
     if (const FreeModelResult* up = UpstreamOf(in, r.model)) {

@@ -256,6 +256,7 @@ int Run(const FreeArgs& a) {
       a.models.empty() ? DefaultFreeModels(data) : Split(a.models);
   FreeCalibratorOptions co;
   co.min_coverage = a.min_coverage_percent / 100;
+  if (motion) co.motion_noise_dof = motion->sigma_dof;
   std::vector<FreeModelResult> results;
   if (!CalibrateFreeModels(models, data, context, co, &results, &error)) {
     fmt::print(stderr, "turncal free: {}\n", error);

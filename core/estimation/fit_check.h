@@ -8,6 +8,7 @@
 // it, or the noise level as a whole.
 
 #include <Eigen/Core>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,9 @@ struct FitCheck {
   int dof = 0;
   double p_upper = 1.0;  // P(chi^2 >= observed) under the noise model
   double p_lower = 1.0;  // P(chi^2 <= observed)
+  // Finite: the p-values are the F test's of chi^2 / dof against a noise estimated with this many
+  // degrees of freedom (free mode's samples in motion, FreeCalibratorOptions::motion_noise_dof).
+  double noise_dof = std::numeric_limits<double>::infinity();
   // Per axis of the triad: the squared innovations' sum over the poses, divided by its share of
   // the degrees of freedom (1 when that axis's noise is as modelled).
   Eigen::Vector3d axis_ratio = Eigen::Vector3d::Ones();

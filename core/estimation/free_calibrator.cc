@@ -9,6 +9,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/SVD>
 #include <algorithm>
+#include <boost/math/special_functions/beta.hpp>
 #include <boost/math/special_functions/gamma.hpp>
 #include <cmath>
 #include <memory>
@@ -337,7 +338,15 @@ class FreeCalibration {
     FitCheck& fit = est_.fit;
     fit.chi2 = est_.chi2;
     fit.dof = est_.dof;
-    if (est_.dof > 0) {
+    const double nu = MotionNoiseDof();
+    if (est_.dof > 0 && std::isfinite(nu) && nu > 0 && 2 * out_.motion_points > out_.intervals) {
+      // F = (chi^2 / dof) against the noise's own chi^2_nu / nu: P(F > x) = I_{nu / (nu + dof x)}
+      // (nu / 2, dof / 2).
+      const double d1 = est_.dof, x = est_.chi2 / d1;
+      fit.p_upper = boost::math::ibeta(nu / 2, d1 / 2, nu / (nu + d1 * x));
+      fit.p_lower = boost::math::ibetac(nu / 2, d1 / 2, nu / (nu + d1 * x));
+      fit.noise_dof = nu;
+    } else if (est_.dof > 0) {
       fit.p_upper = boost::math::gamma_q(est_.dof / 2.0, est_.chi2 / 2.0);
       fit.p_lower = boost::math::gamma_p(est_.dof / 2.0, est_.chi2 / 2.0);
     }
@@ -370,6 +379,27 @@ class FreeCalibration {
       fit.verdict = FitVerdict::kTooSmall;
       fit.cause = "the residuals are smaller than the intervals' noise says";
     }
+  }
+
+  // The degrees of freedom of the noise the samples in motion are weighed with, as their norm
+  // residuals see it: each residual's variance is sum_k u_k^2 sigma_k^2 over the axes (u the
+  // field's direction), so a rotation that turns every axis along the field averages the three
+  // axes' independent estimates (3 nu for nu each); one that keeps one axis along it sees only
+  // that axis's nu. nu_eff = nu / sum_k w_k^2, w_k each axis's share of the residuals' variance.
+  double MotionNoiseDof() const {
+    const double nu = options_.motion_noise_dof;
+    if (!std::isfinite(nu) || !(nu > 0)) return nu;
+    Eigen::Vector3d share = Eigen::Vector3d::Zero();
+    for (const auto& iv : data_.intervals) {
+      if (!iv.in_motion || !iv.mag) continue;
+      const Eigen::Vector3d u = model_.Direction(data_, theta_, iv).normalized();
+      if (!u.allFinite()) continue;
+      const Eigen::Vector3d part = u.cwiseAbs2().cwiseProduct(iv.mag->covariance.diagonal());
+      if (part.sum() > 0) share += part / part.sum();
+    }
+    if (!(share.sum() > 0)) return nu;
+    share /= share.sum();
+    return nu / share.squaredNorm();
   }
 
   // The parameters in a null direction (sigma infinite) and in a direction weaker than the gate

@@ -13,6 +13,7 @@
 // part of each interval's mean, gyro9's direction terms the part across it.
 
 #include <Eigen/Core>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -33,6 +34,15 @@ struct FreeCalibratorOptions {
   // (as the pose calibrator does; the estimate says so).
   bool inflate_covariance_by_chi2 = true;
   double chi2_inflation_p_value = 0.01;
+  // The degrees of freedom of the magnetometer's per-sample noise that the samples in motion are
+  // weighed with (MotionPoints::sigma_dof; infinite: known). Finite, and the samples in motion
+  // the most of the terms, the fit check is the F test of the residuals' variance against that
+  // noise's, F(dof, nu) with nu this per axis times up to 3 (the norm residuals average the
+  // axes' estimates as the rotation turns each along the field), not the chi^2: a sigma from a
+  // noise meter's second of a
+  // 50-Hz magnetometer is 10 % uncertain, and the chi^2 against it piled its p-values at both
+  // ends (200 hand rotations with a 4-s pause: 91 in the lowest tenth, 30 in the highest).
+  double motion_noise_dof = std::numeric_limits<double>::infinity();
   double outlier_threshold = 4.0;
   // The magnetometer's samples in motion whose field magnitude departs from the fit beyond this
   // many robust sigmas (or the count's Bonferroni bound, when larger) are left out as disturbed

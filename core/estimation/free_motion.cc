@@ -159,10 +159,15 @@ MotionPoints MotionCollector::Select(const std::vector<FreeInterval>& intervals,
   }
   if (dof >= options.min_pooled_samples && pooled.allFinite() && (pooled.array() > 0).all()) {
     out.sigma = (pooled / dof).cwiseSqrt();
+    out.sigma_dof = dof;
     out.noise_source = fmt::format("pooled over the {} still intervals' {:.0f} samples",
                                    pooled_intervals, dof + pooled_intervals);
   } else if (options.mag_sigma) {
     out.sigma = *options.mag_sigma;
+    out.sigma_dof = options.mag_sigma_dof;
+    if (std::isfinite(out.sigma_dof) && options.mag_sigma_rate_hz > 0) {
+      out.sigma_dof *= std::min(1.0, 1.0 / (out.period_s * options.mag_sigma_rate_hz));
+    }
     out.noise_source = options.noise_source.empty() ? "given" : options.noise_source;
   } else {
     std::vector<Eigen::Vector3d> values;
@@ -213,6 +218,8 @@ FreeCollected CollectFree(const std::vector<Sample>& samples, const SequencerOpt
     MotionOptions mo = *motion;
     if (!mo.mag_sigma && out.found.noise && out.found.noise->sigma[kTriadMag]) {
       mo.mag_sigma = *out.found.noise->sigma[kTriadMag];
+      mo.mag_sigma_dof = out.found.noise->sigma_dof;
+      mo.mag_sigma_rate_hz = out.found.noise->rate_hz;
       mo.noise_source = out.found.noise->source;
     }
     out.motion = MagnetometerInMotion(samples, out.found.intervals, mo);

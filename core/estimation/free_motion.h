@@ -24,6 +24,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -44,6 +45,12 @@ struct MotionOptions {
   // ("measured", "the industrial class"); unset: from the points' own scatter.
   std::optional<Eigen::Vector3d> mag_sigma;
   std::string noise_source;
+  // The degrees of freedom mag_sigma was estimated with (infinite: a datasheet's or a long
+  // rest's) and the rate of the samples it was measured over: a magnetometer slower than that
+  // stream repeated its values there, and each counts once (the dof scaled by its own rate over
+  // that one).
+  double mag_sigma_dof = std::numeric_limits<double>::infinity();
+  double mag_sigma_rate_hz = 0.0;
   // The still intervals' own samples, pooled, are the noise instead when they hold at least this
   // many (their scatter about their means: sigma to sqrt(1 / 2n)).
   double min_pooled_samples = 1000;
@@ -58,6 +65,11 @@ struct MotionPoints {
   double period_s = 0.0;          // between new values (the magnetometer's own rate's period)
   bool frozen = false;            // every sample with the field held one value
   Eigen::Vector3d sigma = Eigen::Vector3d::Zero();
+  // Its degrees of freedom: a noise meter's second of a 50-Hz magnetometer has about 50, so that
+  // sigma is uncertain by 10 % and the fit check is an F test against it (FreeCalibratorOptions::
+  // motion_noise_dof); infinite for a datasheet's, a long rest's, or the points' own scatter
+  // (which the chi^2 cannot check).
+  double sigma_dof = std::numeric_limits<double>::infinity();
   std::string noise_source;  // as given, or "the points' scatter about an ellipsoid"
   // One line for the report: what was taken and how.
   std::string Summary() const;

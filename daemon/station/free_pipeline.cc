@@ -64,7 +64,9 @@ void FreeUpdate::Run(const std::vector<std::string>& configured,
   data = all;
   models = configured.empty() ? DefaultFreeModels(*all) : configured;
   results.clear();
-  if (!CalibrateFreeModels(models, *all, context, options, &results, &error)) return;
+  FreeCalibratorOptions with_noise = options;
+  if (motion) with_noise.motion_noise_dof = motion->sigma_dof;
+  if (!CalibrateFreeModels(models, *all, context, with_noise, &results, &error)) return;
   advice = NextOrientations(results, *all, context);
 }
 
