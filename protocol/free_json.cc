@@ -107,6 +107,13 @@ bool ParseFreeContext(const nlohmann::json& j, FreeContext* out, std::string* er
   return out->IsValid(error);
 }
 
+nlohmann::json ToJson(const CoverageGap& gap) {
+  return {{"direction", {gap.direction.x(), gap.direction.y(), gap.direction.z()}},
+          {"name", CaseDirectionName(gap.direction)},
+          {"radius_deg", gap.radius_deg},
+          {"empty_area_fraction", gap.empty_area_fraction}};
+}
+
 nlohmann::json FreeGateJson(const FreeCalibratorOptions& o) {
   nlohmann::json precision;
   if (o.precision) {
@@ -196,13 +203,7 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
   m["coverage"] = {{"filled", fe.coverage.filled},
                    {"total", fe.coverage.total},
                    {"fraction", fe.coverage.fraction()}};
-  if (!fe.gap.empty()) {
-    m["coverage"]["gap"] = {
-        {"direction", {fe.gap.direction.x(), fe.gap.direction.y(), fe.gap.direction.z()}},
-        {"name", CaseDirectionName(fe.gap.direction)},
-        {"radius_deg", fe.gap.radius_deg},
-        {"empty_area_fraction", fe.gap.empty_area_fraction}};
-  }
+  if (!fe.gap.empty()) m["coverage"]["gap"] = ToJson(fe.gap);
   m["weak"] = fe.weak;
   m["undetermined"] = fe.undetermined;
   m["weakest_direction"] = fe.analysis.weak.empty() ? "" : fe.analysis.weak.back().text;

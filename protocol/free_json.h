@@ -37,6 +37,9 @@ bool ParseFreeContext(const nlohmann::json& j, FreeContext* out, std::string* er
 // The gate's limits: {"min_coverage", "min_relative_singular", "precision": null or
 // {"min_dof", "min_p_value", "tolerances": {"scale_factor", ...}, "parameters": {NAME: sigma}}}.
 nlohmann::json FreeGateJson(const FreeCalibratorOptions& options);
+// The largest region without a direction (core/analysis/sphere_coverage.h): `direction`, `name`
+// (the case's nearest axis, edge or corner), `radius_deg`, `empty_area_fraction`.
+nlohmann::json ToJson(const CoverageGap& gap);
 bool ParseFreeGate(const nlohmann::json& j, FreeCalibratorOptions* out, std::string* error);
 
 // One free model's result: {"requested", "model", "note", "ok", "error", "intervals",

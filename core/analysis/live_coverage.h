@@ -27,7 +27,6 @@ class LiveCoverage {
   // Counts `values` (a MotionCollector's: appended to in time order, thinned to bound memory --
   // `thinned`, its count of values dropped, changing means recount) not yet counted.
   const SphereCoverage& Update(const std::vector<MotionValue>& values, std::int64_t thinned);
-  const SphereCoverage& coverage() const { return coverage_; }
   // "the magellipsoid fit", "the values' midpoint (no fit yet)".
   const std::string& source() const { return source_; }
 

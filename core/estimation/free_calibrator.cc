@@ -338,8 +338,10 @@ class FreeCalibration {
     FitCheck& fit = est_.fit;
     fit.chi2 = est_.chi2;
     fit.dof = est_.dof;
-    const double nu = MotionNoiseDof();
-    if (est_.dof > 0 && std::isfinite(nu) && nu > 0 && 2 * out_.motion_points > out_.intervals) {
+    const double nu = est_.dof > 0 && 2 * out_.motion_points > out_.intervals
+                          ? MotionNoiseDof()
+                          : std::numeric_limits<double>::infinity();
+    if (est_.dof > 0 && std::isfinite(nu) && nu > 0) {
       // F = (chi^2 / dof) against the noise's own chi^2_nu / nu: P(F > x) = I_{nu / (nu + dof x)}
       // (nu / 2, dof / 2).
       const double d1 = est_.dof, x = est_.chi2 / d1;
@@ -627,8 +629,12 @@ std::vector<std::string> DefaultFreeModels(const std::vector<FreeInterval>& inte
 double FitErrorPercent(const FreeEstimate& fe, SensorKind model_sensor, SensorKind triad,
                        const FreeContext& context) {
   const bool mag = triad == SensorKind::kMagnetometer;
-  const std::string kind = mag && model_sensor != SensorKind::kMagnetometer ? "mag norm" : "norm";
-  if (mag != (model_sensor == SensorKind::kMagnetometer) && kind == "norm") return NAN;
+  // A joint model (accmag) names its magnetometer's norm "mag norm" (its "norm" is gravity's); a
+  // model of one triad, "norm".
+  const bool joint = mag && std::any_of(fe.after.begin(), fe.after.end(),
+                                        [](const MisfitFigure& f) { return f.kind == "mag norm"; });
+  if (!joint && triad != model_sensor) return NAN;
+  const std::string kind = joint ? "mag norm" : "norm";
   const double magnitude =
       mag ? (fe.relative_scale || !(context.field_magnitude > 0) ? 1.0 : context.field_magnitude)
           : context.gravity_mps2;

@@ -39,9 +39,9 @@ struct FreeCalibratorOptions {
   // the most of the terms, the fit check is the F test of the residuals' variance against that
   // noise's, F(dof, nu) with nu this per axis times up to 3 (the norm residuals average the
   // axes' estimates as the rotation turns each along the field), not the chi^2: a sigma from a
-  // noise meter's second of a
-  // 50-Hz magnetometer is 10 % uncertain, and the chi^2 against it piled its p-values at both
-  // ends (200 hand rotations with a 4-s pause: 91 in the lowest tenth, 30 in the highest).
+  // noise meter's second of a 50-Hz magnetometer is 10 % uncertain, and the chi^2 against it
+  // piled its p-values at both ends (200 hand rotations with a 4-s pause: 91 in the lowest
+  // tenth, 30 in the highest).
   double motion_noise_dof = std::numeric_limits<double>::infinity();
   double outlier_threshold = 4.0;
   // The magnetometer's samples in motion whose field magnitude departs from the fit beyond this

@@ -266,11 +266,8 @@ void FreeCalibrations::PublishCoverage(const DevicePipeline& d, double t_s, Cali
                           {"rows", CoverageRows(c)}};
   const CoverageGap gap = LargestGap(c);
   if (!gap.empty()) {
-    event["gap"] = {{"name", CaseDirectionName(gap.direction)},
-                    {"direction", {gap.direction.x(), gap.direction.y(), gap.direction.z()}},
-                    {"radius_deg", gap.radius_deg},
-                    {"empty_area_fraction", gap.empty_area_fraction},
-                    {"text", CoverageGapText(gap, SensorKind::kMagnetometer, context_.dip_deg)}};
+    event["gap"] = protocol::ToJson(gap);
+    event["gap"]["text"] = CoverageGapText(gap, SensorKind::kMagnetometer, context_.dip_deg);
   }
   host.Publish(event);
 }
@@ -336,7 +333,7 @@ void FreeCalibrations::PublishEstimate(const DevicePipeline& d, const FreeModelS
                                  : SensorKind::kAccelerometer;
     const double fit_error = model ? FitErrorPercent(fe, model->sensor(), triad, context_) : NAN;
     if (std::isfinite(fit_error)) event["fit_error_percent"] = fit_error;
-    if (fe.gap.radius_deg > 0) {
+    if (!fe.gap.empty()) {
       event["uncovered"] =
           CoverageGapText(fe.gap, model ? model->sensor() : m.sensor, context_.dip_deg);
     }

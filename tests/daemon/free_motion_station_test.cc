@@ -190,7 +190,8 @@ TEST(FreeMotionStation, TheCoverageFillsAsTheValuesArriveAndNamesTheLargestGap) 
       },
       &outcome, &error))
       << error;
-  ASSERT_GE(events.size(), 18u) << "every half second of a 10-s rotation from 50 values, and at its end";
+  ASSERT_GE(events.size(), 18u)
+      << "every half second of a 10-s rotation from 50 values, and at its end";
   int previous_values = 0;
   bool fitted = false;
   for (const auto& e : events) {
