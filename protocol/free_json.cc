@@ -223,6 +223,7 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
   if (fe.disturbance) {
     const FieldDisturbance& d = *fe.disturbance;
     m["disturbed"] = {{"values", d.values},
+                      {"detected", d.detected},
                       {"of", d.of},
                       {"t0_s", d.t0_s},
                       {"t1_s", d.t1_s},

@@ -52,6 +52,49 @@ MotionDepartures FindDisturbedMotion(const FreeModel& model, const FreeData& dat
   return out;
 }
 
+std::vector<int> DisturbedSpan(const FreeData& data, const std::vector<int>& disturbed) {
+  if (disturbed.empty()) return {};
+  const auto at_s = [&data](std::size_t i) {
+    return 0.5 * (data.intervals[i].t_start_s + data.intervals[i].t_end_s);
+  };
+  // One value's spacing: the median step between samples in motion.
+  std::vector<std::size_t> motion;
+  for (std::size_t i = 0; i < data.intervals.size(); ++i) {
+    if (data.intervals[i].in_motion) motion.push_back(i);
+  }
+  std::vector<double> steps;
+  for (std::size_t k = 1; k < motion.size(); ++k) {
+    steps.push_back(std::abs(at_s(motion[k]) - at_s(motion[k - 1])));
+  }
+  const double spacing_s = steps.empty() ? 0.0 : MedianOf(steps);
+  // The runs, each widened; overlapping windows merge.
+  std::vector<double> times;
+  for (int i : disturbed) times.push_back(at_s(static_cast<std::size_t>(i)));
+  std::sort(times.begin(), times.end());
+  std::vector<std::pair<double, double>> windows;
+  std::size_t first = 0;
+  for (std::size_t k = 1; k <= times.size(); ++k) {
+    if (k < times.size() && times[k] - times[k - 1] < kDisturbanceJoinS) continue;
+    const double t0 = times[first], t1 = times[k - 1];
+    const double margin = 0.5 * (t1 - t0) + spacing_s;
+    if (!windows.empty() && t0 - margin <= windows.back().second) {
+      windows.back().second = t1 + margin;
+    } else {
+      windows.emplace_back(t0 - margin, t1 + margin);
+    }
+    first = k;
+  }
+  std::vector<int> out;
+  std::size_t w = 0;
+  for (std::size_t i : motion) {
+    const double t = at_s(i);
+    while (w < windows.size() && t > windows[w].second) ++w;
+    if (w == windows.size()) break;
+    if (t >= windows[w].first) out.push_back(static_cast<int>(i));
+  }
+  return out;
+}
+
 FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& data,
                                      const FreeCalibratorOptions& options,
                                      const std::function<FreeEstimate(const FreeData&)>& fit) {
@@ -61,11 +104,13 @@ FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& dat
   // The samples in motion disturbed at the latest fit, always judged over all of them (a value
   // left out may come back); the fit without them; until the set stops changing (four rounds).
   std::vector<int> left_out;
+  int detected = 0;
   MotionDepartures at =
       FindDisturbedMotion(model, data, out.estimate.theta, options.disturbance_sigmas);
-  for (int round = 0; round < 4 && at.disturbed != left_out; ++round) {
+  std::vector<int> span = DisturbedSpan(data, at.disturbed);
+  for (int round = 0; round < 4 && span != left_out; ++round) {
     std::vector<bool> drop(data.intervals.size(), false);
-    for (int i : at.disturbed) drop[static_cast<std::size_t>(i)] = true;
+    for (int i : span) drop[static_cast<std::size_t>(i)] = true;
     FreeData rest;
     rest.context = data.context;
     rest.upstream_theta = data.upstream_theta;
@@ -76,8 +121,10 @@ FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& dat
     FreeEstimate again = fit(rest);
     if (!again.estimate.ok) break;  // keep the last fit that worked, with what it left out
     out = std::move(again);
-    left_out = std::move(at.disturbed);
+    left_out = std::move(span);
+    detected = static_cast<int>(at.disturbed.size());
     at = FindDisturbedMotion(model, data, out.estimate.theta, options.disturbance_sigmas);
+    span = DisturbedSpan(data, at.disturbed);
   }
   // A disturbance as long as a good part of the capture pulls the fit and widens the scatter it
   // is judged by until nothing stands out; but the departures then wander far more than they
@@ -95,6 +142,7 @@ FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& dat
   if (left_out.empty()) return out;
   FieldDisturbance d;
   d.values = static_cast<int>(left_out.size());
+  d.detected = detected;
   d.of = motion_points;
   const double origin_s = data.intervals.front().t_start_s;
   d.t0_s = data.intervals[static_cast<std::size_t>(left_out.front())].t_start_s - origin_s;
@@ -118,9 +166,9 @@ FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& dat
 std::string DisturbanceText(const FieldDisturbance& d) {
   return fmt::format(
       "the field's magnitude departed from the fit by up to {:.3g} % ({:.0f} robust sigmas) in "
-      "{} of {} values in motion between {:.2f} and {:.2f} s: a magnet or steel nearby? Left out "
-      "of the fit",
-      d.largest_percent, d.largest_sigmas, d.values, d.of, d.t0_s, d.t1_s);
+      "{} of {} values in motion: a magnet or steel nearby? Left out of the fit with the time "
+      "about them, {} values between {:.2f} and {:.2f} s",
+      d.largest_percent, d.largest_sigmas, d.detected, d.of, d.values, d.t0_s, d.t1_s);
 }
 
 }  // namespace turncal

@@ -24,15 +24,17 @@
 namespace turncal {
 
 struct FieldDisturbance {
-  int values = 0;  // left out
-  int of = 0;      // samples in motion in the capture
-  // Their span on the host's clock, s after the first interval's start, and the largest
+  int values = 0;    // left out: the disturbed and the time about them
+  int detected = 0;  // of them, those beyond the bound
+  int of = 0;        // samples in motion in the capture
+  // The span left out on the host's clock, s after the first interval's start, and the largest
   // departure in per cent of the field (of the corrected magnitude, 1, when the field's
   // magnitude is not known) and in robust sigmas.
   double t0_s = 0.0, t1_s = 0.0;
   double largest_percent = 0.0, largest_sigmas = 0.0;
 
-  double share() const { return of > 0 ? static_cast<double>(values) / of : 0.0; }
+  // The share of the values beyond the bound (what refuses a calibration).
+  double share() const { return of > 0 ? static_cast<double>(detected) / of : 0.0; }
 };
 
 // The samples in motion's departures at a fit: the indices into data.intervals of those
@@ -49,20 +51,30 @@ struct MotionDepartures {
 MotionDepartures FindDisturbedMotion(const FreeModel& model, const FreeData& data,
                                      const Eigen::VectorXd& theta, double sigmas);
 
+// The samples in motion a disturbance spans, in time: the disturbed values (indices into
+// data.intervals) joined into runs where less than kDisturbanceJoinS apart, each run widened by
+// half its span and one value's spacing on either side (its flanks, below the bound, pull the fit
+// as much as its peak: a choice by time, not by the values' own departures, which would hide the
+// misfit instead of removing it); in order.
+constexpr double kDisturbanceJoinS = 0.25;
+std::vector<int> DisturbedSpan(const FreeData& data, const std::vector<int>& disturbed);
+
 struct FreeEstimate;
 struct FreeCalibratorOptions;
 
 // `fit` of data, then, while the samples in motion disturbed at the fit (options'
-// disturbance_sigmas; 0: never) change, `fit` again without them (up to four rounds; a fit that
-// fails keeps the last one that worked): the estimate with its disturbance, a warning naming it
-// and, past max_disturbed_share, a gate reason; and a gate reason when the departures' scatter
-// exceeds max_field_wander times their step noise (a disturbance too long to stand out).
+// disturbance_sigmas; 0: never) change, `fit` again without their span (DisturbedSpan; up to
+// four rounds; a fit that fails keeps the last one that worked): the estimate with its
+// disturbance, a warning naming it and, past max_disturbed_share, a gate reason; and a gate reason
+// when the departures' scatter exceeds max_field_wander times their step noise (a disturbance too
+// long to stand out).
 FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& data,
                                      const FreeCalibratorOptions& options,
                                      const std::function<FreeEstimate(const FreeData&)>& fit);
 
 // "the field's magnitude departed from the fit by up to 19.4 % (41 robust sigmas) in 52 of 1000
-// values between 4.02 and 5.01 s: a magnet or steel nearby? Left out of the fit".
+// values in motion: a magnet or steel nearby? Left out of the fit with the time about them, 98
+// values between 3.80 and 4.71 s".
 std::string DisturbanceText(const FieldDisturbance& d);
 
 }  // namespace turncal
