@@ -57,6 +57,7 @@ class FreeMonteCarlo {
     station_.sensor_class = o_.sensor_class;
     station_.sequencer.dwell_s = 1.0;
     station_.free.field_known = o_.field_known;
+    if (o_.bandwidth_known) station_.free.mag_bandwidth_hz = o_.mag_bandwidth_hz;
     station_.drift_model = o_.drift == "gauss-markov";
     if (o_.warmup > 0) {
       station_.warmup_in_instabilities = o_.warmup;
@@ -161,6 +162,7 @@ class FreeMonteCarlo {
       o.session.hand = hand;
       o.session.start_s = 0.0;
       o.session.mag_rate_hz = o_.mag_rate_hz;
+      o.session.mag_bandwidth_hz = o_.mag_bandwidth_hz;
       if (o_.device_rate_hz > 0) o.session.rate_hz = o_.device_rate_hz;
     }
     return o;

@@ -58,6 +58,10 @@ struct FreeMonteCarloOptions {
   double hand_pause_s = 3.0;
   double device_rate_hz = 0.0;
   double mag_rate_hz = 0.0;
+  // The magnetometer's first-order low-pass, Hz (SessionSimOptions::mag_bandwidth_hz; 0: none),
+  // and whether the station is told it ([free] mag_bandwidth_hz) or not (what ignoring it costs).
+  double mag_bandwidth_hz = 0.0;
+  bool bandwidth_known = true;
   // A magnet passing by at magnet_at_s (s into the session; < 0: none) for magnet_s, its
   // field's peak magnet_peak (Gauss; SessionSimOptions::magnet_*): the station must leave the
   // disturbed values out and stay honest.

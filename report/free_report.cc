@@ -229,6 +229,11 @@ nlohmann::json FreeReportJson(const FreeReportInput& in) {
                      {"sigma", {m.sigma.x(), m.sigma.y(), m.sigma.z()}},
                      {"noise_source", m.noise_source},
                      {"summary", m.Summary()}};
+    if (m.bandwidth_hz > 0) {
+      out["motion"]["bandwidth_hz"] = m.bandwidth_hz;
+      out["motion"]["fastest_turn_dps"] = m.fastest_turn_radps * 180 / M_PI;
+      out["motion"]["smallest_attenuation"] = m.smallest_attenuation;
+    }
   }
   return out;
 }

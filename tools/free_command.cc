@@ -45,6 +45,7 @@ struct FreeArgs {
   bool intervals = false;
   bool still_only = false;
   int max_motion_points = MotionOptions{}.max_points;
+  double mag_bandwidth_hz = 0.0;
   bool json = false;
   std::string html;
 };
@@ -247,6 +248,7 @@ int Run(const FreeArgs& a) {
   // The still intervals, then the magnetometer's samples in motion (issue 37).
   MotionOptions mo;
   mo.max_points = a.max_motion_points;
+  mo.mag_bandwidth_hz = a.mag_bandwidth_hz;
   FreeCollected collected = CollectFree(samples, so, a.still_only ? nullptr : &mo);
   const FreeIntervals& found = collected.found;
   const std::vector<FreeInterval>& data = collected.data;
@@ -373,6 +375,12 @@ void AddFreeCommand(CLI::App* app) {
   cmd->add_option("--max-motion-points", a->max_motion_points,
                   "at most this many magnetometer samples in motion (every k-th new value)")
       ->check(CLI::Range(10, 1000000))
+      ->capture_default_str();
+  cmd->add_option("--mag-bandwidth", a->mag_bandwidth_hz,
+                  "the magnetometer's bandwidth, Hz, when known (its filter setting): the "
+                  "samples in motion's expected magnitude is attenuated as a first-order "
+                  "low-pass attenuates a turning field (0: not accounted for)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_flag("--json", a->json, "the result as JSON on stdout");
   cmd->add_option("--html", a->html, "write the report (with the coverage sphere) here");

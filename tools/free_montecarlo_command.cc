@@ -80,6 +80,8 @@ void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                                     {"hand_pause_every_s", o.hand_pause_every_s},
                                     {"device_rate_hz", o.device_rate_hz},
                                     {"mag_rate_hz", o.mag_rate_hz},
+                                    {"mag_bandwidth_hz", o.mag_bandwidth_hz},
+                                    {"bandwidth_known", o.bandwidth_known},
                                     {"magnet_at_s", o.magnet_at_s},
                                     {"runs", o.runs},
                                     {"ok", s.solved},
@@ -109,12 +111,16 @@ void PrintFreeText(const montecarlo::FreeMonteCarloOptions& o,
   const std::string what =
       o.hand_s > 0
           ? fmt::format(
-                "{} hand rotations ({}, {} s at {} deg/s RMS{}{})", o.runs, o.hand_path, o.hand_s,
+                "{} hand rotations ({}, {} s at {} deg/s RMS{}{}{})", o.runs, o.hand_path, o.hand_s,
                 o.hand_rate_dps,
                 o.hand_pause_every_s > 0
                     ? fmt::format(", a {} s pause every {} s", o.hand_pause_s, o.hand_pause_every_s)
                     : "",
-                o.mag_rate_hz > 0 ? fmt::format(", magnetometer at {} Hz", o.mag_rate_hz) : "")
+                o.mag_rate_hz > 0 ? fmt::format(", magnetometer at {} Hz", o.mag_rate_hz) : "",
+                o.mag_bandwidth_hz > 0
+                    ? fmt::format(", its bandwidth {} Hz ({})", o.mag_bandwidth_hz,
+                                  o.bandwidth_known ? "known to the station" : "not told")
+                    : "")
           : fmt::format("{} tumbles of {} orientations (up within {:.0f} deg of +z)", o.runs,
                         o.orientations, o.cap_deg);
   fmt::print(
@@ -272,6 +278,12 @@ void AddFreeMonteCarloCommand(CLI::App* app) {
                   "the magnetometer's own rate, Hz: below the device's it holds its value "
                   "between updates (default: a new value in every sample)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--mag-bandwidth", o->mag_bandwidth_hz,
+                  "the magnetometer's first-order low-pass, Hz (0: none), told to the station "
+                  "([free] mag_bandwidth_hz)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_flag("!--bandwidth-unknown", o->bandwidth_known,
+                "with --mag-bandwidth: do not tell the station (what ignoring it costs)");
   cmd->add_flag("--verbose", a->verbose,
                 "every run's estimate, truth, sigma and z per parameter on standard error");
   cmd->add_flag("--json", a->json, "one JSON object");

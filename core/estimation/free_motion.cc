@@ -56,6 +56,12 @@ std::string MotionPoints::Summary() const {
     s += fmt::format("; noise {:.3g} {:.3g} {:.3g} per sample ({})", sigma.x(), sigma.y(),
                      sigma.z(), noise_source);
   }
+  if (bandwidth_hz > 0) {
+    s += fmt::format(
+        "; its {:g} Hz bandwidth attenuates the turning field by up to {:.3g} % (turning at up to "
+        "{:.0f} deg/s)",
+        bandwidth_hz, 100 * (1 - smallest_attenuation), fastest_turn_radps * 180 / M_PI);
+  }
   return s;
 }
 
@@ -97,6 +103,50 @@ void MotionCollector::Keep(const MotionValue& value) {
   values_.resize(w);
   stride_ *= 2;
 }
+
+namespace {
+
+// The attenuation of each of `kept` (pointers into `fresh`) by a first-order low-pass of
+// `bandwidth_hz` (MotionOptions::mag_bandwidth_hz; all 1 when 0): the field's rate of turn at a
+// value is the angle between its neighbours' directions about the values' centre over their time
+// apart. Fills out's bandwidth_hz, fastest_turn_radps and smallest_attenuation.
+std::vector<double> Attenuation(const std::vector<MotionValue>& fresh,
+                                const std::vector<const MotionValue*>& kept, double bandwidth_hz,
+                                MotionPoints* out) {
+  std::vector<double> a(kept.size(), 1.0);
+  if (!(bandwidth_hz > 0) || fresh.size() < 3) return a;
+  std::vector<Eigen::Vector3d> values;
+  for (const MotionValue* v : kept) values.push_back(v->mag);
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  if (auto e = free::FitEllipsoid(values)) {
+    centre = e->center;
+  } else if (auto s = free::FitSphere(values)) {
+    centre = s->center;
+  } else {
+    return a;  // no centre: the rate of turn is not known
+  }
+  const auto time_s = [](const MotionValue& v) {
+    return v.t_device_s ? *v.t_device_s : v.t_host_s;
+  };
+  const double w_c = 2 * M_PI * bandwidth_hz;
+  out->bandwidth_hz = bandwidth_hz;
+  for (std::size_t j = 0; j < kept.size(); ++j) {
+    const std::size_t i = static_cast<std::size_t>(kept[j] - fresh.data());
+    const MotionValue& before = fresh[i > 0 ? i - 1 : i];
+    const MotionValue& after = fresh[i + 1 < fresh.size() ? i + 1 : i];
+    const double dt = time_s(after) - time_s(before);
+    if (!(dt > 0)) continue;
+    const Eigen::Vector3d u = (before.mag - centre).normalized();
+    const Eigen::Vector3d v = (after.mag - centre).normalized();
+    const double turn_radps = std::atan2(u.cross(v).norm(), u.dot(v)) / dt;
+    a[j] = 1.0 / std::sqrt(1.0 + std::pow(turn_radps / w_c, 2));
+    out->fastest_turn_radps = std::max(out->fastest_turn_radps, turn_radps);
+    out->smallest_attenuation = std::min(out->smallest_attenuation, a[j]);
+  }
+  return a;
+}
+
+}  // namespace
 
 MotionPoints MotionCollector::Select(const std::vector<FreeInterval>& intervals,
                                      const MotionOptions& options) const {
@@ -176,8 +226,10 @@ MotionPoints MotionCollector::Select(const std::vector<FreeInterval>& intervals,
     out.noise_source =
         "the points' scatter about an ellipsoid through them: the chi^2 is no check of the noise";
   }
+  const std::vector<double> attenuation = Attenuation(fresh, kept, options.mag_bandwidth_hz, &out);
   const Eigen::Matrix3d covariance = out.sigma.cwiseAbs2().cwiseMax(1e-300).asDiagonal();
-  for (const MotionValue* v : kept) {
+  for (std::size_t j = 0; j < kept.size(); ++j) {
+    const MotionValue* v = kept[j];
     FreeInterval p;
     p.in_motion = true;
     p.t_start_s = v->t_host_s;
@@ -192,6 +244,7 @@ MotionPoints MotionCollector::Select(const std::vector<FreeInterval>& intervals,
     m.count = 1;
     p.mag = m;
     p.temp_c = v->temp_c;
+    p.mag_attenuation = attenuation[j];
     out.points.push_back(std::move(p));
   }
   return out;

@@ -54,6 +54,13 @@ struct MotionOptions {
   // The still intervals' own samples, pooled, are the noise instead when they hold at least this
   // many (their scatter about their means: sigma to sqrt(1 / 2n)).
   double min_pooled_samples = 1000;
+  // The magnetometer's bandwidth, Hz, when known (a device's filter setting or datasheet; 0: not
+  // accounted for): a first-order low-pass lags a turning field and attenuates it by
+  // 1 / sqrt(1 + (w / (2 pi bandwidth))^2), w the field's rate of turn in the sensor's frame,
+  // measured from the values on either side of each (the hard iron taken out by an algebraic
+  // ellipsoid through them). The norm does not see the lag; each point's expected magnitude is
+  // attenuated (FreeInterval::mag_attenuation).
+  double mag_bandwidth_hz = 0.0;
 };
 
 struct MotionPoints {
@@ -71,6 +78,11 @@ struct MotionPoints {
   // (which the chi^2 cannot check).
   double sigma_dof = std::numeric_limits<double>::infinity();
   std::string noise_source;  // as given, or "the points' scatter about an ellipsoid"
+  // The bandwidth accounted for (MotionOptions::mag_bandwidth_hz), the field's fastest turn among
+  // the points, rad/s, and the smallest attenuation.
+  double bandwidth_hz = 0.0;
+  double fastest_turn_radps = 0.0;
+  double smallest_attenuation = 1.0;
   // One line for the report: what was taken and how.
   std::string Summary() const;
 };

@@ -104,6 +104,10 @@ struct PoseRecord {
   // A sample in motion rather than a still window (free mode's magnetometer in motion, issue
   // 37; core/estimation/free_motion.h): one value, its covariance the sample's noise.
   bool in_motion = false;
+  // Such a sample's field magnitude relative to a still one's: a magnetometer's first-order
+  // low-pass of a known bandwidth attenuates a field turning at w by 1 / sqrt(1 + (w / w_c)^2)
+  // (MotionOptions::mag_bandwidth_hz); 1 for a still window or an unknown bandwidth.
+  double mag_attenuation = 1.0;
 
   double duration_s() const { return t_end_s - t_start_s; }
   bool has_sensor_window() const {

@@ -71,11 +71,12 @@ class Accel9 final : public free::NormFreeModel {
 
   std::vector<FreeTerm> Terms(const FreeData& data, const Eigen::VectorXd& theta) const override {
     const Eigen::Matrix3d L = free::UpperTK(theta.data());
-    return NormTerms(data, [&](const Eigen::Vector3d& mean, const Eigen::Matrix3d& covariance) {
-      const Eigen::Vector3d f = L * (mean - theta.tail<3>());
-      return free::MakeNormCost<Accel9Correction, 9>(mean, magnitude(),
-                                                     free::NormSigma(L, f, covariance));
-    });
+    return NormTerms(
+        data, [&](const Eigen::Vector3d& mean, const Eigen::Matrix3d& covariance, double expected) {
+          const Eigen::Vector3d f = L * (mean - theta.tail<3>());
+          return free::MakeNormCost<Accel9Correction, 9>(mean, expected,
+                                                         free::NormSigma(L, f, covariance));
+        });
   }
 
   Eigen::VectorXd Identity(const FreeData&) const override {

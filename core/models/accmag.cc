@@ -171,7 +171,7 @@ class AccMag final : public FreeModel {
       add(free::MakeNormCost<AccPart, kN>(iv.acc->mean, context_.gravity_mps2,
                                           free::NormSigma(La, f, ca)),
           "norm");
-      add(free::MakeNormCost<MagPart, kN>(iv.mag->mean, magnitude(),
+      add(free::MakeNormCost<MagPart, kN>(iv.mag->mean, magnitude() * iv.mag_attenuation,
                                           free::NormSigma(R * Lm, h, cm)),
           "norm");
       const Eigen::Vector3d u = f.normalized(), hn = h.normalized();
@@ -194,7 +194,7 @@ class AccMag final : public FreeModel {
       const Eigen::Vector3d f = AccPart::Apply(theta.data(), Eigen::Vector3d(iv.acc->mean));
       const Eigen::Vector3d h = Correct(theta, iv.mag->mean);
       out.push_back({"norm", k, f.norm() - context_.gravity_mps2});
-      out.push_back({"mag norm", k, h.norm() - magnitude()});
+      out.push_back({"mag norm", k, h.norm() - magnitude() * iv.mag_attenuation});
       out.push_back(
           {"dip", k,
            std::asin(std::clamp(-f.normalized().dot(h.normalized()), -1.0, 1.0)) - theta[kDip]});

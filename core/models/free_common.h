@@ -187,7 +187,9 @@ class NormFreeModel : public FreeModel {
     std::vector<Misfit> out;
     for (int k = 0; k < static_cast<int>(data.intervals.size()); ++k) {
       if (const TriadStats* t = Triad(data.intervals[static_cast<std::size_t>(k)])) {
-        out.push_back({"norm", k, Correct(theta, t->mean).norm() - magnitude_});
+        out.push_back({"norm", k,
+                       Correct(theta, t->mean).norm() -
+                           Magnitude(data.intervals[static_cast<std::size_t>(k)])});
       }
     }
     return out;
@@ -204,6 +206,11 @@ class NormFreeModel : public FreeModel {
 
   // |Correct(mean)| in every still interval: gravity, or the field's magnitude.
   double magnitude() const { return magnitude_; }
+  // ... over `interval`: a magnetometer's sample in motion's attenuated by its bandwidth.
+  double Magnitude(const FreeInterval& interval) const {
+    return sensor_ == SensorKind::kMagnetometer ? magnitude_ * interval.mag_attenuation
+                                                : magnitude_;
+  }
   // The model's triad over `interval` (null when the interval has none).
   const TriadStats* Triad(const FreeInterval& interval) const {
     const std::optional<TriadStats>& t = sensor_ == SensorKind::kAccelerometer ? interval.acc
@@ -258,8 +265,9 @@ class NormFreeModel : public FreeModel {
     }
     return false;
   }
-  // One "norm" term per interval that carries the triad, its cost `make(mean, covariance)` (the
-  // mean's covariance with the triad's offset sigma).
+  // One "norm" term per interval that carries the triad, its cost `make(mean, covariance,
+  // magnitude)` (the mean's covariance with the triad's offset sigma; the magnitude expected over
+  // the interval, Magnitude).
   template <class MakeCost>
   std::vector<FreeTerm> NormTerms(const FreeData& data, MakeCost make) const {
     const double offset_sigma = sensor_ == SensorKind::kAccelerometer
@@ -273,7 +281,7 @@ class NormFreeModel : public FreeModel {
     std::vector<FreeTerm> terms;
     for (std::size_t i = 0; i < means.size(); ++i) {
       FreeTerm t;
-      t.cost = make(means[i], covariances[i]);
+      t.cost = make(means[i], covariances[i], Magnitude(data.intervals[index[i]]));
       t.interval = index[i];
       t.kind = "norm";
       t.window = Window(data.intervals[index[i]]);

@@ -69,11 +69,12 @@ class MagEllipsoid final : public free::NormFreeModel {
 
   std::vector<FreeTerm> Terms(const FreeData& data, const Eigen::VectorXd& theta) const override {
     const Eigen::Matrix3d L = free::Symmetric(theta.data() + 3);
-    return NormTerms(data, [&](const Eigen::Vector3d& mean, const Eigen::Matrix3d& covariance) {
-      const Eigen::Vector3d h = L * (mean - theta.head<3>());
-      return free::MakeNormCost<EllipsoidCorrection, 9>(mean, magnitude(),
-                                                        free::NormSigma(L, h, covariance));
-    });
+    return NormTerms(
+        data, [&](const Eigen::Vector3d& mean, const Eigen::Matrix3d& covariance, double expected) {
+          const Eigen::Vector3d h = L * (mean - theta.head<3>());
+          return free::MakeNormCost<EllipsoidCorrection, 9>(mean, expected,
+                                                            free::NormSigma(L, h, covariance));
+        });
   }
 
   Eigen::VectorXd Identity(const FreeData&) const override {

@@ -20,10 +20,12 @@ struct SphereDistance {
 // |m - b| - r over the four parameters.
 struct SphereFunctor {
   Eigen::Vector3d raw;
+  double attenuation = 1.0;  // FreeInterval::mag_attenuation
   double inv_sigma = 1.0;
   template <typename T>
   bool operator()(const T* p, T* r) const {
-    r[0] = ((Vec3<T>(raw.cast<T>()) - free::Vector(p)).norm() - p[3]) * T(inv_sigma);
+    r[0] =
+        ((Vec3<T>(raw.cast<T>()) - free::Vector(p)).norm() - T(attenuation) * p[3]) * T(inv_sigma);
     return true;
   }
 };
@@ -67,13 +69,15 @@ class MagSphere final : public free::NormFreeModel {
   }
 
   std::vector<FreeTerm> Terms(const FreeData& data, const Eigen::VectorXd& theta) const override {
-    return NormTerms(data, [&](const Eigen::Vector3d& mean, const Eigen::Matrix3d& covariance) {
-      const Eigen::Vector3d d = mean - theta.head<3>();
-      auto* f = new SphereFunctor{
-          mean, 1.0 / free::NormSigma(Eigen::Matrix3d::Identity(), d, covariance)};
-      return std::unique_ptr<ceres::CostFunction>(
-          new ceres::AutoDiffCostFunction<SphereFunctor, 1, 4>(f));
-    });
+    return NormTerms(
+        data, [&](const Eigen::Vector3d& mean, const Eigen::Matrix3d& covariance, double expected) {
+          const Eigen::Vector3d d = mean - theta.head<3>();
+          auto* f =
+              new SphereFunctor{mean, expected / magnitude(),
+                                1.0 / free::NormSigma(Eigen::Matrix3d::Identity(), d, covariance)};
+          return std::unique_ptr<ceres::CostFunction>(
+              new ceres::AutoDiffCostFunction<SphereFunctor, 1, 4>(f));
+        });
   }
 
   // No hard iron and the radius that leaves the raw magnitude as it is.

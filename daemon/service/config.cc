@@ -240,9 +240,11 @@ bool GetBoolean(const toml::table& t, const char* key, bool* out, const std::str
 bool ParseFree(const toml::table* t, const std::string& source, StationOptions* out,
                std::string* error) {
   StationOptions& st = *out;
-  if (!OnlyKeys(*t, {"min_coverage_percent", "field", "motion", "max_motion_points"}, "[free]",
-                source, error) ||
+  if (!OnlyKeys(
+          *t, {"min_coverage_percent", "field", "motion", "max_motion_points", "mag_bandwidth_hz"},
+          "[free]", source, error) ||
       !GetNumber(*t, "min_coverage_percent", &st.free.min_coverage_percent, source, error) ||
+      !GetNumber(*t, "mag_bandwidth_hz", &st.free.mag_bandwidth_hz, source, error) ||
       !GetBoolean(*t, "motion", &st.free.motion, source, error) ||
       !GetInt(*t, "max_motion_points", &st.free.max_motion_points, source, error)) {
     return false;

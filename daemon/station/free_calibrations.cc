@@ -33,6 +33,7 @@ FreeCalibrations::FreeCalibrations(std::vector<std::string> configured,
   // What the data carry may include a magnetometer model.
   motion_.enabled = options.free.motion && (configured_.empty() || motion_.enabled);
   motion_options_.max_points = options.free.max_motion_points;
+  motion_options_.mag_bandwidth_hz = options.free.mag_bandwidth_hz;
   // A stream never still long enough for the noise meter: the class's magnetometer noise.
   const NoiseProfile class_noise = NoiseProfileForClass(sensor, 100.0, true);
   class_mag_sigma_ = *class_noise.sigma[kTriadMag];

@@ -83,6 +83,10 @@ nlohmann::json FreeMotionState::Json() const {
     j["rate_hz"] = last->period_s > 0 ? nlohmann::json(1.0 / last->period_s) : nlohmann::json();
     j["noise_source"] = last->noise_source;
     j["summary"] = last->Summary();
+    if (last->bandwidth_hz > 0) {
+      j["bandwidth_hz"] = last->bandwidth_hz;
+      j["smallest_attenuation"] = last->smallest_attenuation;
+    }
   }
   return j;
 }

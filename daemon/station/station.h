@@ -74,6 +74,9 @@ struct FreeStationOptions {
   // value outside the still intervals one norm equation, at most max_motion_points of them.
   bool motion = true;
   int max_motion_points = 600;  // a fit with the drift whitened grows as n^3: 0.2 s here
+  // The magnetometer's bandwidth, Hz, when known (MotionOptions::mag_bandwidth_hz; 0: not
+  // accounted for).
+  double mag_bandwidth_hz = 0.0;
 };
 
 struct StationOptions {

@@ -4,6 +4,7 @@
 #include <fmt/ranges.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include "core/estimation/sensor_class.h"
 #include "core/modeling/free_model.h"
@@ -52,6 +53,10 @@ bool StationOptions::IsValid(std::string* error) const {
   }
   if (!(free.max_motion_points >= 10 && free.max_motion_points <= 100000)) {
     if (error) *error = "[free] max_motion_points must be in [10, 100000]";
+    return false;
+  }
+  if (!(free.mag_bandwidth_hz >= 0 && std::isfinite(free.mag_bandwidth_hz))) {
+    if (error) *error = "[free] mag_bandwidth_hz must be >= 0 (0: not accounted for)";
     return false;
   }
   // A model of the pose source: a free model without poses, a pose model with them.

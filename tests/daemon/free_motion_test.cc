@@ -45,6 +45,9 @@ struct HandCase {
   // A magnet passing by (SessionSimOptions::magnet_*; peak 0: none) and the calibrator's
   // options.
   double magnet_at_s = 0.0, magnet_s = 1.0, magnet_peak = 0.0;
+  // The magnetometer's first-order low-pass (0: none) and whether the fit is told it.
+  double mag_bandwidth_hz = 0.0;
+  bool bandwidth_known = true;
   FreeCalibratorOptions calibrator;
 };
 
@@ -71,6 +74,7 @@ HandFit Fit(const HandCase& k, const std::vector<std::string>& models) {
   o.session.magnet_at_s = k.magnet_at_s;
   o.session.magnet_s = k.magnet_s;
   o.session.magnet_peak = k.magnet_peak;
+  o.session.mag_bandwidth_hz = k.mag_bandwidth_hz;
   std::string error;
   EXPECT_TRUE(sim::BuildSimCapture(o, &f.capture, &error)) << error;
   const std::vector<Sample> samples = Decode(f.capture);
@@ -80,6 +84,7 @@ HandFit Fit(const HandCase& k, const std::vector<std::string>& models) {
     so.noise = NoiseProfileForClass(o.session.sensor, k.rate_hz, true);
   }
   MotionOptions mo;
+  if (k.bandwidth_known) mo.mag_bandwidth_hz = k.mag_bandwidth_hz;
   f.collected = CollectFree(samples, so, &mo);
   EXPECT_TRUE(
       CalibrateFreeModels(models, f.collected.data, f.context, k.calibrator, &f.results, &error))
@@ -192,6 +197,50 @@ HandCase WithMagnet(double at_s, double near_s) {
   k.magnet_s = near_s;
   k.magnet_peak = 0.1;
   return k;
+}
+
+// A magnetometer filtered to 3 Hz (a slow filter setting): its field turning at up to 2 rad/s,
+// what it reports is attenuated by up to half a per cent, a gain error far beyond the gains' sigma
+// that the chi^2 does not see (the misfit is smooth). Told the bandwidth, each value's expected
+// magnitude is attenuated by its measured rate of turn and the fit is honest; not told, the gains
+// are off.
+TEST(FreeMotion, AMagnetometersKnownBandwidthIsAccountedFor) {
+  HandCase k;
+  k.mag_bandwidth_hz = 3.0;
+  const HandFit f = Fit(k, {"magellipsoid"});
+  ASSERT_TRUE(f.collected.motion);
+  const MotionPoints& m = *f.collected.motion;
+  EXPECT_EQ(m.bandwidth_hz, 3.0);
+  // 90 deg/s RMS: the field's fastest turn about 2 rad/s, against w_c = 18.8 rad/s.
+  EXPECT_GT(m.fastest_turn_radps, 1.0) << m.Summary();
+  EXPECT_LT(m.fastest_turn_radps, 10.0) << m.Summary();
+  EXPECT_NEAR(m.smallest_attenuation,
+              1.0 / std::sqrt(1.0 + std::pow(m.fastest_turn_radps / (2 * M_PI * 3.0), 2)), 1e-12);
+  EXPECT_NE(m.Summary().find("3 Hz bandwidth attenuates the turning field"), std::string::npos)
+      << m.Summary();
+  double smallest = 1.0;
+  for (const auto& p : m.points) smallest = std::min(smallest, p.mag_attenuation);
+  EXPECT_EQ(smallest, m.smallest_attenuation);
+  ASSERT_EQ(f.results.size(), 1u);
+  EXPECT_GT(f.results[0].estimate.estimate.p_value, 1e-3) << f.results[0].estimate.estimate.chi2;
+  ExpectHonest(f, f.results[0], "bandwidth known");
+
+  HandCase unknown = k;
+  unknown.bandwidth_known = false;
+  const HandFit g = Fit(unknown, {"magellipsoid"});
+  ASSERT_EQ(g.results.size(), 1u);
+  const Estimate& e = g.results[0].estimate.estimate;
+  ASSERT_TRUE(e.ok) << e.error;
+  Eigen::VectorXd truth;
+  std::string error;
+  ASSERT_TRUE(sim::FreeTruth(g.capture, "magellipsoid", g.context,
+                             TimeWindow{0.0, g.capture.session.duration_s}, &truth, &error))
+      << error;
+  double largest_z = 0;
+  for (int i = 0; i < e.theta.size(); ++i) {
+    largest_z = std::max(largest_z, std::abs(e.theta[i] - truth[i]) / e.sigma[i]);
+  }
+  EXPECT_GT(largest_z, 5.0) << "not told, the gains should be off";
 }
 
 TEST(FreeMotion, AMagnetPassingByIsNamedAndLeftOut) {

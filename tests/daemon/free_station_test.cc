@@ -245,6 +245,12 @@ TEST(FreeStation, ModelsFromTheDataAndConfiguration) {
   EXPECT_NE(error.find("motion"), std::string::npos) << error;
   EXPECT_FALSE(daemon::ParseConfig("[free]\nmax_motion_points = 5\n", "bad.toml", &config, &error));
   EXPECT_NE(error.find("max_motion_points must be in [10, 100000]"), std::string::npos) << error;
+  // [free] mag_bandwidth_hz: the magnetometer's filter, when known (0: not accounted for).
+  ASSERT_TRUE(daemon::ParseConfig("[free]\nmag_bandwidth_hz = 10\n", "free.toml", &config, &error))
+      << error;
+  EXPECT_EQ(config.station.free.mag_bandwidth_hz, 10.0);
+  EXPECT_FALSE(daemon::ParseConfig("[free]\nmag_bandwidth_hz = -1\n", "bad.toml", &config, &error));
+  EXPECT_NE(error.find("mag_bandwidth_hz must be >= 0"), std::string::npos) << error;
   ASSERT_TRUE(daemon::ParseConfig(
       "[station]\npose_source = \"free\"\n[free]\nfield = \"unknown\"\nmax_motion_points = "
       "100\n",
