@@ -62,6 +62,7 @@ struct FreeMonteCarloOptions {
   // and whether the station is told it ([free] mag_bandwidth_hz) or not (what ignoring it costs).
   double mag_bandwidth_hz = 0.0;
   bool bandwidth_known = true;
+  bool mag_noise_filtered = false;  // SessionSimOptions::mag_noise_filtered
   // A magnet passing by at magnet_at_s (s into the session; < 0: none) for magnet_s, its
   // field's peak magnet_peak (Gauss; SessionSimOptions::magnet_*): the station must leave the
   // disturbed values out and stay honest.

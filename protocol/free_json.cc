@@ -213,6 +213,12 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
   m["bias_window"] = fe.bias_window_host ? ToJson(*fe.bias_window_host) : nlohmann::json();
   m["warnings"] = e.warnings;
   if (fe.field_wander > 0) m["field_wander"] = fe.field_wander;
+  if (fe.correlation.pairs > 0) {
+    const MotionCorrelation& c = fe.correlation;
+    m["correlation"] = {{"pairs", c.pairs},         {"lag_one", c.lag_one},
+                        {"threshold", c.threshold}, {"spacing_s", c.spacing_s},
+                        {"tau_s", c.tau_s},         {"whitened", c.whitened}};
+  }
   if (fe.norm_bias.size() == static_cast<Eigen::Index>(e.parameters.size())) {
     nlohmann::json bias = nlohmann::json::object();
     for (std::size_t i = 0; i < e.parameters.size(); ++i) {

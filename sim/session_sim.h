@@ -97,6 +97,11 @@ struct SessionSimOptions {
   // field's magnitude is then attenuated by 1 / sqrt(1 + (w / (2 pi bandwidth))^2)).
   double mag_rate_hz = 0.0;
   double mag_bandwidth_hz = 0.0;
+  // With a bandwidth: the magnetometer's noise through the filter too (as a device's digital
+  // filter filters its sensor's noise), scaled so that the filtered noise has the class's RMS;
+  // its values are then correlated in time (exp(-2 pi bandwidth dt)). False: white noise added
+  // after the filter.
+  bool mag_noise_filtered = false;
   // A magnet passing by (issue 37's bad input): from magnet_at_s (session time) for magnet_s, a
   // field along magnet_direction (the sensor's frame; normalised) rising and falling as a raised
   // cosine to magnet_peak (the magnetometer's unit) at its middle; 0: none. It is not the

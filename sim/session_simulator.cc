@@ -434,13 +434,19 @@ class SessionSimulator {
       mag += o_.magnet_peak * 0.5 * (1.0 - std::cos(phase)) * o_.magnet_direction.normalized();
     }
     if (o_.mag_bandwidth_hz > 0) {
-      // The magnetometer's first-order low-pass, started at the first value.
+      // The magnetometer's first-order low-pass, started at the first value; with the noise
+      // filtered, the noise before it (the draws as below, scaled by sqrt((2 - alpha) / alpha):
+      // the filter's output variance is alpha / (2 - alpha) of its input's), quantised after it.
       const double alpha = 1.0 - std::exp(-2 * M_PI * o_.mag_bandwidth_hz * dt_);
+      if (o_.mag_noise_filtered) AddWhiteNoise(&acc, &gyr, &mag, std::sqrt((2 - alpha) / alpha));
       mag_filtered_ =
           k == 0 ? mag : Eigen::Vector3d(*mag_filtered_ + alpha * (mag - *mag_filtered_));
       mag = *mag_filtered_;
+      if (o_.mag_noise_filtered) {
+        for (int i = 0; i < 3; ++i) mag[i] = Quantise(mag[i], c_.mag_quantum);
+      }
     }
-    AddWhiteNoise(&acc, &gyr, &mag);
+    if (!(o_.mag_bandwidth_hz > 0 && o_.mag_noise_filtered)) AddWhiteNoise(&acc, &gyr, &mag);
     if (o_.mag_rate_hz > 0 && o_.mag_rate_hz < o_.rate_hz) {
       // Sample and hold: a new value at the magnetometer's own instants (the draws above are made
       // all the same, so that the other triads' noise is as without it).
@@ -458,15 +464,18 @@ class SessionSimulator {
     return smp;
   }
 
-  // White noise (density x sqrt(rate / 2)) and the ADC's steps, axis by axis.
-  void AddWhiteNoise(Eigen::Vector3d* acc, Eigen::Vector3d* gyr, Eigen::Vector3d* mag) {
+  // White noise (density x sqrt(rate / 2)) and the ADC's steps, axis by axis; mag_scale > 0: the
+  // magnetometer's noise that many times the class's, not quantised (a filter follows).
+  void AddWhiteNoise(Eigen::Vector3d* acc, Eigen::Vector3d* gyr, Eigen::Vector3d* mag,
+                     double mag_scale = 0.0) {
     const double white_acc = c_.acc_noise_density * std::sqrt(o_.rate_hz / 2.0);
     const double white_gyr = c_.gyr_noise_density * std::sqrt(o_.rate_hz / 2.0);
-    const double white_mag = c_.mag_noise_rms;
+    const double white_mag = c_.mag_noise_rms * (mag_scale > 0 ? mag_scale : 1.0);
     for (int i = 0; i < 3; ++i) {
       (*acc)[i] = Quantise((*acc)[i] + white_acc * random_.Normal(), c_.acc_quantum);
       (*gyr)[i] = Quantise((*gyr)[i] + white_gyr * random_.Normal(), c_.gyr_quantum);
-      (*mag)[i] = Quantise((*mag)[i] + white_mag * random_.Normal(), c_.mag_quantum);
+      (*mag)[i] += white_mag * random_.Normal();
+      if (!(mag_scale > 0)) (*mag)[i] = Quantise((*mag)[i], c_.mag_quantum);
     }
   }
 

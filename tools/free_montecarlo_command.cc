@@ -82,6 +82,7 @@ void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                                     {"mag_rate_hz", o.mag_rate_hz},
                                     {"mag_bandwidth_hz", o.mag_bandwidth_hz},
                                     {"bandwidth_known", o.bandwidth_known},
+                                    {"mag_noise_filtered", o.mag_noise_filtered},
                                     {"magnet_at_s", o.magnet_at_s},
                                     {"runs", o.runs},
                                     {"ok", s.solved},
@@ -118,8 +119,9 @@ void PrintFreeText(const montecarlo::FreeMonteCarloOptions& o,
                     : "",
                 o.mag_rate_hz > 0 ? fmt::format(", magnetometer at {} Hz", o.mag_rate_hz) : "",
                 o.mag_bandwidth_hz > 0
-                    ? fmt::format(", its bandwidth {} Hz ({})", o.mag_bandwidth_hz,
-                                  o.bandwidth_known ? "known to the station" : "not told")
+                    ? fmt::format(", its bandwidth {} Hz ({}{})", o.mag_bandwidth_hz,
+                                  o.bandwidth_known ? "known to the station" : "not told",
+                                  o.mag_noise_filtered ? ", the noise filtered too" : "")
                     : "")
           : fmt::format("{} tumbles of {} orientations (up within {:.0f} deg of +z)", o.runs,
                         o.orientations, o.cap_deg);
@@ -284,6 +286,8 @@ void AddFreeMonteCarloCommand(CLI::App* app) {
       ->check(CLI::NonNegativeNumber);
   cmd->add_flag("!--bandwidth-unknown", o->bandwidth_known,
                 "with --mag-bandwidth: do not tell the station (what ignoring it costs)");
+  cmd->add_flag("--mag-noise-filtered", o->mag_noise_filtered,
+                "with --mag-bandwidth: the noise through the filter too (correlated in time)");
   cmd->add_flag("--verbose", a->verbose,
                 "every run's estimate, truth, sigma and z per parameter on standard error");
   cmd->add_flag("--json", a->json, "one JSON object");

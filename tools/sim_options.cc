@@ -159,6 +159,9 @@ void AddNoiseAndTableOptions(CLI::App* cmd, SimCommandArgs* args) {
   cmd->add_option("--mag-bandwidth", args->mag_bandwidth_hz,
                   "the magnetometer's bandwidth, Hz (a first-order low-pass; default none)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_flag("--mag-noise-filtered", args->mag_noise_filtered,
+                "with --mag-bandwidth: the magnetometer's noise through the filter too (its "
+                "values then correlate in time)");
   cmd->add_flag("--no-rate-segments", args->no_rate_segments,
                 "with a gyro model: a table without a rate mode, static poses only (the gyro model "
                 "then learns from the moves between them)");

@@ -71,6 +71,7 @@ struct SimCommandArgs {
   double start_s = -1;  // negative: SessionSimOptions' (1 s)
   double mag_rate_hz = 0;
   double mag_bandwidth_hz = 0;
+  bool mag_noise_filtered = false;
 };
 
 // Registers `turncal sim`'s options on `cmd`, filling `args`, in the order --help lists them.

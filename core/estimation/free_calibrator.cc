@@ -113,10 +113,11 @@ constexpr SensorKind kTriads[] = {SensorKind::kAccelerometer, SensorKind::kGyros
 class FreeCalibration {
  public:
   FreeCalibration(const FreeModel& model, const FreeData& data,
-                  const FreeCalibratorOptions& options)
+                  const FreeCalibratorOptions& options, bool whiten)
       : model_(model),
         data_(data),
         options_(options),
+        whiten_(whiten),
         est_(out_.estimate),
         n_(model.num_parameters()),
         upstream_(data.upstream_theta) {}
@@ -133,7 +134,16 @@ class FreeCalibration {
     if (!model_.Start(data_, &theta_, &est_.error)) return std::move(out_);
     ChooseDrifts();
     for (int pass = 0; pass < options_.passes; ++pass) {
+      if (pass > 0) MeasureCorrelation();
       if (!SolvePass()) return std::move(out_);
+    }
+    if (out_.correlation.whitened) {
+      est_.warnings.push_back(fmt::format(
+          "the noise of the values in motion correlates from one to the next ({:.2f} over {} "
+          "pairs, {:.3g} ms apart: a filter in the magnetometer?): whitened together as "
+          "exp(-dt / {:.3g} ms)",
+          out_.correlation.lag_one, out_.correlation.pairs, 1e3 * out_.correlation.spacing_s,
+          1e3 * out_.correlation.tau_s));
     }
     RemoveNormBias();
     if (!EvaluateAtSolution()) return std::move(out_);
@@ -195,15 +205,37 @@ class FreeCalibration {
     } else {
       drifts_.clear();
     }
-    joint_ = !drifts_.empty();
-    for (const auto& t : model_.Terms(data_, theta_)) joint_ |= !t.shared.empty();
+    correlated_by_drift_ = !drifts_.empty();
+    for (const auto& t : model_.Terms(data_, theta_)) correlated_by_drift_ |= !t.shared.empty();
+    joint_ = correlated_by_drift_;
+  }
+
+  // The values in motion's correlation from one to the next at theta_ (each whitened by its own
+  // noise); taken into the whitening when beyond the threshold.
+  void MeasureCorrelation() {
+    if (out_.motion_points < 20) return;
+    const std::vector<FreeTerm> terms = model_.Terms(data_, theta_);
+    const CorrelatedChain chain = MotionChain(terms, data_, 0.0);
+    const Evaluated e = Evaluate(terms, theta_, upstream_, nullptr);
+    out_.correlation = MeasureMotionCorrelation(
+        ChainResiduals(chain, e.r), options_.correlation_min_lag_one, options_.correlation_sigmas);
+    out_.correlation.whitened = whiten_ && out_.correlation.correlated();
+    joint_ = correlated_by_drift_ || out_.correlation.whitened;
   }
 
   // W for `terms` at `at` (the origin of time moves to the earliest term's start).
   Eigen::MatrixXd Whitener(const std::vector<FreeTerm>& terms, const Eigen::VectorXd& at) {
+    const CorrelatedChain chain =
+        MotionChain(terms, data_, out_.correlation.whitened ? out_.correlation.tau_s : 0.0);
+    if (!correlated_by_drift_) {
+      int m = 0;
+      for (const auto& t : terms) m += t.cost->num_residuals();
+      return ChainWhitener(m, chain);
+    }
     const Evaluated e = Evaluate(terms, at, upstream_, nullptr);
     for (const auto& term : terms) origin_s_ = std::min(origin_s_, term.window.t0_s);
-    return FreeDriftWhitener(terms, e.J, drifts_, reference_, origin_s_);
+    return FreeDriftWhitener(terms, e.J, drifts_, reference_, origin_s_,
+                             chain.tau_s > 0 ? &chain : nullptr);
   }
 
   // One solve with the terms whitened at theta_; false (est_.error says why) when it fails.
@@ -502,6 +534,7 @@ class FreeCalibration {
   const FreeModel& model_;
   const FreeData& data_;
   const FreeCalibratorOptions& options_;
+  const bool whiten_;  // the values in motion whitened together when measured correlated
   FreeEstimate out_;
   Estimate& est_;
   const int n_;
@@ -512,6 +545,7 @@ class FreeCalibration {
   TimeWindow reference_;
   double origin_s_ = INFINITY;
   bool joint_ = false;
+  bool correlated_by_drift_ = false;  // by a triad's drift or noise terms share
   // The solve's terms (the stacked cost refers to them) and the terms at the solution.
   std::vector<FreeTerm> terms_;
   std::unique_ptr<StackedFreeCost> stacked_;
@@ -539,8 +573,8 @@ std::pair<std::string, double> LargestNormBias(const FreeEstimate& estimate) {
 
 FreeEstimate CalibrateFree(const FreeModel& model, const FreeData& data,
                            const FreeCalibratorOptions& options) {
-  return LeaveOutDisturbedMotion(model, data, options, [&](const FreeData& d) {
-    return FreeCalibration(model, d, options).Run();
+  return LeaveOutDisturbedMotion(model, data, options, [&](const FreeData& d, bool whiten) {
+    return FreeCalibration(model, d, options, whiten).Run();
   });
 }
 

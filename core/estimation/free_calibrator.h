@@ -22,6 +22,7 @@
 #include "core/analysis/publish_gate.h"
 #include "core/analysis/sphere_coverage.h"
 #include "core/estimation/calibrator.h"
+#include "core/estimation/free_correlation.h"
 #include "core/estimation/free_disturbance.h"
 #include "core/modeling/free_model.h"
 
@@ -52,6 +53,13 @@ struct FreeCalibratorOptions {
   double disturbance_sigmas = 5.0;
   double max_disturbed_share = 0.1;
   double max_field_wander = 5.0;
+  // The values in motion whitened together when their residuals' lag-one correlation at the fit
+  // exceeds max(correlation_min_lag_one, correlation_sigmas / sqrt(pairs))
+  // (core/estimation/free_correlation.h: a magnetometer's filter correlates its noise); false:
+  // always taken as independent.
+  bool whiten_correlated_motion = true;
+  double correlation_min_lag_one = 0.1;
+  double correlation_sigmas = 3.5;
   // Remove the norm models' second-order bias from the values' noise (core/estimation/free_bias.h:
   // half a sigma on the gains where the coverage is weak); false: the plain least squares.
   bool remove_norm_bias = true;
@@ -118,6 +126,9 @@ struct FreeEstimate {
   // With samples in motion: their departures' robust scatter over their step noise at the fit
   // (1 for white noise; FreeCalibratorOptions::max_field_wander); 0 when not judged.
   double field_wander = 0.0;
+  // With samples in motion: their noise's measured correlation from one value to the next, and
+  // whether (tau_s > 0) they were whitened together.
+  MotionCorrelation correlation;
   // The second-order bias from the values' noise, removed from the estimate (parameter units;
   // empty when not computed: FreeCalibratorOptions::remove_norm_bias, a model without norm terms).
   Eigen::VectorXd norm_bias;

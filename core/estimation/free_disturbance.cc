@@ -95,15 +95,27 @@ std::vector<int> DisturbedSpan(const FreeData& data, const std::vector<int>& dis
   return out;
 }
 
-FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& data,
-                                     const FreeCalibratorOptions& options,
-                                     const std::function<FreeEstimate(const FreeData&)>& fit) {
-  FreeEstimate out = fit(data);
-  if (!(options.disturbance_sigmas > 0) || out.motion_points == 0 || !out.estimate.ok) return out;
+FreeEstimate LeaveOutDisturbedMotion(
+    const FreeModel& model, const FreeData& data, const FreeCalibratorOptions& options,
+    const std::function<FreeEstimate(const FreeData&, bool whiten)>& fit) {
+  // The fit of the values kept whitened together, when their noise was measured correlated.
+  const auto whitened = [&](FreeEstimate white, const FreeData& kept) {
+    if (!options.whiten_correlated_motion || !white.estimate.ok ||
+        !white.correlation.correlated()) {
+      return white;
+    }
+    FreeEstimate again = fit(kept, true);
+    return again.estimate.ok ? again : white;
+  };
+  FreeEstimate out = fit(data, false);
+  if (!(options.disturbance_sigmas > 0) || out.motion_points == 0 || !out.estimate.ok) {
+    return whitened(std::move(out), data);
+  }
   const int motion_points = out.motion_points;
   // The samples in motion disturbed at the latest fit, always judged over all of them (a value
   // left out may come back); the fit without them; until the set stops changing (four rounds).
   std::vector<int> left_out;
+  FreeData kept;  // without left_out (empty: data)
   int detected = 0;
   MotionDepartures at =
       FindDisturbedMotion(model, data, out.estimate.theta, options.disturbance_sigmas);
@@ -118,9 +130,10 @@ FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& dat
     for (std::size_t i = 0; i < data.intervals.size(); ++i) {
       if (!drop[i]) rest.intervals.push_back(data.intervals[i]);
     }
-    FreeEstimate again = fit(rest);
+    FreeEstimate again = fit(rest, false);
     if (!again.estimate.ok) break;  // keep the last fit that worked, with what it left out
     out = std::move(again);
+    kept = std::move(rest);
     left_out = std::move(span);
     detected = static_cast<int>(at.disturbed.size());
     at = FindDisturbedMotion(model, data, out.estimate.theta, options.disturbance_sigmas);
@@ -130,6 +143,7 @@ FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& dat
   // is judged by until nothing stands out; but the departures then wander far more than they
   // change from one value to the next, which white noise and the bias's slow drift cannot do.
   const double wander = at.step_noise > 0 ? at.scatter / at.step_noise : 0.0;
+  out = whitened(std::move(out), left_out.empty() ? data : kept);
   out.field_wander = wander;
   if (wander > options.max_field_wander) {
     out.gate_reasons.push_back(fmt::format(

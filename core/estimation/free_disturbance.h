@@ -67,10 +67,13 @@ struct FreeCalibratorOptions;
 // four rounds; a fit that fails keeps the last one that worked): the estimate with its
 // disturbance, a warning naming it and, past max_disturbed_share, a gate reason; and a gate reason
 // when the departures' scatter exceeds max_field_wander times their step noise (a disturbance too
-// long to stand out).
-FreeEstimate LeaveOutDisturbedMotion(const FreeModel& model, const FreeData& data,
-                                     const FreeCalibratorOptions& options,
-                                     const std::function<FreeEstimate(const FreeData&)>& fit);
+// long to stand out). Every fit is `fit(data, false)`: the values taken as independent, as a
+// disturbance is smooth and would otherwise read as correlated noise; when the last one measures
+// the values' noise correlated (FreeEstimate::correlation) and options whiten it, the values kept
+// are fitted once more with `fit(kept, true)`, whitened together.
+FreeEstimate LeaveOutDisturbedMotion(
+    const FreeModel& model, const FreeData& data, const FreeCalibratorOptions& options,
+    const std::function<FreeEstimate(const FreeData&, bool whiten)>& fit);
 
 // "the field's magnitude departed from the fit by up to 19.4 % (41 robust sigmas) in 52 of 1000
 // values in motion: a magnet or steel nearby? Left out of the fit with the time about them, 98

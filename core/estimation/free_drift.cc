@@ -6,7 +6,8 @@ namespace turncal {
 
 Eigen::MatrixXd FreeDriftWhitener(const std::vector<FreeTerm>& terms, const Eigen::MatrixXd& J,
                                   const std::vector<FreeDriftTriad>& triads,
-                                  const TimeWindow& reference, double origin_s) {
+                                  const TimeWindow& reference, double origin_s,
+                                  const CorrelatedChain* chain) {
   const int m = static_cast<int>(J.rows());
   // Each term's inputs: a triad's drift over a window, and the term's sensitivity to it.
   struct Input {
@@ -79,6 +80,7 @@ Eigen::MatrixXd FreeDriftWhitener(const std::vector<FreeTerm>& terms, const Eige
       }
     }
   }
+  if (chain) AddChainCovariance(*chain, &S);
   Eigen::LLT<Eigen::MatrixXd> llt(S);
   return llt.matrixL().solve(Eigen::MatrixXd::Identity(m, m));
 }

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/estimation/bias_drift.h"
+#include "core/estimation/free_correlation.h"
 #include "core/modeling/free_model.h"
 
 namespace turncal {
@@ -29,10 +30,12 @@ struct FreeDriftTriad {
 // every triad in `triads` with a bias column over its own window (sensitivity -J's columns), and
 // of the triads in its extra_drift over theirs; the reference window and the time origin of the
 // random walk and warm-up (the earliest window's start). The terms' shared noise (FreeTerm::shared)
-// is added too; with no triads and no shared noise W is the identity.
+// is added too, and the correlation of the values in motion when `chain` (not null) has one
+// (core/estimation/free_correlation.h); with none of these W is the identity.
 Eigen::MatrixXd FreeDriftWhitener(const std::vector<FreeTerm>& terms, const Eigen::MatrixXd& J,
                                   const std::vector<FreeDriftTriad>& triads,
-                                  const TimeWindow& reference, double origin_s);
+                                  const TimeWindow& reference, double origin_s,
+                                  const CorrelatedChain* chain = nullptr);
 
 // All terms as one residual block, W times their stacked residuals: over theta and, when any term
 // uses it, the upstream block. The terms must outlive it.

@@ -48,6 +48,7 @@ struct HandCase {
   // The magnetometer's first-order low-pass (0: none) and whether the fit is told it.
   double mag_bandwidth_hz = 0.0;
   bool bandwidth_known = true;
+  bool mag_noise_filtered = false;  // the noise through the filter too
   FreeCalibratorOptions calibrator;
 };
 
@@ -75,6 +76,7 @@ HandFit Fit(const HandCase& k, const std::vector<std::string>& models) {
   o.session.magnet_s = k.magnet_s;
   o.session.magnet_peak = k.magnet_peak;
   o.session.mag_bandwidth_hz = k.mag_bandwidth_hz;
+  o.session.mag_noise_filtered = k.mag_noise_filtered;
   std::string error;
   EXPECT_TRUE(sim::BuildSimCapture(o, &f.capture, &error)) << error;
   const std::vector<Sample> samples = Decode(f.capture);
@@ -125,6 +127,9 @@ TEST(FreeMotion, AHandRotationOnAMipStreamGivesAnHonestEllipsoid) {
   EXPECT_TRUE(r.estimate.gate_passed);
   EXPECT_GT(r.estimate.estimate.p_value, 1e-3) << r.estimate.estimate.chi2;
   EXPECT_FALSE(r.estimate.disturbance) << DisturbanceText(*r.estimate.disturbance);
+  // White noise: its lag-one correlation within 3.5 / sqrt(pairs), not whitened.
+  EXPECT_GT(r.estimate.correlation.pairs, 900);
+  EXPECT_FALSE(r.estimate.correlation.correlated()) << r.estimate.correlation.lag_one;
   ExpectHonest(f, r, "mip 1 kHz");
 }
 
@@ -241,6 +246,45 @@ TEST(FreeMotion, AMagnetometersKnownBandwidthIsAccountedFor) {
     largest_z = std::max(largest_z, std::abs(e.theta[i] - truth[i]) / e.sigma[i]);
   }
   EXPECT_GT(largest_z, 5.0) << "not told, the gains should be off";
+}
+
+// A 10-Hz filter that filters the noise too (a device's digital filter): consecutive values of
+// the 100-Hz magnetometer correlate by exp(-2 pi 10 Hz x 10 ms) = 0.53. Measured at the fit and
+// whitened together, the estimate is honest and its sigmas wider than independent values would
+// claim (about sqrt((1 + rho) / (1 - rho)) = 1.8 times for the slowly turning regressors);
+// taken as independent, the sigmas are too small.
+TEST(FreeMotion, NoiseCorrelatedFromOneValueToTheNextIsWhitened) {
+  HandCase k;
+  k.mag_bandwidth_hz = 10.0;
+  k.mag_noise_filtered = true;
+  const HandFit f = Fit(k, {"magellipsoid"});
+  ASSERT_EQ(f.results.size(), 1u);
+  const FreeModelResult& r = f.results[0];
+  const MotionCorrelation& c = r.estimate.correlation;
+  EXPECT_GT(c.pairs, 900);
+  ASSERT_TRUE(c.correlated()) << c.lag_one;
+  // The lag-one estimate's sigma is about sqrt((1 - rho^2) / pairs) = 0.027.
+  const double rho = std::exp(-2 * M_PI * 10.0 * 0.01);
+  EXPECT_NEAR(c.lag_one, rho, 0.11);
+  EXPECT_NEAR(c.spacing_s, 0.01, 1e-4);
+  EXPECT_NEAR(c.tau_s, 1.0 / (2 * M_PI * 10.0), 0.35 / (2 * M_PI * 10.0));
+  EXPECT_GT(r.estimate.estimate.p_value, 1e-3) << r.estimate.estimate.chi2;
+  bool warned = false;
+  for (const auto& w : r.estimate.estimate.warnings) warned |= w.find("correlates") != w.npos;
+  EXPECT_TRUE(warned);
+  ExpectHonest(f, r, "correlated noise whitened");
+
+  HandCase white = k;
+  white.calibrator.whiten_correlated_motion = false;
+  const HandFit g = Fit(white, {"magellipsoid"});
+  ASSERT_EQ(g.results.size(), 1u);
+  const Estimate& e = g.results[0].estimate.estimate;
+  ASSERT_TRUE(e.ok) << e.error;
+  EXPECT_FALSE(g.results[0].estimate.correlation.whitened);
+  for (int i = 0; i < 3; ++i) {  // the hard iron
+    EXPECT_GT(r.estimate.estimate.sigma[i], 1.4 * e.sigma[i])
+        << e.parameters[static_cast<std::size_t>(i)].name;
+  }
 }
 
 TEST(FreeMotion, AMagnetPassingByIsNamedAndLeftOut) {

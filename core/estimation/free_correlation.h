@@ -1,0 +1,73 @@
+#pragma once
+// Noise correlated from one value in motion to the next (issue 37): a magnetometer's low-pass
+// filter (or a decimation filter in the device) filters the noise as well as the field, so the
+// values of a continuous rotation are not independent -- a first-order filter of 10 Hz makes
+// consecutive values of a 100-Hz magnetometer correlate by exp(-2 pi 10 Hz x 10 ms) = 0.53, and a
+// fit that counts them as independent claims sigmas too small by about sqrt((1 + rho)/(1 - rho)).
+//
+// The correlation is measured, not assumed: the lag-one correlation of the values' residuals at
+// the fit (each whitened by its own white noise), over the pairs of consecutive values in motion
+// no further apart than three typical spacings and within 4 robust sigmas. A magnet passing is
+// smooth too: the disturbed values are found and left out with the values taken as independent
+// (core/estimation/free_disturbance.h), and only then is the correlation taken into the fit.
+// Beyond max(min_lag_one, sigmas / sqrt(pairs)) -- white noise's lag-one correlation has the
+// sigma 1 / sqrt(pairs) -- the noise is taken as exponentially correlated in time,
+// corr(t_i, t_j) = exp(-|t_i - t_j| / tau): a first-order filter's, the continuous-time AR(1)
+// (Ornstein-Uhlenbeck) sampled at the values' own instants, with tau such that the pairs' mean
+// exp(-dt / tau) is the measured correlation. The values are then whitened together, not thinned,
+// so every value keeps its information: Prais-Winsten's transform at irregular spacing,
+// e_k = (r_k - phi_k r_{k-1}) / sqrt(1 - phi_k^2), phi_k = exp(-(t_k - t_{k-1}) / tau).
+// Pure computation.
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "core/modeling/free_model.h"
+
+namespace turncal {
+
+struct MotionCorrelation {
+  int pairs = 0;           // consecutive values in motion compared
+  double lag_one = 0.0;    // their residuals' correlation at the fit
+  double threshold = 0.0;  // above which the noise is taken as correlated
+  double spacing_s = 0.0;  // the pairs' median spacing
+  double tau_s = 0.0;      // the correlation's time constant when taken as correlated; else 0
+  bool whitened = false;   // the fit whitened the values together with it
+  bool correlated() const { return tau_s > 0; }
+  // exp(-spacing / tau): the correlation between values one typical spacing apart.
+  double at_spacing() const;
+};
+
+// One value in motion: its time (sensor clock, s) and its whitened residual at the fit.
+struct MotionResidual {
+  double t_s = 0.0;
+  double r = 0.0;
+};
+
+// The correlation of `residuals` (any order). Fewer than 20 pairs: none measured (pairs 0).
+MotionCorrelation MeasureMotionCorrelation(std::vector<MotionResidual> residuals,
+                                           double min_lag_one = 0.1, double sigmas = 3.5);
+
+// One chain of correlated residuals: their rows in the stacked residual vector and their times.
+struct CorrelatedChain {
+  std::vector<int> rows;
+  std::vector<double> t_s;
+  double tau_s = 0.0;
+};
+
+// The values in motion among `terms` (one residual each; the terms' rows in order), their times
+// their windows' middles, with the time constant `tau_s`.
+CorrelatedChain MotionChain(const std::vector<FreeTerm>& terms, const FreeData& data, double tau_s);
+
+// The chain's residuals in `r` (the terms' stacked residuals, each whitened by its own noise).
+std::vector<MotionResidual> ChainResiduals(const CorrelatedChain& chain, const Eigen::VectorXd& r);
+
+// Adds the chain's correlation (exp(-|dt| / tau) between distinct members) to the covariance S
+// of whitened residuals (unit diagonal).
+void AddChainCovariance(const CorrelatedChain& chain, Eigen::MatrixXd* S);
+
+// The whitening W of residuals that are independent (unit variance) but for the chain: the
+// identity, with the chain's rows replaced by the Prais-Winsten transform in time order.
+Eigen::MatrixXd ChainWhitener(int m, const CorrelatedChain& chain);
+
+}  // namespace turncal

@@ -1,0 +1,106 @@
+// The noise of values in motion correlated from one to the next
+// (core/estimation/free_correlation.h; issue 37): its lag-one correlation and time constant
+// measured from residuals at irregular instants, white noise left as it is, and the chain's
+// whitening exact (W S W^T = I).
+
+#include "core/estimation/free_correlation.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+namespace turncal {
+namespace {
+
+// n values of an exponentially correlated unit-variance noise (time constant tau_s; 0: white) at
+// instants 10 ms apart, every 7th 20 ms apart (a mixed spacing, as a station's decimation makes).
+std::vector<MotionResidual> Noise(int n, double tau_s, std::uint32_t seed) {
+  std::mt19937 random(seed);
+  std::normal_distribution<double> normal;
+  std::vector<MotionResidual> out;
+  double t = 0, r = normal(random);
+  for (int k = 0; k < n; ++k) {
+    if (k > 0) {
+      const double dt = k % 7 == 0 ? 0.02 : 0.01;
+      t += dt;
+      const double phi = tau_s > 0 ? std::exp(-dt / tau_s) : 0.0;
+      r = phi * r + std::sqrt(1 - phi * phi) * normal(random);
+    }
+    out.push_back({t, r});
+  }
+  return out;
+}
+
+TEST(MotionCorrelation, ATimeConstantIsMeasuredAtMixedSpacing) {
+  const double tau = 0.016;  // a 10-Hz first-order filter's
+  double sum_tau_s = 0;
+  for (std::uint32_t seed = 1; seed <= 100; ++seed) {
+    const MotionCorrelation c = MeasureMotionCorrelation(Noise(1000, tau, seed));
+    EXPECT_GE(c.pairs, 990);  // 999, less any beyond 4 robust sigmas
+    EXPECT_NEAR(c.spacing_s, 0.01, 1e-9);
+    ASSERT_TRUE(c.correlated()) << c.lag_one;
+    // The lag-one correlation's sigma is about sqrt((1 - rho^2) / n) = 0.027 at rho 0.5 (0.028
+    // over 400 seeds); tau's relative sigma that over rho |ln rho|, 0.09: 4 sigma.
+    EXPECT_NEAR(c.tau_s, tau, 0.36 * tau) << "seed " << seed;
+    sum_tau_s += c.tau_s;
+    EXPECT_NEAR(c.at_spacing(), std::exp(-c.spacing_s / c.tau_s), 1e-15);
+  }
+  // Unbiased: the mean of 100 within 3 of its sigmas (0.009 tau; 400 seeds gave 0.99 tau).
+  EXPECT_NEAR(sum_tau_s / 100, tau, 0.027 * tau);
+}
+
+TEST(MotionCorrelation, WhiteNoiseIsNotTakenAsCorrelated) {
+  int flagged = 0;
+  for (std::uint32_t seed = 1; seed <= 200; ++seed) {
+    const MotionCorrelation c = MeasureMotionCorrelation(Noise(1000, 0.0, seed));
+    EXPECT_NEAR(c.threshold, std::max(0.1, 3.5 / std::sqrt(static_cast<double>(c.pairs))), 1e-12);
+    flagged += c.correlated();
+  }
+  // 3.5 sigma of the lag-one correlation (and at least 0.1): P about 2e-4 per capture.
+  EXPECT_LE(flagged, 1);
+}
+
+TEST(MotionCorrelation, TooFewPairsMeasureNothingAndAPauseBreaksThePairs) {
+  EXPECT_EQ(MeasureMotionCorrelation(Noise(15, 0.016, 1)).pairs, 0);
+  // A pause of 10 s in the middle: the pair across it is not one (more than 3 spacings apart).
+  std::vector<MotionResidual> paused = Noise(100, 0.016, 2);
+  for (std::size_t k = 50; k < paused.size(); ++k) paused[k].t_s += 10.0;
+  const MotionCorrelation c = MeasureMotionCorrelation(paused);
+  EXPECT_EQ(c.pairs, 98);
+  EXPECT_TRUE(c.correlated()) << c.lag_one;
+}
+
+TEST(MotionCorrelation, ADisturbanceIsNotReadAsCorrelation) {
+  // White noise with a smooth bump of 40 sigma over 50 values (a magnet passing by): its values
+  // beyond 4 robust sigmas are left out of the pairs.
+  std::vector<MotionResidual> r = Noise(1000, 0.0, 3);
+  for (int k = 400; k < 450; ++k) {
+    r[static_cast<std::size_t>(k)].r += 20.0 * (1 - std::cos(2 * M_PI * (k - 400) / 50.0));
+  }
+  const MotionCorrelation c = MeasureMotionCorrelation(r);
+  EXPECT_FALSE(c.correlated()) << c.lag_one;
+  EXPECT_LT(c.pairs, 999);
+}
+
+TEST(MotionCorrelation, TheChainsWhiteningIsExact) {
+  // Six residuals: rows 0 and 4 independent, rows 1, 2, 3, 5 a chain out of time order.
+  CorrelatedChain chain;
+  chain.rows = {1, 5, 2, 3};
+  chain.t_s = {0.00, 0.05, 0.01, 0.03};
+  chain.tau_s = 0.02;
+  Eigen::MatrixXd S = Eigen::MatrixXd::Identity(6, 6);
+  AddChainCovariance(chain, &S);
+  EXPECT_NEAR(S(1, 2), std::exp(-0.5), 1e-15);
+  EXPECT_NEAR(S(5, 1), std::exp(-2.5), 1e-15);
+  EXPECT_EQ(S(0, 1), 0.0);
+  const Eigen::MatrixXd W = ChainWhitener(6, chain);
+  EXPECT_TRUE((W * S * W.transpose()).isIdentity(1e-12)) << W * S * W.transpose();
+  // No time constant: nothing correlated.
+  chain.tau_s = 0;
+  EXPECT_TRUE(ChainWhitener(6, chain).isIdentity(0.0));
+}
+
+}  // namespace
+}  // namespace turncal
