@@ -137,8 +137,7 @@ class FreeCalibration {
     if (!model_.Start(data_, &theta_, &est_.error)) return std::move(out_);
     ChooseDrifts();
     for (int pass = 0; pass < options_.passes; ++pass) {
-      if (pass > 0) MeasureCorrelation();
-      if (!SolvePass()) return std::move(out_);
+      if (!SolvePass(pass > 0)) return std::move(out_);
     }
     if (out_.correlation.whitened) {
       est_.warnings.push_back(fmt::format(
@@ -213,11 +212,10 @@ class FreeCalibration {
     joint_ = correlated_by_drift_;
   }
 
-  // The values in motion's correlation from one to the next at theta_ (each whitened by its own
-  // noise); taken into the whitening when beyond the threshold.
-  void MeasureCorrelation() {
+  // The values in motion's correlation from one to the next in `terms` at theta_ (each whitened
+  // by its own noise); taken into the whitening when beyond the threshold.
+  void MeasureCorrelation(const std::vector<FreeTerm>& terms) {
     if (out_.motion_points < 20) return;
-    const std::vector<FreeTerm> terms = model_.Terms(data_, theta_);
     const CorrelatedChain chain = MotionChain(terms, data_, 0.0);
     const Evaluated e = Evaluate(terms, theta_, upstream_, nullptr);
     out_.correlation = MeasureMotionCorrelation(
@@ -242,12 +240,14 @@ class FreeCalibration {
   }
 
   // One solve with the terms whitened at theta_; false (est_.error says why) when it fails.
-  bool SolvePass() {
+  // With `measure`, the correlation of the values in motion is measured at theta_ first.
+  bool SolvePass(bool measure) {
     terms_ = model_.Terms(data_, theta_);
     if (terms_.empty()) {
       est_.error = fmt::format("{}: the intervals give no residuals", model_.name());
       return false;
     }
+    if (measure) MeasureCorrelation(terms_);
     ceres::Problem::Options po;
     po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     ceres::Problem problem(po);

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <numeric>
 
+#include "core/estimation/free_motion.h"
+
 namespace turncal {
 namespace {
 constexpr double kOutlierSigmas = 4.0;
@@ -24,17 +26,13 @@ MotionCorrelation MeasureMotionCorrelation(std::vector<MotionResidual> residuals
     if (dt > 0) steps.push_back(dt);
   }
   if (steps.size() < 20) return out;
-  std::vector<double> sorted = steps;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  out.spacing_s = sorted[sorted.size() / 2];
+  out.spacing_s = MedianOf(std::move(steps));
   const double max_gap = 3.0 * out.spacing_s;
   // A disturbance (a magnet passing) is smooth and would read as correlation: the values beyond
   // kOutlierSigmas robust sigmas (1.4826 x the median |r|) are left out of the pairs.
   std::vector<double> magnitudes;
   for (const MotionResidual& m : residuals) magnitudes.push_back(std::abs(m.r));
-  std::nth_element(magnitudes.begin(), magnitudes.begin() + magnitudes.size() / 2,
-                   magnitudes.end());
-  const double bound = kOutlierSigmas * 1.4826 * magnitudes[magnitudes.size() / 2];
+  const double bound = kOutlierSigmas * 1.4826 * MedianOf(std::move(magnitudes));
   double rr = 0, aa = 0, bb = 0;
   std::vector<double> dts;
   for (std::size_t k = 1; k < residuals.size(); ++k) {
@@ -92,9 +90,8 @@ CorrelatedChain MotionChain(const std::vector<FreeTerm>& terms, const FreeData& 
 std::vector<MotionResidual> ChainResiduals(const CorrelatedChain& chain, const Eigen::VectorXd& r) {
   std::vector<MotionResidual> out;
   out.reserve(chain.rows.size());
-  for (std::size_t k = 0; k < chain.rows.size(); ++k) {
-    if (chain.rows[k] < r.size()) out.push_back({chain.t_s[k], r[chain.rows[k]]});
-  }
+  for (std::size_t k = 0; k < chain.rows.size(); ++k)
+    out.push_back({chain.t_s[k], r[chain.rows[k]]});
   return out;
 }
 
