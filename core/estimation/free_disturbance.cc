@@ -105,7 +105,16 @@ FreeEstimate LeaveOutDisturbedMotion(
       return white;
     }
     FreeEstimate again = fit(kept, true);
-    return again.estimate.ok ? again : white;
+    if (again.estimate.ok) return again;
+    // The independent fit's sigmas are too small for correlated noise: kept, but not passed.
+    const std::string why = fmt::format(
+        "the values in motion's noise correlates ({:.2f} over {} pairs) but the fit that accounts "
+        "for it failed ({}): the sigmas of the fit that treats them as independent are too small",
+        white.correlation.lag_one, white.correlation.pairs, again.estimate.error);
+    white.estimate.warnings.push_back(why);
+    white.gate_passed = false;
+    white.gate_reasons.push_back(why);
+    return white;
   };
   FreeEstimate out = fit(data, false);
   if (!(options.disturbance_sigmas > 0) || out.motion_points == 0 || !out.estimate.ok) {

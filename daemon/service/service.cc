@@ -96,8 +96,17 @@ bool Service::StartStation(std::string* error) {
 }
 
 void Service::DropStation(const std::string& why) {
-  if (station_) station_->WriteDueReports();  // queued on the worker, written by the drain
+  if (station_) {
+    // Its queued solves would be discarded: skipped, so the drain (which holds the loop) waits
+    // only for the one running and for the writes.
+    station_->Abandon();
+    station_->WriteDueReports();  // queued on the worker, written by the drain
+  }
   if (worker_) worker_->Drain();
+  if (station_ && station_->abandoned_solves() > 0) {
+    spdlog::info("turncald: {} solve(s) queued for the station being replaced were skipped",
+                 station_->abandoned_solves());
+  }
   station_.reset();
   // Poses still being collected are never answered by the old station: say so.
   if (!server_ || why.empty()) return;

@@ -192,12 +192,12 @@ void Station::OnSample(int device, const Sample& sample) {
 void Station::JournalMotion(DeviceState& d, std::vector<MotionValue> values) {
   if (values.empty() || !EnsureJournal()) return;
   auto error = std::make_shared<std::string>();
-  Defer([journal = journal_, name = d.name, values = std::move(values),
-         error] { journal->AppendMotion(name, values, error.get()); },
-        [this, name = d.name, error] {
-          NoteWrite(name, *error);
-          if (!error->empty()) journal_.reset();  // reopened before the next append
-        });
+  DeferWrite([journal = journal_, name = d.name, values = std::move(values),
+              error] { journal->AppendMotion(name, values, error.get()); },
+             [this, name = d.name, error] {
+               NoteWrite(name, *error);
+               if (!error->empty()) journal_.reset();  // reopened before the next append
+             });
 }
 
 void Station::TickDevice(int device, std::int64_t now_ns) {
@@ -229,11 +229,13 @@ void Station::WriteReport(std::size_t device, std::int64_t now_ns, bool now) {
     if (c.active_version() > 0) models.push_back(c.name());
   }
   auto error = std::make_shared<std::string>();
-  Defer([dir = options_.state_dir, name = d.name, models,
-         error] { WriteDeviceReport(dir, name, models, drivers::UtcNowIso8601(), error.get()); },
-        [this, name = d.name, error] {
-          if (!error->empty()) Publish({{"class", "ERROR"}, {"device", name}, {"message", *error}});
-        });
+  DeferWrite(
+      [dir = options_.state_dir, name = d.name, models, error] {
+        WriteDeviceReport(dir, name, models, drivers::UtcNowIso8601(), error.get());
+      },
+      [this, name = d.name, error] {
+        if (!error->empty()) Publish({{"class", "ERROR"}, {"device", name}, {"message", *error}});
+      });
 }
 
 void Station::SetChamber(std::optional<double> setpoint_c) {
@@ -321,9 +323,9 @@ void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) 
       devices_[device]->sequencer->noise()) {
     auto error = std::make_shared<std::string>();
     const std::string name = devices_[device]->name;
-    Defer([dir = options_.state_dir, name, noise = *devices_[device]->sequencer->noise(),
-           error] { WriteNoiseProfile(dir, name, noise, error.get()); },
-          [this, name, error] { NoteWrite(name, *error); });
+    DeferWrite([dir = options_.state_dir, name, noise = *devices_[device]->sequencer->noise(),
+                error] { WriteNoiseProfile(dir, name, noise, error.get()); },
+               [this, name, error] { NoteWrite(name, *error); });
   }
   if (e.kind == SequencerEventKind::kCaptured && e.record) {
     // Journaled (fsynced) before it is used: the worker runs in order, so the append precedes the
@@ -333,19 +335,19 @@ void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) 
       const std::string name = devices_[device]->name;
       nlohmann::json answer = protocol::ToJson(e);
       answer["device"] = name;
-      Defer([journal = journal_, name, record = *e.record,
-             error] { journal->Append(name, record, error.get()); },
-            [this, name, error, answer = std::move(answer)]() mutable {
-              NoteWrite(name, *error);
-              // Claimed saved only when the record is in the journal (fsynced).
-              answer["saved"] = error->empty();
-              if (!error->empty()) {
-                answer["save_error"] = *error;
-                // An append that failed may have left a partial line: reopen before the next.
-                journal_.reset();
-              }
-              Publish(answer);
-            });
+      DeferWrite([journal = journal_, name, record = *e.record,
+                  error] { journal->Append(name, record, error.get()); },
+                 [this, name, error, answer = std::move(answer)]() mutable {
+                   NoteWrite(name, *error);
+                   // Claimed saved only when the record is in the journal (fsynced).
+                   answer["saved"] = error->empty();
+                   if (!error->empty()) {
+                     answer["save_error"] = *error;
+                     // An append that failed may have left a partial line: reopen before the next.
+                     journal_.reset();
+                   }
+                   Publish(answer);
+                 });
     }
     Update(device, *e.record, e.t_s);
   }
@@ -363,9 +365,9 @@ void Station::SaveNoiseProfile(DeviceState& d) {
   const NoiseProfile* noise = d.sequencer->noise();
   if (options_.state_dir.empty() || noise == nullptr) return;
   auto error = std::make_shared<std::string>();
-  Defer([dir = options_.state_dir, name = d.name, profile = *noise,
-         error] { WriteNoiseProfile(dir, name, profile, error.get()); },
-        [this, name = d.name, error] { NoteWrite(name, *error); });
+  DeferWrite([dir = options_.state_dir, name = d.name, profile = *noise,
+              error] { WriteNoiseProfile(dir, name, profile, error.get()); },
+             [this, name = d.name, error] { NoteWrite(name, *error); });
 }
 
 void Station::Activate(DeviceState& d, Calibration& c, double t_s,
@@ -377,7 +379,7 @@ void Station::Activate(DeviceState& d, Calibration& c, double t_s,
   }
   // Persisted (atomically, fsynced: off the loop), then applied and announced.
   auto write_error = std::make_shared<std::string>();
-  Defer(
+  DeferWrite(
       [dir = options_.state_dir, device = d.name, model = c.name(),
        calibration = std::move(a.document), write_error, saved = options_.on_calibration_saved] {
         if (dir.empty()) return;
@@ -397,7 +399,21 @@ void Station::Activate(DeviceState& d, Calibration& c, double t_s,
       });
 }
 
+void Station::Abandon() { *abandoned_ = true; }
+
 void Station::Defer(std::function<void()> work, std::function<void()> done) {
+  DeferWrite(
+      [abandoned = abandoned_, skipped = skipped_, work = std::move(work)] {
+        if (*abandoned) {
+          ++*skipped;
+          return;
+        }
+        work();
+      },
+      std::move(done));
+}
+
+void Station::DeferWrite(std::function<void()> work, std::function<void()> done) {
   auto guarded = [alive = alive_, done = std::move(done)] {
     if (*alive) done();
   };

@@ -11,6 +11,7 @@
 // Same code for live devices and replays: the Station is a ReplayTarget, and the service loop
 // (issue "The daemon") will feed it from transports.
 
+#include <atomic>
 #include <functional>
 #include <map>
 #include <memory>
@@ -213,6 +214,12 @@ class Station : public ReplayTarget, private CalibrationHost {
   // (the service calls it before it stops; OnFinish does for replays). Reports are otherwise
   // written from TickDevice/OnTick, at most every kReportIntervalNs per device.
   void WriteDueReports();
+  // The station is about to be dropped (reload, reset): the calibrations' solves and fits still
+  // queued on the worker are skipped when their turn comes (their results would be discarded),
+  // so draining the worker waits only for the one running and for the writes (journal, noise,
+  // calibrations, reports), which all still run. abandoned_solves() counts those skipped.
+  void Abandon();
+  int abandoned_solves() const { return *skipped_; }
   static constexpr std::int64_t kReportIntervalNs = 60'000'000'000;
   // A live device idle this long after its latest pose solves what its calibrations deferred.
   static constexpr double kIdleSolveS = 5.0;
@@ -239,6 +246,7 @@ class Station : public ReplayTarget, private CalibrationHost {
   // CalibrationHost (daemon/station/calibration.h): what the devices' calibration sets work
   // through. Activate writes the calibration's document (calibrations/DEVICE.MODEL.json, off the
   // loop), then applies it and publishes CALIBRATION_ACTIVE with "saved" (the write's outcome).
+  // Defer is a calibration's computation: skipped when the station is abandoned before it starts.
   void Defer(std::function<void()> work, std::function<void()> done) override;
   void Publish(const nlohmann::json& event) override;
   void Activate(DeviceState& d, Calibration& c, double t_s,
@@ -250,6 +258,8 @@ class Station : public ReplayTarget, private CalibrationHost {
   // Counts a state-directory write's outcome; publishes ERROR when it failed.
   void NoteWrite(const std::string& device, const std::string& error);
   bool EnsureJournal();  // (re)opens the journal of a session with a state directory
+  // A write into the state directory on the worker, in order: never skipped.
+  void DeferWrite(std::function<void()> work, std::function<void()> done);
 
   StationOptions options_;
   SensorClass sensor_;
@@ -263,6 +273,10 @@ class Station : public ReplayTarget, private CalibrationHost {
   bool resuming_ = false;
   Executor executor_;
   std::shared_ptr<bool> alive_ = std::make_shared<bool>(true);
+  // Set by Abandon, read by the worker; the count of computations skipped, written by the worker
+  // and read after the drain.
+  std::shared_ptr<std::atomic<bool>> abandoned_ = std::make_shared<std::atomic<bool>>(false);
+  std::shared_ptr<std::atomic<int>> skipped_ = std::make_shared<std::atomic<int>>(0);
   double capture_cpu_ms_last_ = 0.0, capture_cpu_ms_max_ = 0.0;
 };
 

@@ -7,7 +7,12 @@
 
 #include <gtest/gtest.h>
 
+#include <memory>
+#include <string>
 #include <vector>
+
+#include "core/estimation/free_calibrator.h"
+#include "core/modeling/free_model.h"
 
 namespace turncal {
 namespace {
@@ -67,6 +72,48 @@ TEST(DisturbedSpan, LeavesTheStillIntervalsAndNothingWhenNothingIsDisturbed) {
   d.intervals[500].in_motion = false;
   EXPECT_EQ(DisturbedSpan(d, Join(Range(495, 499), Range(501, 506))),
             Join(Range(489, 499), Range(501, 512)));
+}
+
+// When the values' noise was measured correlated but the fit that whitens them fails, the fit
+// that treats them as independent is kept, its sigmas too small: warned and not passed.
+TEST(LeaveOutDisturbedMotion, AWhitenedFitThatFailsLeavesTheIndependentFitUnpassed) {
+  std::string error;
+  const auto model = MakeFreeModel("magsphere", FreeContext{}, &error);
+  ASSERT_TRUE(model) << error;
+  FreeCalibratorOptions options;
+  options.disturbance_sigmas = 0;  // no search: the callback's fits only
+  int whitened_calls = 0;
+  const auto fit = [&](const FreeData&, bool whiten) {
+    FreeEstimate e;
+    if (whiten) {
+      ++whitened_calls;
+      e.estimate.error = "the solver did not converge";
+      return e;
+    }
+    e.estimate.ok = true;
+    e.motion_points = 1000;
+    e.gate_passed = true;
+    e.correlation.pairs = 997;
+    e.correlation.lag_one = 0.52;
+    e.correlation.threshold = 0.11;
+    e.correlation.tau_s = 0.0154;
+    return e;
+  };
+  const FreeEstimate out = LeaveOutDisturbedMotion(*model, Motion(), options, fit);
+  EXPECT_EQ(whitened_calls, 1);
+  ASSERT_TRUE(out.estimate.ok);
+  EXPECT_FALSE(out.correlation.whitened);
+  EXPECT_FALSE(out.gate_passed);
+  ASSERT_EQ(out.gate_reasons.size(), 1u);
+  EXPECT_NE(out.gate_reasons[0].find("the solver did not converge"), std::string::npos);
+  EXPECT_NE(out.gate_reasons[0].find("too small"), std::string::npos);
+  ASSERT_EQ(out.estimate.warnings.size(), 1u);
+
+  // Told not to whiten, the independent fit is the answer and passes.
+  options.whiten_correlated_motion = false;
+  const FreeEstimate plain = LeaveOutDisturbedMotion(*model, Motion(), options, fit);
+  EXPECT_EQ(whitened_calls, 1);
+  EXPECT_TRUE(plain.gate_passed);
 }
 
 }  // namespace

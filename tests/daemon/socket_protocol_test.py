@@ -190,8 +190,10 @@ try:
     watcher.reply(want="WATCH")
     with open(config, "a") as f:
         f.write("[sequencer]\ndwel_s = 2\n")
+    # A reload drains the solve worker first (the old station's queued solves are skipped, the
+    # one running finishes): waited for, not timed (the CI host under a sanitizer is slow).
     daemon.send_signal(signal.SIGHUP)
-    r = watcher.reply(want="ERROR")
+    r = watcher.reply(timeout=120, want="ERROR")
     check("reload refused" in r.get("message", "") and "dwel_s" in r.get("message", ""),
           f"SIGHUP with a typo: {r.get('message', '')[:100]}")
     with open(config) as f:
@@ -199,7 +201,7 @@ try:
     with open(config, "w") as f:
         f.write(text)
     daemon.send_signal(signal.SIGHUP)
-    r = watcher.reply(want="RELOADED")
+    r = watcher.reply(timeout=120, want="RELOADED")
     check(r.get("class") == "RELOADED", "SIGHUP: configuration reloaded")
     c = Client(sock)
     c.send({"cmd": "devices"})

@@ -415,6 +415,59 @@ TEST(StationPersistence, PoseIsAnsweredOnlyOnceItsRecordIsJournaled) {
   std::filesystem::remove_all(dir);
 }
 
+// A station being replaced (SIGHUP, reset) skips the solves still queued for it, whose results
+// would be discarded: the service's drain then waits only for the writes, which all still run.
+TEST(StationPersistence, AnAbandonedStationSkipsItsQueuedSolvesButNotItsWrites) {
+  sim::SimCaptureOptions o;
+  o.protocol = drivers::Protocol::kXbus;
+  o.poses = CubePoses26();
+  o.session.seed = 5;
+  sim::SimCapture c;
+  std::string error;
+  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
+  const std::string dir = ::testing::TempDir() + "station_abandon_" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  daemon::StationOptions so;
+  so.state_dir = dir;
+  int captured = 0;
+  daemon::Station station({"imu"}, so, [&](const nlohmann::json& e) {
+    if (e["class"] == "POSE_CAPTURED") ++captured;
+  });
+  std::vector<std::pair<std::function<void()>, std::function<void()>>> queue;
+  station.SetExecutor([&](std::function<void()> work, std::function<void()> done) {
+    queue.emplace_back(std::move(work), std::move(done));
+  });
+  const std::string path = WriteSimCaptureFile(c, "abandon");
+  drivers::CaptureReader reader;
+  ASSERT_TRUE(reader.Open(path, &error)) << error;
+  daemon::ReplayStats stats;
+  ASSERT_TRUE(daemon::ReplayInto(&reader, &station, true, {}, &stats, &error)) << error;
+  ASSERT_GE(queue.size(), 26u) << "a journal append per pose";
+  // The worker: the first 13 answers queue their poses' solves; then the station is abandoned
+  // (the service drops it) and the rest of the queue runs without the loop (its `done`s would
+  // find the station gone).
+  bool abandoned = false;
+  for (std::size_t i = 0; i < queue.size(); ++i) {
+    auto [work, done] = std::move(queue[i]);
+    work();
+    if (!abandoned) done();
+    if (captured == 13 && !abandoned) {
+      station.Abandon();
+      abandoned = true;
+    }
+  }
+  ASSERT_TRUE(abandoned);
+  std::ifstream in(dir + "/journal.jsonl");
+  int lines = 0;
+  for (std::string line; std::getline(in, line);) lines += !line.empty();
+  EXPECT_EQ(lines, 26) << "every journal append still ran";
+  // Each of the 13 answered poses queued a solve per model (the default pose models: at least
+  // one), and none had started: all skipped.
+  EXPECT_GE(station.abandoned_solves(), 13);
+  std::remove(path.c_str());
+  std::filesystem::remove_all(dir);
+}
+
 TEST(StationPersistence, TornJournalLineIsSkipped) {
   const std::string dir = ::testing::TempDir() + "station_torn_" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
