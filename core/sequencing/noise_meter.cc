@@ -93,8 +93,30 @@ std::vector<char> NoiseMeter::KeptSamples(std::uint8_t present) const {
   return keep;
 }
 
+void NoiseMeter::Moments::Add(const Eigen::Vector3d& v) {
+  ++n;
+  const Eigen::Vector3d d = v - mean;
+  mean += d / static_cast<double>(n);
+  m2 += d.cwiseProduct(v - mean);
+}
+
+bool NoiseMeter::CountsHeldOnce(int t) const {
+  bool repeats = false;
+  for (const auto& p : parts_) {
+    if (p.fresh[static_cast<std::size_t>(t)].n < 3) return false;
+    repeats |= p.fresh[static_cast<std::size_t>(t)].n < p.all[static_cast<std::size_t>(t)].n;
+  }
+  return repeats;
+}
+
+const NoiseMeter::Moments& NoiseMeter::Of(const Part& p, int t) const {
+  const auto i = static_cast<std::size_t>(t);
+  return CountsHeldOnce(t) ? p.fresh[i] : p.all[i];
+}
+
 void NoiseMeter::Accumulate(std::uint8_t present, const std::vector<char>& keep,
                             std::int64_t* t_first_ns, std::int64_t* t_last_ns, std::int64_t* n) {
+  std::array<std::optional<Eigen::Vector3d>, 3> previous;  // each triad's last value kept
   for (std::size_t i = 0; i < samples_.size(); ++i) {
     const StillSample& s = samples_[i];
     if (!keep[i]) {
@@ -112,21 +134,25 @@ void NoiseMeter::Accumulate(std::uint8_t present, const std::vector<char>& keep,
     ++p.n;
     for (int t = 0; t < 3; ++t) {
       if (!(present & (1u << t))) continue;
-      const Eigen::Vector3d d = s.v[t] - p.mean[t];
-      p.mean[t] += d / static_cast<double>(p.n);
-      p.m2[t] += d.cwiseProduct(s.v[t] - p.mean[t]);
+      const auto ti = static_cast<std::size_t>(t);
+      p.all[ti].Add(s.v[t]);
+      if (!previous[ti] || *previous[ti] != s.v[t]) p.fresh[ti].Add(s.v[t]);
+      previous[ti] = s.v[t];
     }
   }
 }
 
-bool NoiseMeter::TriadNoise(int t, double nd, NoiseProfile* profile, std::string* why) const {
+bool NoiseMeter::TriadNoise(int t, NoiseProfile* profile, std::string* why) const {
   const int k = static_cast<int>(parts_.size());
-  const double dof = nd - k;
+  double nd = 0;
   Eigen::Vector3d pooled = Eigen::Vector3d::Zero(), grand = Eigen::Vector3d::Zero();
   for (const auto& p : parts_) {
-    pooled += p.m2[t];
-    grand += p.mean[t] * static_cast<double>(p.n);
+    const Moments& m = Of(p, t);
+    pooled += m.m2;
+    grand += m.mean * static_cast<double>(m.n);
+    nd += static_cast<double>(m.n);
   }
+  const double dof = nd - k;
   pooled /= dof;
   grand /= nd;
   Eigen::Vector3d sigma = pooled.cwiseSqrt();
@@ -138,9 +164,10 @@ bool NoiseMeter::TriadNoise(int t, double nd, NoiseProfile* profile, std::string
     const double var = sigma[a] * sigma[a];
     double means_chi2 = 0;
     for (const auto& p : parts_) {
-      const double pv = p.m2[t][a] / static_cast<double>(p.n - 1);
+      const Moments& m = Of(p, t);
+      const double pv = m.m2[a] / static_cast<double>(m.n - 1);
       const double hi = VarianceRatioLimit(options_.false_alarm / (2.0 * k * 9),
-                                           static_cast<double>(p.n - 1), dof);
+                                           static_cast<double>(m.n - 1), dof);
       if (pv / var > hi) {
         return Reason(
             why,
@@ -149,8 +176,8 @@ bool NoiseMeter::TriadNoise(int t, double nd, NoiseProfile* profile, std::string
                 "the pooled one (limit {:.2f})",
                 TriadName(t), "xyz"[a], pv / var, hi));
       }
-      const double d = p.mean[t][a] - grand[a];
-      means_chi2 += d * d * static_cast<double>(p.n) / var;
+      const double d = m.mean[a] - grand[a];
+      means_chi2 += d * d * static_cast<double>(m.n) / var;
     }
     const double chi_lim = boost::math::quantile(
         boost::math::complement(boost::math::chi_squared(k - 1), options_.false_alarm / 9.0));
@@ -258,12 +285,20 @@ NoiseMeter::Status NoiseMeter::Finish() {
   for (int t = 0; t < 3; ++t) {
     if (!(present & (1u << t))) continue;
     std::string why;
-    if (!TriadNoise(t, nd, &prof, &why)) return reject(why);
+    if (!TriadNoise(t, &prof, &why)) return reject(why);
   }
   if (std::string why; !MeasureRate(&prof, &why)) return reject(why);
   prof.sigma_dof = dof;
   prof.source =
       fmt::format("measured over {:.2f} s ({} samples, {} outliers left out)", span, n, outliers_);
+  for (int t = 0; t < 3; ++t) {
+    if (!(present & (1u << t)) || !CountsHeldOnce(t)) continue;
+    std::int64_t values = 0;
+    for (const auto& p : parts_) values += p.fresh[static_cast<std::size_t>(t)].n;
+    prof.source.insert(
+        prof.source.size() - 1,
+        fmt::format("; the {}'s held repeats counted once: {} values", TriadName(t), values));
+  }
   std::string error;
   if (!prof.IsValid(&error)) return reject(error);
   profile_ = prof;
