@@ -360,18 +360,34 @@ TEST(StationPersistence, ResumesAfterACrashWithEveryCapturedPose) {
   std::filesystem::remove_all(dir);
 }
 
-// A torn last journal line (kill -9 during a write) is skipped and reported, not fatal.
-// Issue "The daemon" (nothing lost): a pose is answered POSE_CAPTURED only once its record is in
-// the journal on disk. The station's work goes to a queue here (the daemon's worker thread): while
-// the journal appends wait, no pose is answered; each answer comes after its own append.
-TEST(StationPersistence, PoseIsAnsweredOnlyOnceItsRecordIsJournaled) {
+// The daemon's worker, as a queue the test runs: the 26-pose Xbus cube (seed 5) replayed into
+// `station`, its work queued in `queue` instead of run. False (with `error`) when it cannot.
+using WorkQueue = std::vector<std::pair<std::function<void()>, std::function<void()>>>;
+bool ReplayCubeIntoAQueue(daemon::Station* station, WorkQueue* queue, const std::string& name,
+                          std::string* error) {
   sim::SimCaptureOptions o;
   o.protocol = drivers::Protocol::kXbus;
   o.poses = CubePoses26();
   o.session.seed = 5;
   sim::SimCapture c;
-  std::string error;
-  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
+  if (!sim::BuildSimCapture(o, &c, error)) return false;
+  station->SetExecutor([queue](std::function<void()> work, std::function<void()> done) {
+    queue->emplace_back(std::move(work), std::move(done));
+  });
+  const std::string path = WriteSimCaptureFile(c, name);
+  drivers::CaptureReader reader;
+  daemon::ReplayStats stats;
+  const bool ok =
+      reader.Open(path, error) && daemon::ReplayInto(&reader, station, true, {}, &stats, error);
+  std::remove(path.c_str());
+  return ok;
+}
+
+// A torn last journal line (kill -9 during a write) is skipped and reported, not fatal.
+// Issue "The daemon" (nothing lost): a pose is answered POSE_CAPTURED only once its record is in
+// the journal on disk. The station's work goes to a queue here (the daemon's worker thread): while
+// the journal appends wait, no pose is answered; each answer comes after its own append.
+TEST(StationPersistence, PoseIsAnsweredOnlyOnceItsRecordIsJournaled) {
   const std::string dir = ::testing::TempDir() + "station_answer_" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
   daemon::StationOptions so;
@@ -391,15 +407,9 @@ TEST(StationPersistence, PoseIsAnsweredOnlyOnceItsRecordIsJournaled) {
       answered_before_journal = answered_before_journal || journal_lines() < captured;
     }
   });
-  std::vector<std::pair<std::function<void()>, std::function<void()>>> queue;
-  station.SetExecutor([&](std::function<void()> work, std::function<void()> done) {
-    queue.emplace_back(std::move(work), std::move(done));
-  });
-  const std::string path = WriteSimCaptureFile(c, "answer");
-  drivers::CaptureReader reader;
-  ASSERT_TRUE(reader.Open(path, &error)) << error;
-  daemon::ReplayStats stats;
-  ASSERT_TRUE(daemon::ReplayInto(&reader, &station, true, {}, &stats, &error)) << error;
+  WorkQueue queue;
+  std::string error;
+  ASSERT_TRUE(ReplayCubeIntoAQueue(&station, &queue, "answer", &error)) << error;
   EXPECT_EQ(started, 26);
   EXPECT_EQ(captured, 0) << "answered while the journal appends still waited";
   EXPECT_EQ(journal_lines(), 0);
@@ -411,20 +421,12 @@ TEST(StationPersistence, PoseIsAnsweredOnlyOnceItsRecordIsJournaled) {
   EXPECT_EQ(captured, 26);
   EXPECT_EQ(journal_lines(), 26);
   EXPECT_FALSE(answered_before_journal);
-  std::remove(path.c_str());
   std::filesystem::remove_all(dir);
 }
 
 // A station being replaced (SIGHUP, reset) skips the solves still queued for it, whose results
 // would be discarded: the service's drain then waits only for the writes, which all still run.
 TEST(StationPersistence, AnAbandonedStationSkipsItsQueuedSolvesButNotItsWrites) {
-  sim::SimCaptureOptions o;
-  o.protocol = drivers::Protocol::kXbus;
-  o.poses = CubePoses26();
-  o.session.seed = 5;
-  sim::SimCapture c;
-  std::string error;
-  ASSERT_TRUE(sim::BuildSimCapture(o, &c, &error)) << error;
   const std::string dir = ::testing::TempDir() + "station_abandon_" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
   daemon::StationOptions so;
@@ -433,15 +435,9 @@ TEST(StationPersistence, AnAbandonedStationSkipsItsQueuedSolvesButNotItsWrites) 
   daemon::Station station({"imu"}, so, [&](const nlohmann::json& e) {
     if (e["class"] == "POSE_CAPTURED") ++captured;
   });
-  std::vector<std::pair<std::function<void()>, std::function<void()>>> queue;
-  station.SetExecutor([&](std::function<void()> work, std::function<void()> done) {
-    queue.emplace_back(std::move(work), std::move(done));
-  });
-  const std::string path = WriteSimCaptureFile(c, "abandon");
-  drivers::CaptureReader reader;
-  ASSERT_TRUE(reader.Open(path, &error)) << error;
-  daemon::ReplayStats stats;
-  ASSERT_TRUE(daemon::ReplayInto(&reader, &station, true, {}, &stats, &error)) << error;
+  WorkQueue queue;
+  std::string error;
+  ASSERT_TRUE(ReplayCubeIntoAQueue(&station, &queue, "abandon", &error)) << error;
   ASSERT_GE(queue.size(), 26u) << "a journal append per pose";
   // The worker: the first 13 answers queue their poses' solves; then the station is abandoned
   // (the service drops it) and the rest of the queue runs without the loop (its `done`s would
@@ -464,7 +460,6 @@ TEST(StationPersistence, AnAbandonedStationSkipsItsQueuedSolvesButNotItsWrites) 
   // Each of the 13 answered poses queued a solve per model (the default pose models: at least
   // one), and none had started: all skipped.
   EXPECT_GE(station.abandoned_solves(), 13);
-  std::remove(path.c_str());
   std::filesystem::remove_all(dir);
 }
 
