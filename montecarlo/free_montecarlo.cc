@@ -108,13 +108,15 @@ class FreeMonteCarlo {
     std::filesystem::remove(path);
     if (!read) return;
     const nlohmann::json& device = replay.result["devices"].begin().value();
-    out->intervals = device.value("poses", 0);
     const auto it = device["models"].find(o_.model);
     if (it == device["models"].end()) {
       out->error = "no result for the model";
       return;
     }
     const nlohmann::json& r = *it;
+    // The still intervals the model used (its intervals less its values in motion; the device's
+    // pose count is the records a pose-based model took, none for a magnetometer alone).
+    out->intervals = r.value("intervals", 0) - r.value("motion_points", 0);
     Gate(r, out);
     if (!Truth(capture, r, out)) return;
     Score(r, out);

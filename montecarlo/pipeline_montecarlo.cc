@@ -283,6 +283,7 @@ class PipelineMonteCarlo {
       session.repeat_poses_through_chamber = true;
     }
     if (o_.rate_hz > 0) session.rate_hz = o_.rate_hz;
+    session.mag_rate_hz = o_.mag_rate_hz;
     return o;
   }
 

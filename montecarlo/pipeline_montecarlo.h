@@ -77,6 +77,9 @@ struct PipelineMonteCarloOptions {
   std::vector<double> held_out_c;
   std::string thermal_orders = "chosen";
   double rate_hz = 0.0;  // the simulated device's output rate (0: the protocol's default)
+  // The magnetometer's own rate below the output rate: each value held until the next (0: every
+  // sample a new value).
+  double mag_rate_hz = 0.0;
   std::string keep_dir;  // when set: the captures of runs with a parameter beyond 4 sigma go here
   double keep_p_below = 0.0;  // with keep_dir: also the runs whose chi^2 p-value is below this
   // Called after each run that gave an estimate with the number of such runs so far, one call at

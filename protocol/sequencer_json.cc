@@ -16,7 +16,9 @@ namespace {
 nlohmann::json Triad(const TriadStats& s) {
   nlohmann::json cov = nlohmann::json::array();
   for (int r = 0; r < 3; ++r) cov.push_back(JsonVec3(s.covariance.row(r).transpose()));
-  return {{"mean", JsonVec3(s.mean)}, {"covariance", cov}, {"count", s.count}};
+  nlohmann::json j = {{"mean", JsonVec3(s.mean)}, {"covariance", cov}, {"count", s.count}};
+  if (s.values > 0) j["values"] = s.values;
+  return j;
 }
 
 }  // namespace
@@ -104,6 +106,12 @@ bool ReadTriad(const nlohmann::json& j, TriadStats* t) {
   t->count = j["count"].get<std::int64_t>();
   const auto& c = j["covariance"];
   if (!c.is_array() || c.size() != 3 || t->count < 1) return false;
+  // A triad that held its values (absent in journals written before it was counted: samples).
+  if (j.contains("values")) {
+    if (!j["values"].is_number_integer()) return false;
+    t->values = j["values"].get<std::int64_t>();
+    if (t->values < 2 || t->values > t->count) return false;
+  }
   for (int r = 0; r < 3; ++r) {
     Eigen::Vector3d row;
     if (!ReadJsonVec3(c[static_cast<std::size_t>(r)], &row)) return false;

@@ -57,6 +57,7 @@ void PrintPipelineJson(const montecarlo::PipelineMonteCarloOptions& o,
                                     {"chamber", o.chamber},
                                     {"thermal_orders", o.chamber.empty() ? "" : o.thermal_orders},
                                     {"device_rate_hz", o.rate_hz},
+                                    {"mag_rate_hz", o.mag_rate_hz},
                                     {"dwell_s", o.dwell_s},
                                     {"seed", o.seed},
                                     {"runs", o.runs},
@@ -243,6 +244,11 @@ void AddPipelineMonteCarloOptions(CLI::App* mc, PipelineMonteCarloArgs* args) {
   mc->add_option("--device-rate", pipe->rate_hz,
                  "with --pipeline: the simulated device's output rate, Hz (default: the "
                  "protocol's); with --noise session: the simulator's (default 100)")
+      ->check(CLI::NonNegativeNumber);
+  mc->add_option("--mag-rate", pipe->mag_rate_hz,
+                 "with --pipeline: the magnetometer's own rate below the device's, Hz (each "
+                 "value held until the next, as an Xsens or MIP with a slower magnetometer "
+                 "sends it; default: every sample a new value)")
       ->check(CLI::NonNegativeNumber);
   CLI::Option* keep = mc->add_option(
       "--keep", pipe->keep_dir,

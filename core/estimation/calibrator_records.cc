@@ -108,7 +108,7 @@ bool Calibrator::add_pose(const PoseRecord& record, std::string* error) {
   double floor_var = 0.0;
   if (options_.noise_density > 0 && duration_s > 0) {
     floor_var = options_.noise_density * options_.noise_density / (2.0 * duration_s) *
-                WhiteFloorFraction(triad->mean_covariance ? 0 : triad->count);
+                WhiteFloorFraction(triad->mean_covariance ? 0 : IndependentCount(*triad));
   }
   // Floor the eigenvalues (the mean is never known much better than the white noise allows), then
   // add the pose-to-pose offset variance.

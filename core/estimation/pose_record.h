@@ -28,19 +28,32 @@ struct TriadStats {
   // noise (batch means over sub-windows). Absent: covariance / count is used.
   std::optional<Eigen::Matrix3d> mean_covariance;
   std::int64_t count = 0;
+  // The distinct values among the count samples when the triad held its values (a magnetometer
+  // slower than the stream sends each value once per sample until the next: 50 Hz in a 100-Hz
+  // stream twice): the mean's white noise averages over values, not samples, and covariance is
+  // then the values' own. 0: each sample is its own value.
+  std::int64_t values = 0;
 };
 
+// How many independent values a triad's mean averages: its values when it held them, else its
+// samples.
+inline std::int64_t IndependentCount(const TriadStats& s) {
+  return s.values > 0 ? s.values : s.count;
+}
+
 // The covariance of a triad's mean from its own samples: the producer's mean_covariance, or the
-// sample covariance / count (unbiased, with count - 1 degrees of freedom).
+// sample covariance / the independent count (unbiased, with that count - 1 degrees of freedom).
 inline Eigen::Matrix3d SampleMeanCovariance(const TriadStats& s) {
   if (s.mean_covariance) return *s.mean_covariance;
-  const double count = static_cast<double>(std::max<std::int64_t>(1, s.count));
+  const double count = static_cast<double>(std::max<std::int64_t>(1, IndependentCount(s)));
   return s.covariance / count;
 }
 
 // The degrees of freedom of SampleMeanCovariance (0: not a sample covariance, nothing to correct).
 inline double SampleMeanDof(const TriadStats& s) {
-  return s.mean_covariance ? 0.0 : static_cast<double>(std::max<std::int64_t>(1, s.count) - 1);
+  return s.mean_covariance
+             ? 0.0
+             : static_cast<double>(std::max<std::int64_t>(1, IndependentCount(s)) - 1);
 }
 
 // A pose weighed by the inverse of a covariance estimated from its own samples is weighed too

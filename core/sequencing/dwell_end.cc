@@ -55,8 +55,10 @@ void Sequencer::Complete(double t_s) {
     const auto n1 = static_cast<double>(first_half_[t].count());
     const Eigen::Vector3d m1 = first_half_[t].mean();
     const Eigen::Vector3d m2 = (acc_[t].mean() * n - m1 * n1) / (n - n1);
+    // A magnetometer slower than the stream holds each value over several samples.
+    const double samples_per_value = n / static_cast<double>(acc_[t].independent());
     for (int a = 0; a < 3; ++a) {
-      const double limit = detector_->HalvesDriftLimit(t, a, n1, n - n1);
+      const double limit = detector_->HalvesDriftLimit(t, a, n1, n - n1, samples_per_value);
       const double drift = std::abs(m2[a] - m1[a]);
       if (!(drift <= limit)) {
         const std::string why = fmt::format(

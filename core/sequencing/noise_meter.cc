@@ -7,6 +7,7 @@
 
 #include "core/sequencing/stillness.h"
 #include "core/sequencing/stillness_stats.h"
+#include "core/sequencing/triad_accumulator.h"
 
 namespace turncal {
 
@@ -101,12 +102,13 @@ void NoiseMeter::Moments::Add(const Eigen::Vector3d& v) {
 }
 
 bool NoiseMeter::CountsHeldOnce(int t) const {
-  bool repeats = false;
+  std::int64_t samples = 0, values = 0;
   for (const auto& p : parts_) {
     if (p.fresh[static_cast<std::size_t>(t)].n < 3) return false;
-    repeats |= p.fresh[static_cast<std::size_t>(t)].n < p.all[static_cast<std::size_t>(t)].n;
+    samples += p.all[static_cast<std::size_t>(t)].n;
+    values += p.fresh[static_cast<std::size_t>(t)].n;
   }
-  return repeats;
+  return HeldRepeats(samples, values);
 }
 
 const NoiseMeter::Moments& NoiseMeter::Of(const Part& p, int t) const {

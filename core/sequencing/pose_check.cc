@@ -42,7 +42,7 @@ PoseFit CheckPoseMean(const TriadStats& measured, const TriadPrediction& predict
                       double false_alarm, const char* triad_name) {
   PoseFit fit;
   Eigen::Matrix3d s = prediction.covariance;
-  if (measured.count > 0) s += measured.covariance / static_cast<double>(measured.count);
+  if (measured.count > 0) s += SampleMeanCovariance(measured);
   const Eigen::Vector3d d = measured.mean - prediction.mean;
   fit.limit2 = Chi2Limit3(false_alarm);
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(s);

@@ -374,7 +374,7 @@ bool Sequencer::SoakSettled(double t_s) {
       return true;
     }
     const HalvesLimit limit = [this](int triad, int axis, double n1, double n2) {
-      return detector_->HalvesDriftLimit(triad, axis, n1, n2);
+      return detector_->HalvesDriftLimit(triad, axis, n1, n2, detector_->samples_per_value(triad));
     };
     std::string why;
     if (bias_settle_.Settled(soak_->window_s, limit, &why)) {

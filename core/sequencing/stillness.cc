@@ -10,6 +10,7 @@
 #include <cmath>
 
 #include "core/sequencing/stillness_stats.h"
+#include "core/sequencing/triad_accumulator.h"
 
 namespace turncal {
 
@@ -150,6 +151,8 @@ StillnessDetector::StillnessDetector(const NoiseProfile& profile, const Stillnes
   for (int t = 0; t < 3; ++t) use_[t] = profile.sigma[t].has_value();
   const double dof = profile.sigma_dof;
   q_var_ = VarianceRatioLimit(options.false_alarm, w_ - 1, dof);
+  q_var_triad_.fill(q_var_);
+  fresh_.assign(static_cast<std::size_t>(w_), 0);
   z_ = TwoSidedZ(options.false_alarm, dof);
   // A stored profile carries what the calibrators identified before a restart.
   for (int t = 0; t < 3; ++t) {
@@ -159,14 +162,16 @@ StillnessDetector::StillnessDetector(const NoiseProfile& profile, const Stillnes
   finding_.kind = StillFinding::kFilling;
 }
 
-double StillnessDetector::HalvesDriftLimit(int triad, int axis, double n1, double n2) const {
+double StillnessDetector::HalvesDriftLimit(int triad, int axis, double n1, double n2,
+                                           double samples_per_value) const {
   const auto t = static_cast<std::size_t>(triad);
   if (!profile_.sigma[t] || !(n1 > 0) || !(n2 > 0)) return 0.0;
   const double sigma = (*profile_.sigma[t])[axis];
   const double scale = drift_scale_[t];
   const double wander = options_.bias_drift[t].HalvesDifferenceVariance(axis, n1 / profile_.rate_hz,
                                                                         n2 / profile_.rate_hz);
-  return z_ * std::sqrt(sigma * sigma * (1 / n1 + 1 / n2) + scale * scale * wander);
+  const double held = std::max(1.0, samples_per_value);
+  return z_ * std::sqrt(sigma * sigma * held * (1 / n1 + 1 / n2) + scale * scale * wander);
 }
 
 void StillnessDetector::SetIdentifiedDrift(int triad, const IdentifiedDrift& identified) {
@@ -179,7 +184,7 @@ void StillnessDetector::SetDriftScale(int triad, double scale) {
   drift_scale_[t] = std::isfinite(scale) && scale > 0 ? scale : 1.0;
   for (int a = 0; a < 3; ++a) {
     window_drift_limit_[3 * t + static_cast<std::size_t>(a)] =
-        HalvesDriftLimit(triad, a, h_, w_ - h_);
+        HalvesDriftLimit(triad, a, h_, w_ - h_, samples_per_value_[t]);
   }
 }
 
@@ -190,6 +195,8 @@ const Eigen::Vector3d& StillnessDetector::At(std::size_t logical, int triad) con
 void StillnessDetector::Clear() {
   size_ = 0;
   head_ = 0;
+  fresh_in_window_.fill(0);
+  has_last_.fill(false);
   still_run_ = 0;
   medians_valid_ = false;
   finding_ = StillFinding{};
@@ -212,6 +219,31 @@ void StillnessDetector::Recompute() {
     }
   }
   pushes_since_recompute_ = 0;
+  UpdateHeld();
+}
+
+// A full window whose triad repeated at least a fifth of its samples held its values: the window's
+// halves and its scatter average samples / values times fewer independent values, and the drift
+// and variance limits are set for them (else a 50-Hz magnetometer in a 100-Hz stream breaks
+// stillness on noise).
+void StillnessDetector::UpdateHeld() {
+  if (size_ < static_cast<std::size_t>(w_)) return;
+  for (int t = 0; t < 3; ++t) {
+    if (!use_[t]) continue;
+    const auto i = static_cast<std::size_t>(t);
+    const double k = HeldRepeats(w_, fresh_in_window_[i])
+                         ? static_cast<double>(w_) / static_cast<double>(fresh_in_window_[i])
+                         : 1.0;
+    if (std::abs(k - samples_per_value_[i]) <= 0.02 * samples_per_value_[i]) continue;
+    samples_per_value_[i] = k;
+    const double values = std::max(2.0, static_cast<double>(w_) / k);
+    q_var_triad_[i] =
+        k > 1.0 ? VarianceRatioLimit(options_.false_alarm, values - 1, profile_.sigma_dof) : q_var_;
+    for (int a = 0; a < 3; ++a) {
+      window_drift_limit_[3 * i + static_cast<std::size_t>(a)] =
+          HalvesDriftLimit(t, a, h_, w_ - h_, k);
+    }
+  }
 }
 
 void StillnessDetector::UpdateMedians() {
@@ -260,6 +292,22 @@ bool StillnessDetector::Push(const StillSample& s, StillSample* evicted, bool* h
   *has_evicted = false;
   if (std::isfinite(s.temp_c)) last_temp_c_ = s.temp_c;
   const auto w = static_cast<std::size_t>(w_);
+  std::uint8_t fresh = 0;
+  for (int t = 0; t < 3; ++t) {
+    const auto i = static_cast<std::size_t>(t);
+    if (!use_[t] || !s.has(t)) continue;
+    if (!has_last_[i] || s.v[t] != last_value_[i]) fresh |= static_cast<std::uint8_t>(1u << t);
+    last_value_[i] = s.v[t];
+    has_last_[i] = true;
+  }
+  const std::size_t slot = size_ == w ? head_ : (head_ + size_) % w;
+  if (size_ == w) {
+    for (int t = 0; t < 3; ++t) {
+      fresh_in_window_[static_cast<std::size_t>(t)] -= (fresh_[slot] >> t) & 1u;
+    }
+  }
+  fresh_[slot] = fresh;
+  for (int t = 0; t < 3; ++t) fresh_in_window_[static_cast<std::size_t>(t)] += (fresh >> t) & 1u;
   if (size_ == w) {
     *evicted = ring_[head_];
     *has_evicted = true;
@@ -336,7 +384,8 @@ void StillnessDetector::Evaluate() {
       const double sigma = (*profile_.sigma[t])[a];
       double var = (s2_[c] - s1_[c] * s1_[c] / n) / (n - 1);
       if (var < 0) var = 0;  // rounding; NaN stays NaN
-      consider(StillFinding::kVariance, t, a, std::sqrt(var), sigma * std::sqrt(q_var_));
+      consider(StillFinding::kVariance, t, a, std::sqrt(var),
+               sigma * std::sqrt(q_var_triad_[static_cast<std::size_t>(t)]));
       const double drift = (s1_[c] - h1_[c]) / n2 - h1_[c] / n1;
       consider(StillFinding::kDrift, t, a, std::abs(drift),
                window_drift_limit_[static_cast<std::size_t>(c)]);

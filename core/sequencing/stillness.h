@@ -225,9 +225,17 @@ class StillnessDetector {
   const NoiseProfile& profile() const { return profile_; }
   // The two-sided quantile the drift test uses (normal, or Student's t for a measured noise).
   double drift_z() const { return z_; }
+  // Samples per value of a triad that holds its values (1: each sample its own), as of the last
+  // full window.
+  double samples_per_value(int triad) const {
+    return samples_per_value_[static_cast<std::size_t>(triad)];
+  }
   // The limit on |mean(second) - mean(first)| on one axis of a triad for halves of n1 and n2
   // samples: z sqrt(sigma^2 (1/n1 + 1/n2) + the bias wander's variance between them, scaled).
-  double HalvesDriftLimit(int triad, int axis, double n1, double n2) const;
+  // A triad that holds each value for `samples_per_value` samples (a magnetometer slower than
+  // the stream) averages fewer values: its white part is that many times larger.
+  double HalvesDriftLimit(int triad, int axis, double n1, double n2,
+                          double samples_per_value = 1.0) const;
   // Scales a triad's bias wander (a sigma factor: the drift's strength the calibrator identified
   // from the session; 1 = options' bias_drift as given).
   void SetDriftScale(int triad, double scale);
@@ -253,8 +261,19 @@ class StillnessDetector {
   std::array<double, 9> anchor_{}, s1_{}, s2_{}, h1_{};
   std::array<double, 9> median_{}, robust_sigma_{};
   std::vector<double> scratch_;
+  void UpdateHeld();
+
   double q_var_ = 0.0;
   double z_ = 0.0;  // two-sided quantile of the drift and rate tests
+  // A triad that holds its values (a magnetometer slower than the stream): per ring slot, whether
+  // each triad's value was fresh (bit 1 << t); the fresh count in the window; the samples per
+  // value the limits were set for, and the variance test's limit at that many values.
+  std::vector<std::uint8_t> fresh_;
+  std::array<std::int64_t, 3> fresh_in_window_{};
+  std::array<Eigen::Vector3d, 3> last_value_{};
+  std::array<bool, 3> has_last_{};
+  std::array<double, 3> samples_per_value_{1.0, 1.0, 1.0};
+  std::array<double, 3> q_var_triad_{};
   std::array<double, 3> drift_scale_{1.0, 1.0, 1.0};
   std::array<double, 9> window_drift_limit_{};  // HalvesDriftLimit for the window's halves
   std::int64_t still_run_ = 0;

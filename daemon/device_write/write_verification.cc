@@ -209,9 +209,7 @@ nlohmann::json VerifyAtPose(const MeasurementModel& model, const Eigen::VectorXd
   const Eigen::Vector3d predicted_station = model.Predict(theta, record.pose);
   const Eigen::Vector3d measured = in_device_output(stats->mean);
   const Eigen::Vector3d predicted = in_device_output(predicted_station);
-  const Eigen::Matrix3d mean_cov = stats->mean_covariance
-                                       ? *stats->mean_covariance
-                                       : Eigen::Matrix3d(stats->covariance / stats->count);
+  const Eigen::Matrix3d mean_cov = SampleMeanCovariance(*stats);
   // The prediction's sigma in the device's output (through the re-expression, correlations
   // included).
   Eigen::Vector3d prediction_sigma = Eigen::Vector3d::Zero();

@@ -28,6 +28,45 @@ TEST(TriadAccumulator, MatchesTwoPassStatisticsFarFromZero) {
   EXPECT_EQ(acc.count(), 100000);
 }
 
+// A magnetometer at 50 Hz in a 100-Hz stream sends each value twice. Its mean averages 100
+// values, not 200 samples: z = (mean - truth) / sqrt(SampleMeanCovariance) has the variance of
+// Student's t with 99 dof (99/97) only when the values are counted; counted by its samples the
+// variance is twice that. A noisy triad that does not hold, and one below its resolution that
+// never changes, are counted by their samples.
+TEST(TriadAccumulator, AHeldTriadsMeanIsWeighedByItsValues) {
+  std::mt19937_64 rng(21);
+  std::normal_distribution<double> n(0, 1);
+  const Eigen::Vector3d truth(0.2, -0.05, 0.4);
+  const double sigma = 5e-4;
+  double z2 = 0.0;
+  int zs = 0;
+  for (int window = 0; window < 2000; ++window) {
+    TriadAccumulator held, fresh, frozen;
+    Eigen::Vector3d v = truth;
+    for (int k = 0; k < 200; ++k) {
+      if (k % 2 == 0) v = truth + sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));
+      held.Add(v);
+      fresh.Add(truth + sigma * Eigen::Vector3d(n(rng), n(rng), n(rng)));
+      frozen.Add(truth);
+    }
+    const TriadStats s = held.Stats();
+    ASSERT_EQ(s.count, 200);
+    ASSERT_EQ(s.values, 100);
+    ASSERT_EQ(IndependentCount(s), 100);
+    ASSERT_EQ(fresh.Stats().values, 0);
+    ASSERT_EQ(frozen.Stats().values, 0);
+    ASSERT_EQ(IndependentCount(frozen.Stats()), 200);
+    const Eigen::Matrix3d w = SampleMeanCovariance(s);
+    for (int a = 0; a < 3; ++a) {
+      const double z = (s.mean[a] - truth[a]) / std::sqrt(w(a, a));
+      z2 += z * z;
+      ++zs;
+    }
+  }
+  // Var(z^2) for t_99 is about 2 + 6 / (99 - 4): the mean's standard error over 6000 z's 0.019.
+  EXPECT_NEAR(z2 / zs, 99.0 / 97.0, 4 * std::sqrt((2.0 + 6.0 / 95.0) / zs));
+}
+
 TEST(NoiseMeter, MeasuresTheNoiseOfAStillSensorWithinItsSamplingError) {
   std::mt19937_64 rng(3);
   std::normal_distribution<double> n(0, 1);
@@ -236,6 +275,36 @@ TEST(StillnessDetector, NoFalseAlarmOverTenMinutesOfStillNoise) {
   EXPECT_EQ(moving, 0);
   // 5 robust sigmas on 6 axes: about 6 x 5.7e-7 x 60000 = 0.2 expected, a few at most.
   EXPECT_LE(outliers, 3);
+}
+
+// A magnetometer slower than the stream (50 Hz and 10 Hz in a 100-Hz stream) holds each value:
+// the window's halves and scatter average fewer values than samples, and limits set for the
+// samples broke stillness on its noise. Ten minutes of still noise: no false alarm.
+TEST(StillnessDetector, AMagnetometerSlowerThanTheStreamIsNoFalseAlarm) {
+  for (const int hold : {2, 10}) {
+    NoiseProfile p = WhiteProfile(100);
+    p.sigma[kTriadMag] = Eigen::Vector3d::Constant(5e-4);
+    StillnessDetector d(p, StillnessOptions{});
+    std::mt19937_64 rng(7 + static_cast<unsigned>(hold));
+    std::normal_distribution<double> n(0, 1);
+    int moving = 0;
+    std::string first;
+    StillSample ev;
+    bool has = false;
+    Eigen::Vector3d mag = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 60000; ++k) {
+      StillSample s = WhiteStill(k * 0.01, &rng);
+      if (k % hold == 0) {
+        mag = Eigen::Vector3d(0.2, -0.05, 0.4) + 5e-4 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+      }
+      s.v[kTriadMag] = mag;
+      s.present = 0b111;
+      if (!d.Push(s, &ev, &has) && k >= 2 * d.window()) {
+        if (moving++ == 0) first = d.finding().Describe();
+      }
+    }
+    EXPECT_EQ(moving, 0) << "held " << hold << ": " << first;
+  }
 }
 
 // A slow turn about the vertical at `rate` rad/s, or a tilt: detected, with the reason naming it.

@@ -24,6 +24,42 @@ TEST(Messages, VersionGreetingCarriesProtocolVersion) {
   EXPECT_EQ(v.dump().find('\n'), std::string::npos);
 }
 
+// A pose record's triad that held its values (a magnetometer slower than the stream) keeps its
+// count of values through the journal; a journal from before has none (each sample a value); a
+// count of values that cannot be is refused.
+TEST(PoseRecordJson, AHeldTriadsValuesRoundTripAndOldJournalsStillParse) {
+  PoseRecord r;
+  r.t_start_s = 1.0;
+  r.t_end_s = 3.0;
+  TriadStats mag;
+  mag.mean = Eigen::Vector3d(0.2, -0.05, 0.4);
+  mag.covariance = Eigen::Matrix3d::Identity() * 2.5e-7;
+  mag.count = 200;
+  mag.values = 100;
+  r.mag = mag;
+  TriadStats acc = mag;
+  acc.values = 0;
+  r.acc = acc;
+  nlohmann::json j = ToJson(r);
+  EXPECT_EQ(j["mag"]["values"], 100);
+  EXPECT_FALSE(j["acc"].contains("values"));
+  PoseRecord back;
+  std::string error;
+  ASSERT_TRUE(ParsePoseRecord(j, &back, &error)) << error;
+  ASSERT_TRUE(back.mag && back.acc);
+  EXPECT_EQ(back.mag->values, 100);
+  EXPECT_EQ(IndependentCount(*back.mag), 100);
+  EXPECT_EQ(IndependentCount(*back.acc), 200);
+  j["mag"].erase("values");
+  ASSERT_TRUE(ParsePoseRecord(j, &back, &error)) << error;
+  EXPECT_EQ(IndependentCount(*back.mag), 200);
+  for (const nlohmann::json& bad :
+       {nlohmann::json(201), nlohmann::json(1), nlohmann::json("100")}) {
+    j["mag"]["values"] = bad;
+    EXPECT_FALSE(ParsePoseRecord(j, &back, &error)) << bad;
+  }
+}
+
 // noise/DEVICE.json: the profile with the drift the calibrators identified round-trips; a file
 // from before it had one still parses; a malformed one is refused with a reason.
 TEST(NoiseProfileJson, IdentifiedDriftRoundTripsAndOldFilesStillParse) {
