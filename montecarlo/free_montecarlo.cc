@@ -165,6 +165,7 @@ class FreeMonteCarlo {
       o.session.start_s = 0.0;
       o.session.mag_rate_hz = o_.mag_rate_hz;
       o.session.mag_bandwidth_hz = o_.mag_bandwidth_hz;
+      o.session.mag_lag_s = o_.mag_lag_s;
       o.session.mag_noise_filtered = o_.mag_noise_filtered;
       if (o_.device_rate_hz > 0) o.session.rate_hz = o_.device_rate_hz;
     }

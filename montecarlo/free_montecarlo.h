@@ -61,6 +61,7 @@ struct FreeMonteCarloOptions {
   // The magnetometer's first-order low-pass, Hz (SessionSimOptions::mag_bandwidth_hz; 0: none),
   // and whether the station is told it ([free] mag_bandwidth_hz) or not (what ignoring it costs).
   double mag_bandwidth_hz = 0.0;
+  double mag_lag_s = 0.0;  // SessionSimOptions::mag_lag_s
   bool bandwidth_known = true;
   bool mag_noise_filtered = false;  // SessionSimOptions::mag_noise_filtered
   // A magnet passing by at magnet_at_s (s into the session; < 0: none) for magnet_s, its

@@ -34,6 +34,9 @@ bool SessionSimOptions::IsValid(std::string* error) const {
   if (!(mag_rate_hz >= 0 && mag_bandwidth_hz >= 0)) {
     return fail("the magnetometer's rate and bandwidth must be >= 0");
   }
+  if (!(mag_lag_s >= 0 && mag_lag_s <= 1.0)) {
+    return fail("the magnetometer's lag must be in [0, 1] s");
+  }
   if (!(magnet_peak >= 0 && magnet_s > 0 && magnet_direction.norm() > 0)) {
     return fail("a magnet needs a peak >= 0, a duration > 0 and a direction");
   }

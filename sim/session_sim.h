@@ -97,6 +97,10 @@ struct SessionSimOptions {
   // field's magnitude is then attenuated by 1 / sqrt(1 + (w / (2 pi bandwidth))^2)).
   double mag_rate_hz = 0.0;
   double mag_bandwidth_hz = 0.0;
+  // The magnetometer's lag behind the stream's clock, s: each sample carries the field of this
+  // long before (rounded to whole samples of rate_hz; the first sample's field before the
+  // session's start; 0: none).
+  double mag_lag_s = 0.0;
   // With a bandwidth: the magnetometer's noise through the filter too (as a device's digital
   // filter filters its sensor's noise), scaled so that the filtered noise has the class's RMS;
   // its values are then correlated in time (exp(-2 pi bandwidth dt)). False: white noise added

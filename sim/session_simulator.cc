@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <optional>
 #include <random>
 
@@ -433,6 +434,13 @@ class SessionSimulator {
       const double phase = 2 * M_PI * (tk - o_.magnet_at_s) / o_.magnet_s;
       mag += o_.magnet_peak * 0.5 * (1.0 - std::cos(phase)) * o_.magnet_direction.normalized();
     }
+    if (o_.mag_lag_s > 0) {
+      // A lagging magnetometer: the field of lag samples before (the first sample's before it).
+      const auto lag = static_cast<std::size_t>(std::llround(o_.mag_lag_s * o_.rate_hz));
+      mag_lagged_.push_back(mag);
+      while (mag_lagged_.size() > lag + 1) mag_lagged_.pop_front();
+      mag = mag_lagged_.front();
+    }
     if (o_.mag_bandwidth_hz > 0) {
       // The magnetometer's first-order low-pass, started at the first value; with the noise
       // filtered, the noise before it (the draws as below, scaled by sqrt((2 - alpha) / alpha):
@@ -525,6 +533,7 @@ class SessionSimulator {
   std::optional<sim::HandPath> hand_;
   // The magnetometer's low-pass state and its held value (SessionSimOptions::mag_*).
   std::optional<Eigen::Vector3d> mag_filtered_, mag_held_;
+  std::deque<Eigen::Vector3d> mag_lagged_;  // with a lag: the latest fields, oldest first
   std::int64_t mag_update_ = -1;
   // With a chamber: the die's temperature, and its prefix sums per sample.
   std::optional<DieTemperature> die_;

@@ -81,6 +81,7 @@ void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                                     {"device_rate_hz", o.device_rate_hz},
                                     {"mag_rate_hz", o.mag_rate_hz},
                                     {"mag_bandwidth_hz", o.mag_bandwidth_hz},
+                                    {"mag_lag_s", o.mag_lag_s},
                                     {"bandwidth_known", o.bandwidth_known},
                                     {"mag_noise_filtered", o.mag_noise_filtered},
                                     {"magnet_at_s", o.magnet_at_s},
@@ -112,12 +113,13 @@ void PrintFreeText(const montecarlo::FreeMonteCarloOptions& o,
   const std::string what =
       o.hand_s > 0
           ? fmt::format(
-                "{} hand rotations ({}, {} s at {} deg/s RMS{}{}{})", o.runs, o.hand_path, o.hand_s,
-                o.hand_rate_dps,
+                "{} hand rotations ({}, {} s at {} deg/s RMS{}{}{}{})", o.runs, o.hand_path,
+                o.hand_s, o.hand_rate_dps,
                 o.hand_pause_every_s > 0
                     ? fmt::format(", a {} s pause every {} s", o.hand_pause_s, o.hand_pause_every_s)
                     : "",
                 o.mag_rate_hz > 0 ? fmt::format(", magnetometer at {} Hz", o.mag_rate_hz) : "",
+                o.mag_lag_s > 0 ? fmt::format(", lagging the clock by {} s", o.mag_lag_s) : "",
                 o.mag_bandwidth_hz > 0
                     ? fmt::format(", its bandwidth {} Hz ({}{})", o.mag_bandwidth_hz,
                                   o.bandwidth_known ? "known to the station" : "not told",
@@ -280,6 +282,10 @@ void AddFreeMonteCarloCommand(CLI::App* app) {
                   "the magnetometer's own rate, Hz: below the device's it holds its value "
                   "between updates (default: a new value in every sample)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--mag-lag", o->mag_lag_s,
+                  "the magnetometer's lag behind the stream's clock, s (not told to the "
+                  "station: the norm does not see it)")
+      ->check(CLI::Range(0.0, 1.0));
   cmd->add_option("--mag-bandwidth", o->mag_bandwidth_hz,
                   "the magnetometer's first-order low-pass, Hz (0: none), told to the station "
                   "([free] mag_bandwidth_hz)")

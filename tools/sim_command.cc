@@ -432,6 +432,7 @@ void SetSessionOptions(const SimCommandArgs& args, sim::SimCaptureOptions* optio
   if (args.start_s >= 0) o.start_s = args.start_s;
   o.mag_rate_hz = args.mag_rate_hz;
   o.mag_bandwidth_hz = args.mag_bandwidth_hz;
+  o.mag_lag_s = args.mag_lag_s;
   o.mag_noise_filtered = args.mag_noise_filtered;
   if (args.magnet_at_s >= 0) {
     o.magnet_at_s = args.magnet_at_s;

@@ -156,6 +156,10 @@ void AddNoiseAndTableOptions(CLI::App* cmd, SimCommandArgs* args) {
                   "the magnetometer's own rate, Hz: below --rate the device repeats its last "
                   "value between updates (default: a new value in every sample)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--mag-lag", args->mag_lag_s,
+                  "the magnetometer's lag behind the stream's clock, s (each sample carries the "
+                  "field of this long before; default 0)")
+      ->check(CLI::Range(0.0, 1.0));
   cmd->add_option("--mag-bandwidth", args->mag_bandwidth_hz,
                   "the magnetometer's bandwidth, Hz (a first-order low-pass; default none)")
       ->check(CLI::NonNegativeNumber);

@@ -71,6 +71,7 @@ struct SimCommandArgs {
   double start_s = -1;  // negative: SessionSimOptions' (1 s)
   double mag_rate_hz = 0;
   double mag_bandwidth_hz = 0;
+  double mag_lag_s = 0;
   bool mag_noise_filtered = false;
 };
 
