@@ -30,8 +30,7 @@ class TriadAccumulator {
     last_ = x;
   }
   std::int64_t count() const { return all_.count; }
-  // Fresh values (each bit-identical repeat of the value before left out).
-  std::int64_t values() const { return fresh_.count; }
+  // Whether the triad held its values (HeldRepeats over its samples and fresh values).
   bool held() const { return HeldRepeats(all_.count, fresh_.count); }
   // The independent count: values when held, else samples.
   std::int64_t independent() const { return held() ? fresh_.count : all_.count; }
