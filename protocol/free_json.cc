@@ -215,9 +215,10 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
   if (fe.field_wander > 0) m["field_wander"] = fe.field_wander;
   if (fe.correlation.pairs > 0) {
     const MotionCorrelation& c = fe.correlation;
-    m["correlation"] = {{"pairs", c.pairs},         {"lag_one", c.lag_one},
-                        {"threshold", c.threshold}, {"spacing_s", c.spacing_s},
-                        {"tau_s", c.tau_s},         {"whitened", c.whitened}};
+    m["correlation"] = {
+        {"pairs", c.pairs},         {"lag_one", c.lag_one},     {"lag_one_raw", c.lag_one_raw},
+        {"threshold", c.threshold}, {"spacing_s", c.spacing_s}, {"tau_s", c.tau_s},
+        {"whitened", c.whitened}};
   }
   if (fe.norm_bias.size() == static_cast<Eigen::Index>(e.parameters.size())) {
     nlohmann::json bias = nlohmann::json::object();

@@ -218,8 +218,9 @@ class FreeCalibration {
     if (out_.motion_points < 20) return;
     const CorrelatedChain chain = MotionChain(terms, data_, 0.0);
     const Evaluated e = Evaluate(terms, theta_, upstream_, nullptr);
-    out_.correlation = MeasureMotionCorrelation(
-        ChainResiduals(chain, e.r), options_.correlation_min_lag_one, options_.correlation_sigmas);
+    out_.correlation =
+        MeasureMotionCorrelation(ChainResiduals(chain, e.r), options_.correlation_min_lag_one,
+                                 options_.correlation_sigmas, n_);
     out_.correlation.whitened = whiten_ && out_.correlation.correlated();
     joint_ = correlated_by_drift_ || out_.correlation.whitened;
   }

@@ -16,7 +16,8 @@ double MotionCorrelation::at_spacing() const {
 }
 
 MotionCorrelation MeasureMotionCorrelation(std::vector<MotionResidual> residuals,
-                                           double min_lag_one, double sigmas) {
+                                           double min_lag_one, double sigmas,
+                                           int fitted_parameters) {
   MotionCorrelation out;
   std::sort(residuals.begin(), residuals.end(),
             [](const MotionResidual& a, const MotionResidual& b) { return a.t_s < b.t_s; });
@@ -50,7 +51,23 @@ MotionCorrelation MeasureMotionCorrelation(std::vector<MotionResidual> residuals
     out.pairs = 0;
     return out;
   }
-  out.lag_one = rr / std::sqrt(aa * bb);
+  out.lag_one_raw = rr / std::sqrt(aa * bb);
+  out.lag_one = out.lag_one_raw;
+  if (fitted_parameters > 0 && out.lag_one_raw < 0.999) {
+    // The fit's projection allowed for (see the header): rho from
+    // lag_one_raw = (n rho - p kappa(rho)) / (n - p kappa(rho)) - 2 rho / n, by fixed point (its
+    // slope is about p / n).
+    const double n = out.pairs, p = fitted_parameters;
+    double rho = out.lag_one_raw;
+    for (int i = 0; i < 50; ++i) {
+      const double kappa = (1 + rho) / std::max(1 - rho, 1e-3);
+      const double next =
+          std::min(0.999, (out.lag_one_raw * (n - p * kappa) + p * kappa) / n + 2 * rho / n);
+      if (std::abs(next - rho) < 1e-12) break;
+      rho = next;
+    }
+    out.lag_one = rho;
+  }
   out.threshold = std::max(min_lag_one, sigmas / std::sqrt(static_cast<double>(out.pairs)));
   if (!(out.lag_one > out.threshold) || out.lag_one >= 0.999) return out;
   // tau with mean exp(-dt / tau) = lag_one: the mean rises with tau; bisection on log tau.
