@@ -88,6 +88,11 @@ int RunOnce(const turncal::daemon::Options& options, const turncal::daemon::Conf
                    m["rank"].get<int>(), m["gate"]["pass"].get<bool>() ? "pass" : "fail",
                    m["active_version"].get<int>() > 0 ? ", active" : "");
     }
+    // A unit that does not sit as its mount says (issue 38): its calibrations were held.
+    if (d.contains("mount") && !d["mount"]["check"]["ok"].get<bool>()) {
+      spdlog::warn("{}: calibrations held: {}", device,
+                   d["mount"]["check"]["problem"].get<std::string>());
+    }
   }
   return 0;
 }

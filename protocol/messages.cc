@@ -216,9 +216,22 @@ bool ParsePoseRequest(const nlohmann::json& request, std::int64_t t_host_ns, Ann
   return true;
 }
 
-bool ParseNextPoseRequest(const nlohmann::json& request, std::string* device, std::string* error) {
+bool ParseNextPoseRequest(const nlohmann::json& request, std::string* device, bool* batch,
+                          std::string* error) {
   if (!StringArgument(request, "device", device)) {
     *error = "next_pose: 'device' must be a device name";
+    return false;
+  }
+  if (batch) *batch = false;
+  const auto it = request.find("batch");
+  if (it == request.end()) return true;
+  if (!batch || !it->is_boolean()) {
+    *error = "next_pose: 'batch' must be true or false";
+    return false;
+  }
+  *batch = it->get<bool>();
+  if (*batch && !device->empty()) {
+    *error = "next_pose: give 'device' or 'batch', not both";
     return false;
   }
   return true;

@@ -97,8 +97,10 @@ bool ParseWatchRequest(const nlohmann::json& request, std::optional<WatchSpec>* 
 bool ParsePoseRequest(const nlohmann::json& request, std::int64_t t_host_ns, Announcement* out,
                       std::string* device, std::string* error);
 
-// next_pose: the device asked about (empty: none named).
-bool ParseNextPoseRequest(const nlohmann::json& request, std::string* device, std::string* error);
+// next_pose: the device asked about (empty: none named), or the whole fixture ("batch": true;
+// docs/BATCH.md). `batch` may be null: then "batch" is refused.
+bool ParseNextPoseRequest(const nlohmann::json& request, std::string* device, bool* batch,
+                          std::string* error);
 // {"cmd":"chamber","setpoint_c":40}: the chamber soaks at 40 degC (announced poses wait for the
 // sensor's temperature to settle); "setpoint_c": null or absent: a ramp, or no chamber.
 bool ParseChamberRequest(const nlohmann::json& request, std::optional<double>* setpoint_c,

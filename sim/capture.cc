@@ -139,8 +139,10 @@ std::vector<std::pair<Bytes, Bytes>> StartUp(drivers::Protocol p, std::uint64_t 
 
 // The model `name`, which must measure `kind`; nullptr with a message otherwise.
 std::unique_ptr<MeasurementModel> CheckedModel(const std::string& name, SensorKind kind,
-                                               std::string* error) {
-  auto model = MakeModel(name, ModelContext{}, error);
+                                               const Mat3<double>& mount, std::string* error) {
+  ModelContext context;
+  context.mounting = mount;
+  auto model = MakeModel(name, context, error);
   if (!model) return nullptr;
   if (name == "mag-physical") {
     *error = "mag-physical is for the observability demonstration only";
@@ -163,12 +165,13 @@ struct SimModels {
 };
 
 bool CheckModels(const SimCaptureOptions& options, SimModels* models, std::string* error) {
-  models->accel = CheckedModel(options.accel_model, SensorKind::kAccelerometer, error);
+  models->accel =
+      CheckedModel(options.accel_model, SensorKind::kAccelerometer, options.mount, error);
   if (!models->accel) return false;
-  models->mag = CheckedModel(options.mag_model, SensorKind::kMagnetometer, error);
+  models->mag = CheckedModel(options.mag_model, SensorKind::kMagnetometer, options.mount, error);
   if (!models->mag) return false;
   if (!options.gyro_model.empty()) {
-    models->gyro = CheckedModel(options.gyro_model, SensorKind::kGyroscope, error);
+    models->gyro = CheckedModel(options.gyro_model, SensorKind::kGyroscope, options.mount, error);
     if (!models->gyro) return false;
   }
   for (const auto& p : options.poses) {
@@ -391,6 +394,7 @@ bool BuildSimCapture(const SimCaptureOptions& options, SimCapture* out, std::str
   c.session_options = o;
   c.baud = baud;
   c.accel_model = options.accel_model;
+  c.mount = options.mount;
   c.mag_model = options.mag_model;
   c.gyro_model = options.gyro_model;
   c.header = HeaderFor(options, o, baud);

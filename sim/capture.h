@@ -38,6 +38,9 @@ struct SimCaptureOptions {
   // table's rate plus a turn-on bias (SimulateSession). Rate segments among the poses need one.
   std::string gyro_model;
   std::vector<TablePose> poses = DefaultSessionPoses();
+  // The unit's nominal mount on the table (issue 38; core/frames/mount.h): its models' context,
+  // so that its truth's mounting angles are small about it. Identity: case along the table.
+  Mat3<double> mount = Mat3<double>::Identity();
   // Noise class, dwell, seed, ... session.rate_hz <= 0 (the default here): the protocol's
   // default, mip 500 Hz, gx2 / xbus / xbus-legacy 100 Hz.
   SessionSimOptions session = [] {
@@ -72,7 +75,8 @@ struct SimCapture {
   std::int64_t offset_ns = 0;
   std::string accel_model;
   std::string mag_model;
-  std::string gyro_model;  // empty: none
+  std::string gyro_model;                         // empty: none
+  Mat3<double> mount = Mat3<double>::Identity();  // as simulated (the truth is about it)
   SimFaultReport faults;
 };
 

@@ -115,9 +115,30 @@ void PrintResult(const nlohmann::json& r) {
   }
 }
 
+// A batch's units, one line each (issue 38).
+void PrintBatchUnits(const nlohmann::json& batch) {
+  for (const auto& u : batch.value("units", nlohmann::json::array())) {
+    fmt::print("  {:<12} slot {:<6} {:>3} poses  {}\n", u.value("device", "?"),
+               u["slot"].is_string() ? u["slot"].get<std::string>() : "-", u.value("poses", 0),
+               u.value("state", "?"));
+  }
+}
+
 void PrintNextPose(const nlohmann::json& a) {
   if (!a.value("ok", false)) {
     fmt::print("no recommendation: {}\n", a.value("error", "?"));
+    if (a.contains("batch")) PrintBatchUnits(a["batch"]);
+    return;
+  }
+  if (a.contains("batch")) {
+    fmt::print("next pose for the batch ({} of {} units planned): {}\n",
+               a["batch"].value("planned", 0), a["batch"]["units"].size(), PoseJsonText(a["pose"]));
+    const int to_gate = a.value("poses_to_gate", -1);
+    if (to_gate >= 0) {
+      fmt::print("poses to the last unit's gate: {} ({:.0f} s of table time)\n", to_gate,
+                 a.value("seconds_to_gate", 0.0));
+    }
+    PrintBatchUnits(a["batch"]);
     return;
   }
   if (a.value("pose_source", "") == "free") {
@@ -183,7 +204,8 @@ constexpr Manual kNextPoseManual = {
     "The most informative pose to capture next for a device (D-optimal over its models), and "
     "how many poses the gate still needs. {socket}",
     "turncal next-pose\n"
-    "turncal next-pose --device imu2 --json",
+    "turncal next-pose --device imu2 --json\n"
+    "turncal next-pose --batch       # the whole fixture, to the last unit's gate",
     "0, also when there is no recommendation (printed as \"no recommendation: ...\"); 2 as "
     "for every client command: the daemon cannot be reached, it answered ERROR, or a "
     "command-line mistake",
@@ -285,15 +307,21 @@ void AddClientCommands(CLI::App* app) {
   struct NextArgs {
     Common common;
     std::string device;
+    bool batch = false;
   };
   auto next = std::make_shared<NextArgs>();
   auto* n = app->add_subcommand("next-pose", "the most informative pose to capture next");
   SetManual(n, kNextPoseManual);
   AddCommon(n, &next->common);
-  n->add_option("--device", next->device, "device (default: the first)");
+  auto* device_option = n->add_option("--device", next->device, "device (default: the first)");
+  n->add_flag(
+       "--batch", next->batch,
+       "the whole fixture: every unit still short of a gate planned together (docs/BATCH.md)")
+      ->excludes(device_option);
   n->callback([next] {
     nlohmann::json request = {{"cmd", "next_pose"}};
     if (!next->device.empty()) request["device"] = next->device;
+    if (next->batch) request["batch"] = true;
     throw CLI::RuntimeError(Simple("next-pose", next->common, request, PrintNextPose));
   });
 

@@ -3,8 +3,11 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <memory>
 #include <nlohmann/json.hpp>
 
+#include "core/frames/mount.h"
+#include "sim/simulated_batch.h"
 #include "sim/simulated_session.h"
 #include "tools/help_text.h"
 
@@ -23,7 +26,12 @@ struct PlanCompareArgs {
   double table_rate_dps = TableMotion{}.rate_dps[0];
   double table_accel_dps2 = TableMotion{}.accel_dps2[0];
   std::string objective = "time";
+  int units = 0;  // > 0: a fixture of that many units (docs/BATCH.md)
 };
+
+// A fixture's units turn through four orientations: as placed, a quarter turn about the
+// vertical, upside down, and on its side (the case's z along the table's y).
+const char* const kBatchMounts[] = {"+x+y+z", "-y+x+z", "+x-y-z", "+z+x+y"};
 
 // Table seconds of the first `count` poses from home: moves, settling and dwells.
 double SessionSeconds(const std::vector<TablePose>& poses, int count, const TableMotion& table,
@@ -58,10 +66,102 @@ struct Tally {
 constexpr Manual kPlanVsCubeManual = {
     "Simulated sessions: how many poses the real calibrator and gate need along the 26-pose "
     "cube and with next-pose planning.",
-    "turncal plan-vs-cube --model accel13 --class consumer --runs 50",
+    "turncal plan-vs-cube --model accel13 --class consumer --runs 50\n"
+    "turncal plan-vs-cube --model accel13 --class industrial --units 8 --runs 20",
     "0; 2 a command-line "
     "mistake",
     "docs/OBSERVABILITY.md"};
+
+// --units N: the batch's poses and table seconds to the last unit's gate along the cube and with
+// the batch's planning, and units per hour of table time.
+int RunBatchCompare(const PlanCompareArgs& args, const SensorClass& sensor, const GateOptions& gate,
+                    const PlannerOptions& planner) {
+  std::string error;
+  std::vector<std::unique_ptr<MeasurementModel>> models;
+  for (int k = 0; k < args.units; ++k) {
+    ModelContext context;
+    ParseMountAxes(kBatchMounts[k % 4], &context.mounting, nullptr);
+    models.push_back(MakeModel(args.model, context, &error));
+    if (!models.back()) {
+      fmt::print(stderr, "turncal plan-vs-cube: {}\n", error);
+      return 2;
+    }
+  }
+  Tally cube, planned;
+  nlohmann::json runs = nlohmann::json::array();
+  for (int run = 0; run < args.runs; ++run) {
+    std::vector<BatchUnit> units;
+    for (int k = 0; k < args.units; ++k) {
+      std::mt19937_64 truth_rng(args.seed + static_cast<std::uint64_t>(run) * 1000 +
+                                static_cast<std::uint64_t>(k));
+      BatchUnit u;
+      u.model = models[static_cast<std::size_t>(k)].get();
+      u.truth = DrawTruth(*u.model, sensor, &truth_rng);
+      u.options = OptionsForClass(*u.model, sensor);
+      units.push_back(u);
+    }
+    std::mt19937_64 rng_a(1000003 * (args.seed + static_cast<std::uint64_t>(run)));
+    std::mt19937_64 rng_b = rng_a;
+    const BatchOutcome a =
+        RunSimulatedBatch(units, sensor, gate, args.dwell_s, 26, CubePoses26(), planner, &rng_a);
+    const BatchOutcome b =
+        RunSimulatedBatch(units, sensor, gate, args.dwell_s, args.max_poses, {}, planner, &rng_b);
+    const double sa = SessionSeconds(a.poses, a.poses_to_last_gate, planner.motion, args.dwell_s);
+    const double sb = SessionSeconds(b.poses, b.poses_to_last_gate, planner.motion, args.dwell_s);
+    cube.counts.push_back(a.poses_to_last_gate);
+    cube.seconds.push_back(sa);
+    planned.counts.push_back(b.poses_to_last_gate);
+    planned.seconds.push_back(sb);
+    runs.push_back({{"run", run},
+                    {"cube", a.poses_to_last_gate},
+                    {"cube_s", sa},
+                    {"cube_units", a.unit_poses_to_gate},
+                    {"planned", b.poses_to_last_gate},
+                    {"planned_s", sb},
+                    {"planned_units", b.unit_poses_to_gate}});
+    if (!args.json) {
+      fmt::print("run {:>3}: cube {:>3} poses {:6.1f} s   planned {:>3} poses {:6.1f} s\n", run,
+                 a.poses_to_last_gate, sa, b.poses_to_last_gate, sb);
+    }
+  }
+  const auto per_hour = [&](const Tally& t) {
+    return t.mean_seconds() > 0 ? 3600.0 * args.units / t.mean_seconds() : 0.0;
+  };
+  if (args.json) {
+    fmt::print("{}\n", nlohmann::json{{"model", args.model},
+                                      {"class", args.sensor_class},
+                                      {"units", args.units},
+                                      {"objective", args.objective},
+                                      {"table_rate_dps", args.table_rate_dps},
+                                      {"runs", runs},
+                                      {"cube_mean", cube.mean()},
+                                      {"cube_mean_s", cube.mean_seconds()},
+                                      {"cube_never", cube.failures()},
+                                      {"cube_units_per_hour", per_hour(cube)},
+                                      {"planned_mean", planned.mean()},
+                                      {"planned_mean_s", planned.mean_seconds()},
+                                      {"planned_never", planned.failures()},
+                                      {"planned_units_per_hour", per_hour(planned)}}
+                           .dump());
+    return 0;
+  }
+  std::string mounts;
+  for (int k = 0; k < std::min(args.units, 4); ++k)
+    mounts += std::string(k ? ", " : "") + kBatchMounts[k];
+  fmt::print(
+      "{} units of {} ({} class tolerances) on one table, mounts {}, {} runs: poses and table "
+      "seconds to the last unit's gate (table {:g} deg/s, {:g} deg/s^2, settle {:g} s, dwell {:g} "
+      "s; planner minimises {})\n"
+      "  cube sequence: mean {:.2f} poses, {:.1f} s, {:.1f} units/hour; a unit never within 26 "
+      "poses in {} run(s)\n"
+      "  planned:       mean {:.2f} poses, {:.1f} s, {:.1f} units/hour; never within {} poses in "
+      "{} run(s)\n",
+      args.units, args.model, args.sensor_class, mounts, args.runs, args.table_rate_dps,
+      args.table_accel_dps2, planner.motion.settle_s, args.dwell_s, args.objective, cube.mean(),
+      cube.mean_seconds(), per_hour(cube), cube.failures(), planned.mean(), planned.mean_seconds(),
+      per_hour(planned), args.max_poses, planned.failures());
+  return 0;
+}
 
 int RunPlanCompare(const PlanCompareArgs& args) {
   SensorClass sensor;
@@ -80,6 +180,7 @@ int RunPlanCompare(const PlanCompareArgs& args) {
   planner.motion.rate_dps.setConstant(args.table_rate_dps);
   planner.motion.accel_dps2.setConstant(args.table_accel_dps2);
   planner.objective = args.objective == "poses" ? PlanObjective::kPoses : PlanObjective::kTime;
+  if (args.units > 0) return RunBatchCompare(args, sensor, gate, planner);
   Tally cube, planned;
   int planned_fewer = 0, equal = 0, planned_quicker = 0;
   nlohmann::json runs = nlohmann::json::array();
@@ -186,6 +287,11 @@ void AddPlanCompareCommand(CLI::App* app) {
                   "the table's angular acceleration, deg/s^2")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_option("--units", args->units,
+                  "a fixture of this many units on one table, in four mounts in turn (as placed, "
+                  "a quarter turn about the vertical, upside down, on its side): poses, seconds "
+                  "and units per hour to the last unit's gate (docs/BATCH.md)")
+      ->check(CLI::Range(1, 64));
   cmd->add_flag("--json", args->json, "one JSON object");
   cmd->callback([args] { throw CLI::RuntimeError(RunPlanCompare(*args)); });
 }

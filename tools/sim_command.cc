@@ -1,5 +1,7 @@
 #include "tools/sim_command.h"
 
+#include "core/frames/mount.h"
+
 #include <fmt/format.h>
 
 #include <cstdio>
@@ -126,8 +128,11 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
                         const SimCommandArgs& args) {
   std::string error;
   const SimulatedSession& session = capture.session;
-  auto accel = MakeModel(capture.accel_model, ModelContext{}, &error);
-  auto mag = MakeModel(capture.mag_model, ModelContext{}, &error);
+  // The models about the unit's mount, as simulated (the truth's mounting angles are about it).
+  ModelContext context;
+  context.mounting = capture.mount;
+  auto accel = MakeModel(capture.accel_model, context, &error);
+  auto mag = MakeModel(capture.mag_model, context, &error);
   nlohmann::json pose_list = nlohmann::json::array();
   auto triad = [](const Eigen::Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
   for (const auto& p : poses) {
@@ -158,7 +163,7 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
   nlohmann::json turn_on = {{capture.accel_model, triad(session.accel_truth.tail<3>())},
                             {capture.mag_model, triad(session.mag_truth.tail<3>())}};
   if (!capture.gyro_model.empty()) {
-    auto gyro = MakeModel(capture.gyro_model, ModelContext{}, &error);
+    auto gyro = MakeModel(capture.gyro_model, context, &error);
     Eigen::VectorXd gyro_truth = session.gyro_truth;
     const int b = gyro->index_of("bx");
     if (!session.events.empty()) gyro_truth.segment<3>(b) += session.events.back().gyr_wander_mean;
@@ -194,6 +199,7 @@ nlohmann::json TruthFor(const sim::SimCapture& capture, const std::vector<TableP
       {"table_rate_dps",
        capture.session_options.table ? capture.session_options.table->rate_dps[0] : 0.0},
       {"duration_s", session.duration_s},
+      {"mount", MountConfigText(capture.mount)},
       {"samples", session.samples.size()},
       {"poses", pose_list}};
   if (so.chamber) truth["thermal"] = ThermalTruthJson(capture);
@@ -229,6 +235,9 @@ int BuildLiveDevices(const SimCommandArgs& args, const sim::SimCaptureOptions& o
     sim::SimCaptureOptions o = options;
     o.protocol = *protocol;
     o.session.seed = options.session.seed + i;
+    if (!args.mounts.empty()) {
+      ParseMountText(args.mounts[std::min(i, args.mounts.size() - 1)], &o.mount, nullptr);
+    }
     sim::LiveSimDevice d;
     d.path = args.lives[i];
     if (!sim::BuildSimCapture(o, &d.capture, &error)) {
@@ -510,6 +519,8 @@ int RunSim(const SimCommandArgs& args) {
   }
   sim::SimCaptureOptions options;
   options.protocol = *protocol;
+  // Checked by ValidateSimArgs.
+  if (!args.mounts.empty()) ParseMountText(args.mounts.front(), &options.mount, nullptr);
   if (const int code = ReadModelsAndPoses(args, &options); code != 0) return code;
   SetSessionOptions(args, &options);
   if (std::string error; !ApplyChamberArgs(args, &options.session, &error)) {

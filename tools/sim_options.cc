@@ -6,6 +6,8 @@
 #include "sim/session_sim.h"
 #include "tools/sim_options.h"
 
+#include "core/frames/mount.h"
+
 namespace turncal::tools {
 
 namespace {
@@ -222,6 +224,11 @@ void AddLiveOptions(CLI::App* cmd, SimCommandArgs* args) {
                   "with --live: the devices' serial numbers, one per --live in order (an Xbus "
                   "device's is its device id, 8 hex digits); default SIM0001, ... and 03700001, "
                   "...");
+  cmd->add_option("--mount", args->mounts,
+                  "the unit's mount on the table (a fixture's slot): the case's axes along the "
+                  "table's (\"-y+x+z\": case x along the table's -y ...) or X,Y,Z degrees; one "
+                  "per --live device in order, the last for the rest (default +x+y+z; the truth "
+                  "is about it: docs/BATCH.md)");
   cmd->add_option("--hold-end", args->hold_end_s,
                   "with --controller: after the last pose the table stays there this many session "
                   "seconds, the devices streaming (time to write a calibration into a device)")
@@ -257,6 +264,15 @@ void ValidateSimArgs(SimCommandArgs* args) {
       throw CLI::ValidationError(
           "sim", "--serial '" + serial +
                      "': 1 to 16 characters (an Xbus device's: its device id, 8 hex digits)");
+    }
+  }
+  if (args->mounts.size() > std::max<std::size_t>(1, args->lives.size())) {
+    throw CLI::ValidationError("sim", "--mount: at most one per --live device");
+  }
+  for (const auto& m : args->mounts) {
+    Mat3<double> mount;
+    if (std::string why; !ParseMountText(m, &mount, &why)) {
+      throw CLI::ValidationError("sim", "--mount: " + why);
     }
   }
   if (!args->controller.empty()) {

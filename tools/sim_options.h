@@ -43,6 +43,7 @@ struct SimCommandArgs {
   double hold_end_s = 0;
   std::vector<std::string> lose_replies;  // DESC:FUNCTION
   std::vector<std::string> serials;       // --serial, one per --live device
+  std::vector<std::string> mounts;        // --mount, one per device (the last for the rest)
   std::string controller;                 // turncald's socket: play the controller (sim/live.h)
   double answer_timeout_s = 120;
   int retries = 2;

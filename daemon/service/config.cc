@@ -314,10 +314,12 @@ bool ParseReference(const toml::table* t, const std::string& source, StationOpti
 
 // One [[device]]: its spec, settings, and its own models and gate tolerances.
 bool ParseDevice(const toml::node& d, const toml::table* t, const std::string& source, Config* out,
-                 std::string* error) {
+                 std::vector<std::string>* slots_taken, std::string* error) {
   Config& c = *out;
   StationOptions& st = c.station;
-  if (!OnlyKeys(*t, {"name", "protocol", "port", "baud", "rate_hz", "configure", "models", "gate"},
+  if (!OnlyKeys(*t,
+                {"name", "protocol", "port", "baud", "rate_hz", "configure", "models", "gate",
+                 "slot", "mount"},
                 "[[device]]", source, error)) {
     return false;
   }
@@ -387,7 +389,10 @@ bool ParseDevice(const toml::node& d, const toml::table* t, const std::string& s
     if (!ParseGate(*g, "[device.gate]", source, &gate, error)) return false;
     own.gate = gate;
   }
-  if (own.models || own.gate) st.per_device[parsed->name] = own;
+  if (!ParseDeviceMount(*t, parsed->name, c.fixture, source, slots_taken, &own, error)) {
+    return false;
+  }
+  if (own.models || own.gate || own.mount) st.per_device[parsed->name] = own;
   return true;
 }
 
@@ -398,13 +403,14 @@ bool ParseDevices(const toml::node* n, const std::string& source, Config* out, s
     *error = fmt::format("{}: devices are [[device]] tables", Where(*n, source));
     return false;
   }
+  std::vector<std::string> slots_taken;  // a slot holds one unit
   for (const auto& d : *a) {
     const toml::table* t = d.as_table();
     if (!t) {
       *error = fmt::format("{}: devices are [[device]] tables", Where(d, source));
       return false;
     }
-    if (!ParseDevice(d, t, source, out, error)) return false;
+    if (!ParseDevice(d, t, source, out, &slots_taken, error)) return false;
   }
   return true;
 }
@@ -470,7 +476,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   Config c;
   if (!OnlyKeys(root,
                 {"socket", "socket_group", "control_users", "state_dir", "station", "sequencer",
-                 "table", "free", "thermal", "gate", "reference", "device", "registry"},
+                 "table", "free", "thermal", "gate", "reference", "device", "registry", "fixture"},
                 "the file", source, error) ||
       !ParseTopLevel(root, source, &c, error)) {
     return false;
@@ -505,6 +511,14 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   }
   if (const toml::table* t = root["registry"].as_table();
       t && !ParseRegistry(*t, source, &c.registry, error)) {
+    return false;
+  }
+  if (const toml::table* t = root["fixture"].as_table()) {
+    if (!ParseFixture(*t, source, &c.fixture, error)) return false;
+    st.fixture = c.fixture.name;
+  } else if (const toml::node* f = root.get("fixture")) {
+    *error =
+        fmt::format("{}: [fixture] is a table (name, file or [[fixture.slot]])", Where(*f, source));
     return false;
   }
   if (const toml::node* n = root.get("device"); n && !ParseDevices(n, source, &c, error)) {

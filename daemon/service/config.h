@@ -10,6 +10,7 @@
 
 #include "daemon/device/live_device.h"
 #include "daemon/registry/registry_options.h"
+#include "daemon/service/config_fixture.h"
 #include "daemon/station/station.h"
 #include "drivers/device_spec.h"
 
@@ -26,6 +27,7 @@ struct Config {
   bool models_set = false;   // [station] models was given (else the pose source's default)
   bool dwell_set = false;    // [sequencer] dwell_s was given
   RegistryOptions registry;  // [registry] (daemon/registry/registry_options.h); no conninfo: none
+  Fixture fixture;           // [fixture] (daemon/service/config_fixture.h); no slots: none
 };
 
 // Parses `text` (named `source` in messages). False with a message on any error.

@@ -95,8 +95,13 @@ void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
     reply(station_->Result());
   } else if (cmd == "next_pose") {
     std::string device;
-    if (!protocol::ParseNextPoseRequest(request, &device, &why)) {
+    bool batch = false;
+    if (!protocol::ParseNextPoseRequest(request, &device, &batch, &why)) {
       error(why);
+      return;
+    }
+    if (batch) {
+      reply(station_->NextPoseBatch());
       return;
     }
     if (device.empty() && !options_.devices.empty()) device = options_.devices.front().name;

@@ -32,6 +32,7 @@
 #include "core/estimation/pose_record.h"
 #include "core/estimation/sensor_class.h"
 #include "core/modeling/measurement_model.h"
+#include "core/planning/pose_planner.h"
 #include "core/sequencing/sample.h"
 
 namespace turncal {
@@ -171,6 +172,13 @@ class CalibrationSet {
 
   // NEXT_POSE for the device (without "device").
   virtual nlohmann::json NextPose(const DevicePipeline& d, const StationOptions& options) const = 0;
+  // What the next-pose planner needs of each of its calibrations (a batch's plan takes every
+  // unit's together, Station::NextPoseBatch); none for a set without announced poses.
+  virtual std::vector<PlanningTarget> PlanningTargets(const DevicePipeline& d,
+                                                      double dwell_s) const {
+    (void)d, (void)dwell_s;
+    return {};
+  }
   // The device's "pose_source", and the source's own entry ("free") in status and in RESULT
   // (null when it has none).
   virtual const char* pose_source() const = 0;

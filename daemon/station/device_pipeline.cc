@@ -84,6 +84,7 @@ nlohmann::json DevicePipeline::StatusJson() const {
            {{"used", t.used}, {"flagged", t.flagged}, {"outliers", t.outliers}, {"lost", t.lost}}},
           {"moves", MovesJson()},
           {"temperature", TemperatureJson()},
+          {"mount", MountJson()},
           {"models", model_status}};
 }
 
@@ -121,6 +122,7 @@ nlohmann::json DevicePipeline::ResultJson() const {
           {"captured", sequencer->captured()},
           {"rejected", sequencer->rejected()},
           {"moves", MovesJson()},
+          {"mount", MountJson()},
           {"models", model_results}};
 }
 

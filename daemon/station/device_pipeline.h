@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/analysis/mount_check.h"
 #include "core/analysis/publish_gate.h"
 #include "core/planning/pose_planner.h"
 #include "core/sequencing/sequencer.h"
@@ -29,8 +30,19 @@ struct DevicePipeline {
   int poses = 0;
   bool noise_stored = false;  // the sequencer uses the profile kept in the state directory
   GateOptions gate;           // the station's, or the device's own
-  nlohmann::json identity;    // from the device dialogue (null in replays)
-  nlohmann::json current;     // the pose being collected: its last sequencer event
+  // Its pose models' context: the station's, with the device's own nominal mount (issue 38:
+  // [[device]] mount or its fixture slot's), the slot's name, and whether the unit sits as that
+  // mount says (core/analysis/mount_check.h), checked from its accelerometer at every static
+  // pose. While it does not, its calibrations are held (not activated): the operator fixes the
+  // configuration and reloads, and the poses already captured are used again from the journal.
+  ModelContext context;
+  std::string slot;
+  bool mount_configured = false;
+  std::vector<MountObservation> mount_observations;
+  MountCheck mount_check;
+  bool mount_wrong_published = false;  // the MOUNT event for the current verdict was sent
+  nlohmann::json identity;             // from the device dialogue (null in replays)
+  nlohmann::json current;              // the pose being collected: its last sequencer event
   // reports/NAME.html is rewritten after an activation, at most every kReportIntervalNs (the
   // render re-solves the calibration pose by pose: tens of ms on the worker).
   bool report_due = false;
@@ -58,6 +70,14 @@ struct DevicePipeline {
   // The sequencer's moves between static poses: enabled, taken (handed to a record), dropped and
   // why the latest was.
   nlohmann::json MovesJson() const;
+  // The mount: configured (its axes or angles), slot, and the check's verdict with its words
+  // (status and RESULT "mount"; the MOUNT event).
+  nlohmann::json MountJson() const;
+  // The check's verdict for an operator: "" while the unit sits as configured, else what is
+  // wrong and what to configure ("slot 3 looks rotated 90 deg about its +z: ...").
+  std::string MountProblem() const;
+  // Adds a static pose's accelerometer mean to the mount check; true when the verdict changed.
+  bool CheckMountWith(const PoseRecord& record);
 };
 
 }  // namespace turncal::daemon

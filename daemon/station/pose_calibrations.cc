@@ -82,6 +82,18 @@ void PoseCalibrations::OnFinish(DevicePipeline& d, CalibrationHost& host) {
 
 void PoseCalibrations::OnResumed(DevicePipeline& d, CalibrationHost& host) {
   SolvePending(d, host, /*resuming=*/true);
+  // A calibration whose gate passed on the journal's poses but that was never activated (held
+  // while the unit did not sit as its mount said, issue 38; or a crash before its document was
+  // written) is activated now: the station (CalibrationHost::Activate) holds it again if the
+  // unit still does not sit as configured.
+  const double t_s = d.records_used.empty() ? 0.0 : d.records_used.back().t_end_s;
+  for (auto& owned : models_) {
+    ModelPipeline& m = *owned;
+    std::string error;
+    if (m.gate.pass && m.active_version() == 0 && m.HasEstimate(&error)) {
+      host.Activate(d, m, t_s, nullptr);
+    }
+  }
 }
 
 void PoseCalibrations::OnIdle(DevicePipeline& d, CalibrationHost& host) {
@@ -128,7 +140,12 @@ std::vector<PlanningTarget> PoseCalibrations::PlanningTargets(const DevicePipeli
 
 nlohmann::json PoseCalibrations::NextPose(const DevicePipeline& d,
                                           const StationOptions& options) const {
-  const std::vector<PlanningTarget> targets = PlanningTargets(d, options.sequencer.dwell_s);
+  return ToJson(
+      PlanNextPose(PlanningTargets(d, options.sequencer.dwell_s), PlannerFor(d, options)));
+}
+
+PlannerOptions PoseCalibrations::PlannerFor(const DevicePipeline& d,
+                                            const StationOptions& options) {
   PlannerOptions planner;
   planner.motion = options.table;
   planner.objective = options.plan_objective;
@@ -140,7 +157,7 @@ nlohmann::json PoseCalibrations::NextPose(const DevicePipeline& d,
   if (const auto at = d.sequencer->announced()) planner.table_at = *at;
   planner.move_from_table_at = d.sequencer->moves().tracking();
   planner.move_rest_s = d.MoveRestSeconds(options.table, planner.move_rest_s);
-  return ToJson(PlanNextPose(targets, planner));
+  return planner;
 }
 
 }  // namespace turncal::daemon

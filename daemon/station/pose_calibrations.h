@@ -21,7 +21,11 @@ class PoseCalibrations : public CalibrationSet {
                    const SensorClass& sensor);
 
   // What the next-pose planner needs of each model: its poses, weights and the device's noise.
-  std::vector<PlanningTarget> PlanningTargets(const DevicePipeline& d, double dwell_s) const;
+  std::vector<PlanningTarget> PlanningTargets(const DevicePipeline& d,
+                                              double dwell_s) const override;
+  // The planner's options for a device of the station: the table's motion, objective, dwell,
+  // rates, and where the table is (the device's latest announced pose).
+  static PlannerOptions PlannerFor(const DevicePipeline& d, const StationOptions& options);
 
   // CalibrationSet:
   std::size_t size() const override { return models_.size(); }

@@ -40,11 +40,19 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
     }
     d->gate = options_.gate;
     std::vector<std::string> models = options_.models;
+    // The device's pose models in its own mount's context (issue 38).
+    StationOptions device_options = options_;
     if (auto it = options_.per_device.find(d->name); it != options_.per_device.end()) {
       if (it->second.models) models = *it->second.models;
       if (it->second.gate) d->gate = *it->second.gate;
+      if (it->second.mount) {
+        device_options.context.mounting = *it->second.mount;
+        d->mount_configured = true;
+      }
+      d->slot = it->second.slot;
     }
-    d->calibrations = MakeCalibrationSet(models, options_, sensor_, d->gate);
+    d->context = device_options.context;
+    d->calibrations = MakeCalibrationSet(models, device_options, sensor_, d->gate);
     // The moves between poses are a gyroscope model's evidence: tracked only for one.
     so.moves.enabled = so.moves.enabled && d->calibrations->NeedsMoves();
     d->sequencer = std::make_unique<Sequencer>(
@@ -139,6 +147,9 @@ void Station::Resume() {
   }
   for (auto& d : devices_) d->calibrations->OnResumed(*d, *this);
   resuming_ = false;
+  for (auto& d : devices_) {
+    if (d->mount_check.wrong) PublishMount(*d);
+  }
   for (std::size_t i = 0; i < devices_.size(); ++i) {
     Publish({{"class", "SESSION_RESUMED"},
              {"device", devices_[i]->name},
@@ -358,7 +369,21 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   ++d.poses;
   d.poses_used.push_back(record.pose);
   d.records_used.push_back(record);
+  // Does the unit sit as its mount says? Checked before its calibrations learn from the pose, so
+  // that a wrong slot holds their activation from the pose that shows it.
+  if (options_.pose_source == PoseSource::kAnnounced && d.CheckMountWith(record) &&
+      d.mount_check.wrong && !resuming_) {
+    PublishMount(d);
+  }
   d.calibrations->OnRecord(d, record, t_s, resuming_, *this);
+}
+
+void Station::PublishMount(DeviceState& d) {
+  if (d.mount_wrong_published) return;
+  d.mount_wrong_published = true;
+  nlohmann::json e = {{"class", "MOUNT"}, {"device", d.name}, {"message", d.MountProblem()}};
+  e.update(d.MountJson());
+  Publish(e);
 }
 
 void Station::SaveNoiseProfile(DeviceState& d) {
@@ -372,7 +397,13 @@ void Station::SaveNoiseProfile(DeviceState& d) {
 
 void Station::Activate(DeviceState& d, Calibration& c, double t_s,
                        const nlohmann::json& override_who) {
-  Activation a = c.Activate(d, ActivationContext{options_.sensor_class, options_.context}, t_s);
+  if (d.mount_check.wrong && override_who.is_null()) {
+    // A unit that does not sit as configured: its calibration is held, not activated (its
+    // mounting angles would carry the wrong slot's rotation). Said once per verdict.
+    PublishMount(d);
+    return;
+  }
+  Activation a = c.Activate(d, ActivationContext{options_.sensor_class, d.context}, t_s);
   if (!override_who.is_null()) {
     a.document["override"] = override_who;
     a.event["override"] = override_who;

@@ -37,10 +37,14 @@
 namespace turncal::daemon {
 
 // One device's own models and gate (config [[device]] models, [device.gate]); absent: the
-// station's.
+// station's. Its nominal mount on the fixture (issue 38; [[device]] mount, or its slot's:
+// docs/BATCH.md): the rotation M from the table's inner frame to its case frame that its pose
+// models' context takes (C_q^r = C(eps) M); absent: the station's context's.
 struct DeviceModelOptions {
   std::optional<std::vector<std::string>> models;
   std::optional<GateOptions> gate;
+  std::optional<Mat3<double>> mount;
+  std::string slot;  // the fixture's slot it sits in ("": none named)
 };
 
 // Where a station's poses come from (DESIGN.md "Pose sources"): announced by the controller
@@ -128,6 +132,7 @@ struct StationOptions {
   GateOptions gate;  // tolerances and min_dof replaced by the class's unless gate_tolerances_set
   bool gate_tolerances_set = false;
   std::map<std::string, DeviceModelOptions> per_device;  // by device name
+  std::string fixture;  // the fixture's name ([fixture] name; "": none)
   // Where the pose journal and the active calibrations live (daemon/state/persistence.h); empty:
   // nothing is persisted. A journal found there is replayed first: the session resumes.
   std::string state_dir;
@@ -199,6 +204,10 @@ class Station : public ReplayTarget, private CalibrationHost {
 
   // The next pose to capture (D-optimal over every model of the device), as NEXT_POSE.
   nlohmann::json NextPose(const std::string& device) const;
+  // The next pose for the whole fixture (issue 38; docs/BATCH.md): every unit still short of a
+  // gate planned together, so that the session ends at the last unit's gate; NEXT_POSE with
+  // "batch" (each unit's state) and each model's "device".
+  nlohmann::json NextPoseBatch() const;
 
   int DeviceIndex(const std::string& name) const;  // -1 when unknown
   // DEVICE's model MODEL (a pose model of an announced station), nullptr when it has none.
@@ -252,6 +261,8 @@ class Station : public ReplayTarget, private CalibrationHost {
   void Activate(DeviceState& d, Calibration& c, double t_s,
                 const nlohmann::json& override_who) override;
   void SaveNoiseProfile(DeviceState& d) override;
+  // MOUNT: the device does not sit as its mount says (once per verdict).
+  void PublishMount(DeviceState& d);
   void JournalMotion(DeviceState& d, std::vector<MotionValue> values) override;
   void Resume();
   void LoadApplied();

@@ -4,6 +4,8 @@
 #include <fmt/format.h>
 
 #include "daemon/station/station.h"
+
+#include "daemon/station/pose_calibrations.h"
 #include "protocol/observability_json.h"
 
 namespace turncal::daemon {
@@ -83,6 +85,56 @@ nlohmann::json Station::NextPose(const std::string& device) const {
   const DeviceState& d = *devices_[static_cast<std::size_t>(i)];
   nlohmann::json j = d.calibrations->NextPose(d, options_);
   j["device"] = device;
+  return j;
+}
+
+nlohmann::json Station::NextPoseBatch() const {
+  // Every unit still short of a gate plans together: the table's next pose for the whole fixture
+  // (the information of all units and all their models), so the session ends at the last unit's
+  // gate. A unit whose gates have all passed does not hold the others back, and a unit that
+  // does not sit as its mount says (its information would be the wrong slot's) waits for its fix.
+  std::vector<PlanningTarget> targets;
+  std::vector<std::string> target_device;
+  nlohmann::json units = nlohmann::json::array();
+  const DeviceState* lead = nullptr;
+  int waiting = 0;
+  for (const auto& d : devices_) {
+    bool passed = d->calibrations->size() > 0;
+    for (std::size_t i = 0; i < d->calibrations->size(); ++i) {
+      passed = passed && d->calibrations->at(i).GatePassed();
+    }
+    std::vector<PlanningTarget> own =
+        d->calibrations->PlanningTargets(*d, options_.sequencer.dwell_s);
+    const char* state = passed                 ? "passed"
+                        : d->mount_check.wrong ? "mount wrong"
+                        : own.empty()          ? "nothing to plan"
+                                               : "planned";
+    units.push_back({{"device", d->name},
+                     {"slot", d->slot.empty() ? nlohmann::json() : nlohmann::json(d->slot)},
+                     {"poses", d->poses},
+                     {"state", state}});
+    if (std::string(state) != "planned") continue;
+    ++waiting;
+    if (!lead) lead = d.get();
+    for (auto& t : own) {
+      targets.push_back(std::move(t));
+      target_device.push_back(d->name);
+    }
+  }
+  nlohmann::json j;
+  if (!lead) {
+    j = {{"class", "NEXT_POSE"},
+         {"ok", false},
+         {"error", devices_.empty() ? "no device" : "no unit of the batch needs a pose"}};
+  } else {
+    j = ToJson(PlanNextPose(targets, PoseCalibrations::PlannerFor(*lead, options_)));
+    if (j.contains("models")) {
+      for (std::size_t k = 0; k < j["models"].size() && k < target_device.size(); ++k) {
+        j["models"][k]["device"] = target_device[k];
+      }
+    }
+  }
+  j["batch"] = {{"units", units}, {"planned", waiting}, {"fixture", options_.fixture}};
   return j;
 }
 

@@ -5,6 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
+#include <fstream>
+
 namespace turncal::daemon {
 namespace {
 
@@ -287,6 +290,82 @@ TEST(Config, AModelListedTwiceIsRefused) {
   ASSERT_TRUE(ParseConfig("[station]\nmodels = [\"accel13\", \"mag13\"]\n", "t.toml", &c, &error))
       << error;
 }
+
+}  // namespace
+}  // namespace turncal::daemon
+
+namespace turncal::daemon {
+namespace {
+
+// Issue 38: a fixture's slots and their mounts, inline or in a file of their own, and each
+// device's slot or mount.
+TEST(Config, AFixturesSlotsGiveTheirDevicesMounts) {
+  const std::string devices =
+      "[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nslot = \"2\"\n"
+      "[[device]]\nname = \"b\"\nprotocol = \"xbus\"\nport = \"/dev/y\"\nmount = [0, 0, 45]\n"
+      "[[device]]\nname = \"c\"\nprotocol = \"mip\"\nport = \"/dev/z\"\n";
+  Config c;
+  std::string error;
+  ASSERT_TRUE(
+      ParseConfig("[fixture]\nname = \"cube8\"\n[[fixture.slot]]\nname = \"1\"\nmount = "
+                  "\"+x+y+z\"\n[[fixture.slot]]\nname = \"2\"\nmount = \"-y+x+z\"\n" +
+                      devices,
+                  "t.toml", &c, &error))
+      << error;
+  EXPECT_EQ(c.station.fixture, "cube8");
+  ASSERT_EQ(c.fixture.slots.size(), 2u);
+  const DeviceModelOptions& a = c.station.per_device.at("a");
+  EXPECT_EQ(a.slot, "2");
+  ASSERT_TRUE(a.mount.has_value());
+  EXPECT_TRUE(a.mount->isApprox(R3(-M_PI / 2)));
+  const DeviceModelOptions& b = c.station.per_device.at("b");
+  EXPECT_EQ(b.slot, "");
+  EXPECT_TRUE(b.mount->isApprox(R3(M_PI / 4)));
+  EXPECT_EQ(c.station.per_device.count("c"), 0u);  // the station's context: the identity
+
+  // The same slots from a file of their own, relative to the configuration's folder.
+  const std::string dir = ::testing::TempDir() + "/fixture_cfg";
+  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
+  {
+    std::ofstream f(dir + "/cube8.toml");
+    f << "name = \"cube8 from its file\"\n[[slot]]\nname = \"1\"\nmount = \"+x+y+z\"\n"
+         "[[slot]]\nname = \"2\"\nmount = \"-y+x+z\"\n";
+  }
+  Config from_file;
+  ASSERT_TRUE(ParseConfig("[fixture]\nfile = \"cube8.toml\"\n" + devices, dir + "/turncald.toml",
+                          &from_file, &error))
+      << error;
+  EXPECT_EQ(from_file.station.fixture, "cube8 from its file");
+  EXPECT_EQ(from_file.fixture.file, dir + "/cube8.toml");
+  EXPECT_TRUE(from_file.station.per_device.at("a").mount->isApprox(*a.mount));
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Fixtures, ConfigErrors,
+    ::testing::Values(
+        Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nmount = \"-y-x+z\"\n",
+            "t.toml:5: 'mount': mount '-y-x+z': the axes are left-handed"},
+        Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nmount = [0, 90]\n",
+            "t.toml:5: 'mount' must be the case's axes"},
+        Bad{"[[device]]\nname = \"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nslot = \"1\"\n",
+            "t.toml:5: device 'a' is in slot '1' but no [fixture] is configured"},
+        Bad{"[fixture]\n[[fixture.slot]]\nname = \"1\"\nmount = \"+x+y+z\"\n[[device]]\nname = "
+            "\"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nslot = \"9\"\n",
+            "device 'a': the fixture has no slot '9' (its slots: 1)"},
+        Bad{"[fixture]\n[[fixture.slot]]\nname = \"1\"\nmount = \"+x+y+z\"\n[[device]]\nname = "
+            "\"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nslot = \"1\"\n[[device]]\nname = "
+            "\"b\"\nprotocol = \"mip\"\nport = \"/dev/y\"\nslot = \"1\"\n",
+            "device 'b': slot '1' already holds another device"},
+        Bad{"[fixture]\n[[fixture.slot]]\nname = \"1\"\nmount = \"+x+y+z\"\n[[fixture.slot]]\n"
+            "name = \"1\"\nmount = \"-x-y+z\"\n",
+            "slot '1' is named twice"},
+        Bad{"[fixture]\n[[fixture.slot]]\nname = \"1\"\n", "a slot needs a name and a mount"},
+        Bad{"[fixture]\nname = \"x\"\n", "[fixture] has no [[slot]]"},
+        Bad{"[fixture]\nfile = \"/no/such/fixture.toml\"\n", "/no/such/fixture.toml"},
+        Bad{"[fixture]\nslots = 3\n", "unknown key 'slots' in [fixture]"},
+        Bad{"[fixture]\n[[fixture.slot]]\nname = \"1\"\nmount = \"+x+y+z\"\n[[device]]\nname = "
+            "\"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nslot = \"1\"\nmount = \"+x+y+z\"\n",
+            "device 'a' has a slot and a mount"}));
 
 }  // namespace
 }  // namespace turncal::daemon

@@ -78,9 +78,10 @@ bool HasWrongType(const nlohmann::json& request, const std::string& cmd) {
       {"watch", "corrected", Type::kBoolean},   {"watch", "raw", Type::kBoolean},
       {"watch", "uncertainty", Type::kBoolean}, {"watch", "device", Type::kString},
       {"watch", "max_rate_hz", Type::kNumber},  {"next_pose", "device", Type::kString},
-      {"reset", "note", Type::kString},         {"publish", "override", Type::kBoolean},
-      {"publish", "device", Type::kString},     {"publish", "model", Type::kString},
-      {"publish", "operator", Type::kString},   {"publish", "reason", Type::kString},
+      {"next_pose", "batch", Type::kBoolean},   {"reset", "note", Type::kString},
+      {"publish", "override", Type::kBoolean},  {"publish", "device", Type::kString},
+      {"publish", "model", Type::kString},      {"publish", "operator", Type::kString},
+      {"publish", "reason", Type::kString},
   };
   // {"enable":false} stops watching: the other arguments do not matter.
   if (cmd == "watch" && request.contains("enable") && request["enable"] == false) return false;
@@ -148,12 +149,14 @@ void CheckRequest(const std::string& line) {
     }
   } else if (cmd == "next_pose") {
     std::string device;
-    if (!protocol::ParseNextPoseRequest(request, &device, &error)) {
+    bool batch = false;
+    if (!protocol::ParseNextPoseRequest(request, &device, &batch, &error)) {
       if (error.empty()) __builtin_trap();
       return;
     }
     if (wrong_type) __builtin_trap();
     if (!device.empty() && request["device"] != device) __builtin_trap();
+    if (batch && (!device.empty() || request["batch"] != true)) __builtin_trap();
   } else if (cmd == "reset") {
     std::string note;
     if (!protocol::ParseResetRequest(request, &note, &error)) {

@@ -178,7 +178,7 @@ TEST(Requests, ArgumentsOfTheWrongTypeAreErrorsNotExceptions) {
   // handler ended turncald -- for next_pose, from any client that may connect.
   std::string device = "x", note = "x", error;
   EXPECT_NO_THROW(EXPECT_FALSE(ParseNextPoseRequest(
-      nlohmann::json::parse(R"({"cmd":"next_pose","device":1})"), &device, &error)));
+      nlohmann::json::parse(R"({"cmd":"next_pose","device":1})"), &device, nullptr, &error)));
   EXPECT_EQ(error, "next_pose: 'device' must be a device name");
   EXPECT_NO_THROW(EXPECT_FALSE(
       ParseResetRequest(nlohmann::json::parse(R"({"cmd":"reset","note":null})"), &note, &error)));
@@ -195,10 +195,21 @@ TEST(Requests, ArgumentsOfTheWrongTypeAreErrorsNotExceptions) {
       {{"override", true}, {"device", "imu1"}, {"model", 13}, {"operator", "A"}, {"reason", "r"}},
       &p, &error)));
   // What was valid stays valid.
-  EXPECT_TRUE(ParseNextPoseRequest({{"cmd", "next_pose"}}, &device, &error));
+  bool batch = true;
+  EXPECT_TRUE(ParseNextPoseRequest({{"cmd", "next_pose"}}, &device, &batch, &error));
   EXPECT_EQ(device, "");
-  EXPECT_TRUE(ParseNextPoseRequest({{"device", "imu2"}}, &device, &error));
+  EXPECT_FALSE(batch);
+  EXPECT_TRUE(ParseNextPoseRequest({{"device", "imu2"}}, &device, &batch, &error));
   EXPECT_EQ(device, "imu2");
+  // The whole fixture (issue 38).
+  device.clear();
+  EXPECT_TRUE(ParseNextPoseRequest({{"batch", true}}, &device, &batch, &error));
+  EXPECT_TRUE(batch);
+  EXPECT_FALSE(ParseNextPoseRequest({{"batch", 1}}, &device, &batch, &error));
+  EXPECT_EQ(error, "next_pose: 'batch' must be true or false");
+  EXPECT_FALSE(
+      ParseNextPoseRequest({{"batch", true}, {"device", "imu2"}}, &device, &batch, &error));
+  EXPECT_EQ(error, "next_pose: give 'device' or 'batch', not both");
   EXPECT_TRUE(ParseResetRequest({{"note", "new IMU batch"}}, &note, &error));
   EXPECT_EQ(note, "new IMU batch");
   ASSERT_TRUE(ParsePublishRequest({{"override", true},
