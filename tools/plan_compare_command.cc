@@ -62,6 +62,22 @@ struct Tally {
   }
 };
 
+// The keys of --json's object both comparisons share.
+nlohmann::json SummaryJson(const PlanCompareArgs& args, const nlohmann::json& runs,
+                           const Tally& cube, const Tally& planned) {
+  return {{"model", args.model},
+          {"class", args.sensor_class},
+          {"objective", args.objective},
+          {"table_rate_dps", args.table_rate_dps},
+          {"runs", runs},
+          {"cube_mean", cube.mean()},
+          {"cube_mean_s", cube.mean_seconds()},
+          {"cube_never", cube.failures()},
+          {"planned_mean", planned.mean()},
+          {"planned_mean_s", planned.mean_seconds()},
+          {"planned_never", planned.failures()}};
+}
+
 // The codes RunPlanCompare returns.
 constexpr Manual kPlanVsCubeManual = {
     "Simulated sessions: how many poses the real calibrator and gate need along the 26-pose "
@@ -128,21 +144,11 @@ int RunBatchCompare(const PlanCompareArgs& args, const SensorClass& sensor, cons
     return t.mean_seconds() > 0 ? 3600.0 * args.units / t.mean_seconds() : 0.0;
   };
   if (args.json) {
-    fmt::print("{}\n", nlohmann::json{{"model", args.model},
-                                      {"class", args.sensor_class},
-                                      {"units", args.units},
-                                      {"objective", args.objective},
-                                      {"table_rate_dps", args.table_rate_dps},
-                                      {"runs", runs},
-                                      {"cube_mean", cube.mean()},
-                                      {"cube_mean_s", cube.mean_seconds()},
-                                      {"cube_never", cube.failures()},
-                                      {"cube_units_per_hour", per_hour(cube)},
-                                      {"planned_mean", planned.mean()},
-                                      {"planned_mean_s", planned.mean_seconds()},
-                                      {"planned_never", planned.failures()},
-                                      {"planned_units_per_hour", per_hour(planned)}}
-                           .dump());
+    nlohmann::json summary = SummaryJson(args, runs, cube, planned);
+    summary["units"] = args.units;
+    summary["cube_units_per_hour"] = per_hour(cube);
+    summary["planned_units_per_hour"] = per_hour(planned);
+    fmt::print("{}\n", summary.dump());
     return 0;
   }
   std::string mounts;
@@ -222,21 +228,11 @@ int RunPlanCompare(const PlanCompareArgs& args) {
     }
   }
   if (args.json) {
-    fmt::print("{}\n", nlohmann::json{{"model", args.model},
-                                      {"class", args.sensor_class},
-                                      {"objective", args.objective},
-                                      {"table_rate_dps", args.table_rate_dps},
-                                      {"runs", runs},
-                                      {"cube_mean", cube.mean()},
-                                      {"cube_mean_s", cube.mean_seconds()},
-                                      {"cube_never", cube.failures()},
-                                      {"planned_mean", planned.mean()},
-                                      {"planned_mean_s", planned.mean_seconds()},
-                                      {"planned_never", planned.failures()},
-                                      {"planned_fewer", planned_fewer},
-                                      {"planned_quicker", planned_quicker},
-                                      {"equal", equal}}
-                           .dump());
+    nlohmann::json summary = SummaryJson(args, runs, cube, planned);
+    summary["planned_fewer"] = planned_fewer;
+    summary["planned_quicker"] = planned_quicker;
+    summary["equal"] = equal;
+    fmt::print("{}\n", summary.dump());
   } else {
     fmt::print(
         "{} ({} class tolerances), {} runs: poses and table seconds to pass the gate (table {:g} "

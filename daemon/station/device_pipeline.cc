@@ -85,6 +85,8 @@ nlohmann::json DevicePipeline::StatusJson() const {
           {"moves", MovesJson()},
           {"temperature", TemperatureJson()},
           {"mount", MountJson()},
+          {"duplicate_serial_of",
+           duplicate_serial_of.empty() ? nlohmann::json() : nlohmann::json(duplicate_serial_of)},
           {"models", model_status}};
 }
 

@@ -42,7 +42,10 @@ struct DevicePipeline {
   MountCheck mount_check;
   bool mount_wrong_published = false;  // the MOUNT event for the current verdict was sent
   nlohmann::json identity;             // from the device dialogue (null in replays)
-  nlohmann::json current;              // the pose being collected: its last sequencer event
+  // Another device of the station that reported the same serial first ("": none): this one's
+  // calibrations are held (Station::SetDeviceIdentity).
+  std::string duplicate_serial_of;
+  nlohmann::json current;  // the pose being collected: its last sequencer event
   // reports/NAME.html is rewritten after an activation, at most every kReportIntervalNs (the
   // render re-solves the calibration pose by pose: tens of ms on the worker).
   bool report_due = false;

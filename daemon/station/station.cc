@@ -111,8 +111,44 @@ const MeasurementModel* Station::ModelOf(const std::string& device,
   return c ? c->writable_model() : nullptr;
 }
 
+namespace {
+// The serial number a device's dialogue reported (a MIP's serial, an Xbus device id); "" if none.
+std::string SerialOf(const nlohmann::json& identity) {
+  if (!identity.is_object()) return "";
+  for (const char* key : {"serial", "device_id"}) {
+    if (auto it = identity.find(key); it != identity.end() && it->is_string()) {
+      return it->get<std::string>();
+    }
+  }
+  return "";
+}
+}  // namespace
+
 void Station::SetDeviceIdentity(int device, nlohmann::json identity) {
-  devices_[static_cast<std::size_t>(device)]->identity = std::move(identity);
+  DeviceState& d = *devices_[static_cast<std::size_t>(device)];
+  d.identity = std::move(identity);
+  // Two units of the batch with one serial (issue 38): one cable in two ports, or a unit whose
+  // serial was cloned. Their calibrations would be filed under one unit (certificate, registry):
+  // the later one to report is named and its calibrations held until the conflict is gone (a
+  // device answering with another serial clears it).
+  const std::string serial = SerialOf(d.identity);
+  std::string other;
+  for (const auto& o : devices_) {
+    if (o.get() != &d && !serial.empty() && SerialOf(o->identity) == serial &&
+        o->duplicate_serial_of.empty()) {
+      other = o->name;
+      break;
+    }
+  }
+  if (other == d.duplicate_serial_of) return;
+  d.duplicate_serial_of = other;
+  if (other.empty()) return;
+  Publish({{"class", "ERROR"},
+           {"device", d.name},
+           {"message", fmt::format("{} reports serial {}, as {} does: two units with one serial "
+                                   "(one unit on two ports, or a cloned serial). {}'s "
+                                   "calibrations are held until it reports a serial of its own",
+                                   d.name, serial, other, d.name)}});
 }
 
 Station::~Station() { *alive_ = false; }
@@ -397,6 +433,10 @@ void Station::SaveNoiseProfile(DeviceState& d) {
 
 void Station::Activate(DeviceState& d, Calibration& c, double t_s,
                        const nlohmann::json& override_who) {
+  if (!d.duplicate_serial_of.empty() && override_who.is_null()) {
+    // Held: another unit of the batch reported the same serial (SetDeviceIdentity said so).
+    return;
+  }
   if (d.mount_check.wrong && override_who.is_null()) {
     // A unit that does not sit as configured: its calibration is held, not activated (its
     // mounting angles would carry the wrong slot's rotation). Said once per verdict.

@@ -216,3 +216,47 @@ TEST(StationBatch, TheNextPoseIsPlannedForEveryUnitStillShortOfAGate) {
 
 }  // namespace
 }  // namespace turncal
+
+namespace turncal {
+namespace {
+
+// Issue 38's bad input: two units of the batch report one serial. The later one is named, its
+// calibrations are held (they would be filed under the other unit), and a serial of its own
+// clears it.
+TEST(StationBatch, TwoUnitsWithOneSerialAreNamedAndTheLaterIsHeld) {
+  const sim::SimCapture c = MountedCapture(Mat3<double>::Identity());
+  std::vector<nlohmann::json> events;
+  daemon::Station station({"imu", "imu2"}, daemon::StationOptions{},
+                          [&](const nlohmann::json& e) { events.push_back(e); });
+  station.SetDeviceIdentity(1, {{"protocol", "mip"}, {"serial", "SIM0001"}});
+  station.SetDeviceIdentity(0, {{"protocol", "mip"}, {"serial", "SIM0001"}});
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0]["class"], "ERROR");
+  EXPECT_EQ(events[0]["device"], "imu");
+  EXPECT_NE(events[0]["message"].get<std::string>().find(
+                "imu reports serial SIM0001, as imu2 does: two units with one serial"),
+            std::string::npos)
+      << events[0]["message"];
+  EXPECT_EQ(station.Status(0)["duplicate_serial_of"], "imu2");
+  EXPECT_TRUE(station.Status(1)["duplicate_serial_of"].is_null());
+
+  const std::string path = WriteSimCaptureFile(c, "dup_serial");
+  drivers::CaptureReader reader;
+  std::string error;
+  ASSERT_TRUE(reader.Open(path, &error)) << error;
+  daemon::ReplayStats stats;
+  ASSERT_TRUE(daemon::ReplayInto(&reader, &station, true, {}, &stats, &error)) << error;
+  int active = 0;
+  for (const auto& e : events) active += e["class"] == "CALIBRATION_ACTIVE";
+  EXPECT_EQ(active, 0);
+  const nlohmann::json result = station.Result();
+  EXPECT_TRUE(result["devices"]["imu"]["models"]["accel13"]["gate"]["pass"].get<bool>());
+  EXPECT_EQ(result["devices"]["imu"]["models"]["accel13"]["active_version"], 0);
+  // The unit answers with its own serial (the cable moved): the conflict is gone.
+  station.SetDeviceIdentity(0, {{"protocol", "mip"}, {"serial", "SIM0003"}});
+  EXPECT_TRUE(station.Status(0)["duplicate_serial_of"].is_null());
+  std::remove(path.c_str());
+}
+
+}  // namespace
+}  // namespace turncal
