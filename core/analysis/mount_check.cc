@@ -1,5 +1,7 @@
 #include "core/analysis/mount_check.h"
 
+#include "core/frames/units.h"
+
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -8,14 +10,12 @@
 namespace turncal {
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
-
 double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  return std::atan2(a.cross(b).norm(), a.dot(b)) / kDeg;
+  return std::atan2(a.cross(b).norm(), a.dot(b)) * kDegPerRad;
 }
 
 double RotationAngleDeg(const Mat3<double>& r) {
-  return std::acos(std::clamp(0.5 * (r.trace() - 1.0), -1.0, 1.0)) / kDeg;
+  return std::acos(std::clamp(0.5 * (r.trace() - 1.0), -1.0, 1.0)) * kDegPerRad;
 }
 
 }  // namespace
@@ -49,12 +49,17 @@ MountCheck CheckMount(const std::vector<MountObservation>& observations,
   spread /= static_cast<double>(u.size());
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(spread);
   out.determined = eig.eigenvalues()[1] >= options.min_spread;  // ascending: [1] the middle one
+  // The RMS angle between the measured directions and D's prediction (D the identity until
+  // determined).
+  const auto misfit_deg = [&](const Mat3<double>& d) {
+    double sum = 0;
+    for (std::size_t k = 0; k < u.size(); ++k) sum += std::pow(AngleDeg(d * u[k], m[k]), 2);
+    return std::sqrt(sum / static_cast<double>(u.size()));
+  };
   if (!out.determined) {
     // One direction: wrong if it is already off; which rotation is not known.
     out.wrong = out.largest_off_deg > options.wrong_deg;
-    double sum = 0;
-    for (std::size_t k = 0; k < u.size(); ++k) sum += std::pow(AngleDeg(u[k], m[k]), 2);
-    out.misfit_deg = std::sqrt(sum / static_cast<double>(u.size()));
+    out.misfit_deg = misfit_deg(Mat3<double>::Identity());
     return out;
   }
   // Kabsch: the rotation D maximising sum m_k . D u_k.
@@ -70,9 +75,7 @@ MountCheck CheckMount(const std::vector<MountObservation>& observations,
   out.rotation = d;
   out.angle_deg = RotationAngleDeg(d);
   out.wrong = out.angle_deg > options.wrong_deg;
-  double sum = 0;
-  for (std::size_t k = 0; k < u.size(); ++k) sum += std::pow(AngleDeg(d * u[k], m[k]), 2);
-  out.misfit_deg = std::sqrt(sum / static_cast<double>(u.size()));
+  out.misfit_deg = misfit_deg(d);
   return out;
 }
 

@@ -1,5 +1,7 @@
 #include "core/frames/mount.h"
 
+#include "core/frames/units.h"
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -7,8 +9,6 @@
 
 namespace turncal {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 // "+x" -> 0 with sign +1; false for anything else.
 bool ParseSignedAxis(std::string_view s, int* axis, double* sign) {
@@ -28,7 +28,7 @@ std::optional<std::string> DirectionName(const Eigen::Vector3d& u) {
     std::sort(order, order + 3, [&](int a, int b) { return std::abs(u[a]) > std::abs(u[b]); });
     for (int k = 0; k < n; ++k) v[order[k]] = u[order[k]] >= 0 ? 1.0 : -1.0;
     v.normalize();
-    if (std::acos(std::min(1.0, v.dot(u))) > 2.0 * kDeg) continue;
+    if (std::acos(std::min(1.0, v.dot(u))) > 2.0 * kRadPerDeg) continue;
     std::string name;
     for (int i = 0; i < 3; ++i) {
       if (v[i] == 0) continue;
@@ -98,7 +98,7 @@ bool ParseMountText(std::string_view text, Mat3<double>* mount, std::string* err
 }
 
 Mat3<double> MountFromAnglesDeg(double x_deg, double y_deg, double z_deg) {
-  return R1(x_deg * kDeg) * R2(y_deg * kDeg) * R3(z_deg * kDeg);
+  return R1(x_deg * kRadPerDeg) * R2(y_deg * kRadPerDeg) * R3(z_deg * kRadPerDeg);
 }
 
 std::optional<std::string> MountAxesName(const Mat3<double>& mount) {
@@ -133,7 +133,7 @@ Eigen::Vector3d MountAnglesDeg(const Mat3<double>& m) {
     // Gimbal lock: only x - z (y = +90) or x + z (y = -90) is defined; x = 0.
     z = std::atan2(-m(1, 0), m(1, 1));
   }
-  return Eigen::Vector3d(x, y, z) / kDeg;
+  return Eigen::Vector3d(x, y, z) * kDegPerRad;
 }
 
 std::string MountConfigText(const Mat3<double>& mount) {
@@ -148,7 +148,7 @@ MountRotation RotationOf(const Mat3<double>& d) {
   // is D^T.
   const Eigen::AngleAxisd aa(Mat3<double>(d.transpose()));
   MountRotation out;
-  out.angle_deg = aa.angle() / kDeg;
+  out.angle_deg = aa.angle() * kDegPerRad;
   out.axis = aa.axis();
   if (out.angle_deg > 179.999) {
     // 180 deg about u is 180 deg about -u: the axis with its largest entry positive.

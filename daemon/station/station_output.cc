@@ -103,8 +103,11 @@ nlohmann::json Station::NextPoseBatch() const {
     for (std::size_t i = 0; i < d->calibrations->size(); ++i) {
       passed = passed && d->calibrations->at(i).GatePassed();
     }
-    std::vector<PlanningTarget> own =
-        d->calibrations->PlanningTargets(*d, options_.sequencer.dwell_s);
+    // Only a unit that is planned for takes its calibrators' locks for its targets.
+    std::vector<PlanningTarget> own;
+    if (!passed && !d->mount_check.wrong) {
+      own = d->calibrations->PlanningTargets(*d, options_.sequencer.dwell_s);
+    }
     const char* state = passed                 ? "passed"
                         : d->mount_check.wrong ? "mount wrong"
                         : own.empty()          ? "nothing to plan"
