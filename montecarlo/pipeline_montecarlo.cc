@@ -7,6 +7,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -15,6 +16,7 @@
 #include <random>
 #include <thread>
 
+#include "core/frames/mount.h"
 #include "core/planning/pose_planner.h"
 #include "core/sequencing/sequencer.h"
 #include "daemon/state/persistence.h"
@@ -24,6 +26,7 @@
 #include "montecarlo/pipeline_thermal.h"
 #include "protocol/calibration_json.h"
 #include "sim/capture.h"
+#include "sim/fixture_capture.h"
 #include "sim/session_sim.h"
 #include "sim/synthetic.h"
 
@@ -103,6 +106,16 @@ class PipelineMonteCarlo {
       if (plan_.empty()) return false;
     }
     if (!(gyro_ && o_.plan == "planner")) plan_ = WithRateSegments(plan_);
+    if (o_.units > 1 && (chamber_ || o_.units > 16)) {
+      s->error = chamber_ ? "--units: a fixture is not simulated in a chamber"
+                          : "--units: at most 16 units";
+      s->bad_options = true;
+      return false;
+    }
+    for (int u = 0; u < std::max(1, o_.units); ++u) {
+      mounts_.emplace_back();
+      ParseMountAxes(sim::kFixtureMounts[u % 4], &mounts_.back(), nullptr);
+    }
     return true;
   }
 
@@ -208,10 +221,67 @@ class PipelineMonteCarlo {
     return mixed;
   }
 
-  // Every run, `jobs` at a time, in a scratch folder removed at the end.
+  // Every run, `jobs` at a time, in a scratch folder removed at the end; a fixture's runs give
+  // one PipelineRun per unit, in order.
   std::vector<PipelineRun> RunAll() {
-    return RunInScratchDir<PipelineRun>("turncal-montecarlo", o_.runs, o_.jobs, &dir_,
-                                        [this](int run, PipelineRun* out) { RunOne(run, out); });
+    if (o_.units <= 1) {
+      return RunInScratchDir<PipelineRun>("turncal-montecarlo", o_.runs, o_.jobs, &dir_,
+                                          [this](int run, PipelineRun* out) { RunOne(run, out); });
+    }
+    const auto sessions = RunInScratchDir<std::vector<PipelineRun>>(
+        "turncal-montecarlo", o_.runs, o_.jobs, &dir_,
+        [this](int run, std::vector<PipelineRun>* out) { RunFixture(run, out); });
+    std::vector<PipelineRun> runs;
+    for (const auto& units : sessions) runs.insert(runs.end(), units.begin(), units.end());
+    return runs;
+  }
+
+  // One fixture's session: `units` units simulated in their mounts, merged into one capture,
+  // replayed through one station, each unit's estimate scored against its own truth.
+  void RunFixture(int run, std::vector<PipelineRun>* out) {
+    const std::uint64_t base = o_.seed * 1000003 + static_cast<std::uint64_t>(run);
+    out->assign(static_cast<std::size_t>(o_.units), PipelineRun{});
+    std::vector<sim::SimCapture> units(out->size());
+    std::string error;
+    for (std::size_t u = 0; u < units.size() && error.empty(); ++u) {
+      (*out)[u].seed = base * 16 + u;
+      (*out)[u].unit = static_cast<int>(u);
+      sim::SimCaptureOptions o = SimulationFor((*out)[u].seed);
+      o.mount = mounts_[u];
+      sim::BuildSimCapture(o, &units[u], &error);
+    }
+    sim::SimCapture fixture;
+    const RemovedOnExit path((dir_ / fmt::format("run-{}.tcap", run)).string());
+    const RemovedOnExit state_dir((dir_ / fmt::format("state-{}", run)).string());
+    daemon::ReplayOnceOutcome replay;
+    PipelineRun events;  // the replay's error and the rejections, of any unit
+    if (error.empty() && sim::MergeFixtureCaptures(units, &fixture, &error) &&
+        sim::WriteSimCapture(fixture, path.path, &error)) {
+      Replay(path.path, state_dir.path, static_cast<double>(fixture.offset_ns) * 1e-9, &replay,
+             &events, out);
+      error = events.error;
+    }
+    for (std::size_t u = 0; u < units.size(); ++u) {
+      PipelineRun& r = (*out)[u];
+      r.error = error;
+      if (!error.empty()) continue;
+      const double offset_s = static_cast<double>(fixture.offset_ns) * 1e-9;
+      nlohmann::json m;
+      Eigen::VectorXd truth;
+      if (!JudgedEstimate(&replay.result, state_dir.path, fmt::format("imu{}", u + 1), &m,
+                          &r.error) ||
+          !Truth(units[u], m, offset_s, &truth, &r.error)) {
+        continue;
+      }
+      Score(m, truth, &r);
+      r.rejected = events.rejected;
+      r.session_s = units[u].session.duration_s;
+    }
+    const int finished = ++done_;
+    if (o_.progress) {
+      std::lock_guard lock(progress_mutex_);
+      o_.progress(finished);
+    }
   }
 
   // One session: simulated, written, replayed through the station, its estimate scored against
@@ -311,17 +381,29 @@ class PipelineMonteCarlo {
       station.gate_tolerances_set = true;
     }
     if (o_.at == "first-gate") station.state_dir = state_dir;
+    for (int u = 0; o_.units > 1 && u < o_.units; ++u) {
+      station.per_device[fmt::format("imu{}", u + 1)].mount = mounts_[static_cast<std::size_t>(u)];
+    }
     return station;
   }
 
   // The capture through the station, noting the first activation (poses and session seconds to
   // a passing gate) and the sequencer's rejections.
+  // A fixture's (`units`: one run per device, imu1, imu2, ...): each unit's first activation in
+  // its own run.
   bool Replay(const std::string& path, const std::string& state_dir, double offset_s,
-              daemon::ReplayOnceOutcome* replay, PipelineRun* out) const {
+              daemon::ReplayOnceOutcome* replay, PipelineRun* out,
+              std::vector<PipelineRun>* units = nullptr) const {
     const auto on_event = [&](const nlohmann::json& j) {
-      if (out->gate_poses < 0 && j.value("class", "") == "CALIBRATION_ACTIVE") {
-        out->gate_poses = j.value("poses", -1);
-        out->gate_s = j.value("t", NAN) - offset_s;
+      PipelineRun* unit = out;
+      if (units) {
+        const std::string device = j.value("device", "");
+        const int k = device.rfind("imu", 0) == 0 ? std::atoi(device.c_str() + 3) - 1 : -1;
+        if (k >= 0 && k < static_cast<int>(units->size())) unit = &(*units)[k];
+      }
+      if (unit->gate_poses < 0 && j.value("class", "") == "CALIBRATION_ACTIVE") {
+        unit->gate_poses = j.value("poses", -1);
+        unit->gate_s = j.value("t", NAN) - offset_s;
       }
       if (j.value("class", "") == "POSE_REJECTED") out->rejected.push_back(j.value("reason", ""));
     };
@@ -451,6 +533,13 @@ class PipelineMonteCarlo {
       poses += r.poses;
       session_s += r.session_s;
     });
+    for (int u = 0; o_.units > 1 && u < o_.units; ++u) {
+      s->unit_z.emplace_back(static_cast<int>(s->parameters.size()));
+      s->unit_mounts.push_back(sim::kFixtureMounts[u % 4]);
+      for (const auto& r : s->runs) {
+        if (r.ok && r.unit == u) s->unit_z.back().Add(r.z);
+      }
+    }
     if (s->solved < 2) return;
     s->ks = KsUniform(p_values);
     s->poses_mean = poses / s->solved;
@@ -473,6 +562,7 @@ class PipelineMonteCarlo {
   std::optional<ChamberProfile> chamber_;
   ThermalBasis truth_basis_;
   std::vector<double> held_out_c_;
+  std::vector<Mat3<double>> mounts_;  // each unit's of a fixture (sim::kFixtureMounts)
   std::filesystem::path dir_;
   std::atomic<int> done_{0};
   std::mutex progress_mutex_;
@@ -483,6 +573,9 @@ class PipelineMonteCarlo {
 bool PipelineMonteCarloSummary::Passed() const {
   int honest = 0;
   for (int i = 0; i < z.parameters(); ++i) honest += z.Honest(i);
+  for (const auto& u : unit_z) {
+    for (int i = 0; i < u.parameters(); ++i) honest -= !u.Honest(i);
+  }
   return honest == z.parameters() && ks.p > 0.01 && solved == static_cast<int>(runs.size());
 }
 

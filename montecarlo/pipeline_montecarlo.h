@@ -80,6 +80,12 @@ struct PipelineMonteCarloOptions {
   // The magnetometer's own rate below the output rate: each value held until the next (0: every
   // sample a new value).
   double mag_rate_hz = 0.0;
+  // A fixture of this many units on one table (issue 38; docs/BATCH.md): each run simulates
+  // that many units of the same plan in sim::kFixtureMounts' four mounts in turn, each with its
+  // own seed and truth, and replays them as one capture through one station with their mounts
+  // configured; each unit's estimate is scored as a run of its own (PipelineRun::unit). Not in a
+  // chamber.
+  int units = 1;
   std::string keep_dir;  // when set: the captures of runs with a parameter beyond 4 sigma go here
   double keep_p_below = 0.0;  // with keep_dir: also the runs whose chi^2 p-value is below this
   // Called after each run that gave an estimate with the number of such runs so far, one call at
@@ -92,6 +98,7 @@ struct PipelineRun {
   bool ok = false;  // an estimate with finite z for every parameter
   std::string error;
   std::uint64_t seed = 0;
+  int unit = 0;  // with units > 1: the unit of its session (0: the first)
   Eigen::VectorXd z;
   double p_value = 1.0;
   bool gate_pass = false;
@@ -125,9 +132,13 @@ struct PipelineMonteCarloSummary {
   double poses_mean = 0.0, session_s_mean = 0.0;
   double poses_to_gate = NAN, seconds_to_gate = NAN;  // mean over the activated runs
   int poses_to_gate_max = 0;
+  // With units > 1: each unit's z-scores over its sessions (every unit's parameters honest is
+  // part of Passed), and its mount's text.
+  std::vector<ZScoreSummary> unit_z;
+  std::vector<std::string> unit_mounts;
 
-  // Every parameter honest (ZScoreSummary::Honest), the p-values uniform (KS p > 0.01) and every
-  // run with an estimate.
+  // Every parameter honest (ZScoreSummary::Honest), for every unit of a fixture too, the
+  // p-values uniform (KS p > 0.01) and every run with an estimate.
   bool Passed() const;
 };
 

@@ -31,6 +31,7 @@ table { border-collapse: collapse; margin: 6px 0; } th, td { padding: 2px 8px; b
 td.num { text-align: right; font-variant-numeric: tabular-nums; } .small { font-size: 12px; color: #555; }
 tr.exceeds td { background: #fde8e8; } tr.within td:nth-child(6) { color: #176317; }
 .verdict { font-size: 16px; } .verdict.pass strong { color: #176317; } .verdict.fail strong { color: #b00; }
+.batch td.pass { color: #176317; } .batch td.fail { color: #b00; }
 .missing, .fit-warn { color: #a00; } table.matrix td { font-family: ui-monospace, monospace; border: none; }
 table.matrix caption { text-align: left; font-weight: bold; } .sigma { color: #666; }
 svg.plot { display: block; margin: 8px 0; background: #fff; }
@@ -242,6 +243,46 @@ std::string PageStart(const std::string& device, const ReportOptions& options) {
   return o;
 }
 
+// The batch summary (ReportOptions::batch): "" for none, or a batch of one unit without a fixture.
+std::string BatchHtml(const nlohmann::json& b, const std::string& device) {
+  if (!b.is_object() || !b.contains("units") || !b["units"].is_array()) return "";
+  const bool fixture = b.value("fixture", nlohmann::json()).is_string();
+  if (b["units"].size() < 2 && !fixture) return "";
+  auto text = [](const nlohmann::json& v) {
+    return v.is_string() ? v.get<std::string>() : v.is_null() ? std::string("&#8212;") : v.dump();
+  };
+  std::string o = "<section class=\"batch\"><h2>Batch " + Escape(text(b["id"])) + "</h2>";
+  o += fmt::format(
+      "<p>{}{} units, started {}: {} passed, {} waiting, {} held{}. This report is of {}.</p>",
+      fixture ? "Fixture " + Escape(b["fixture"].get<std::string>()) + ", " : std::string(),
+      b["units"].size(), Escape(text(b.value("started", nlohmann::json()))), b.value("passed", 0),
+      b.value("waiting", 0), b.value("held", 0),
+      b.value("seconds_to_last_gate", nlohmann::json()).is_number()
+          ? fmt::format("; the last gate after {:.0f} s of table time",
+                        b["seconds_to_last_gate"].get<double>())
+          : std::string(),
+      Escape(device));
+  o += "<table><tr><th>slot</th><th>device</th><th>serial</th><th>state</th><th>poses</th>"
+       "<th>time to its gates</th><th>why</th></tr>";
+  for (const auto& u : b["units"]) {
+    if (!u.is_object()) continue;
+    const std::string state = u.value("state", "");
+    const std::string name = u.value("device", "");
+    o += fmt::format(
+        "<tr{}><td>{}</td><td>{}</td><td>{}</td><td class=\"{}\">{}</td><td>{}</td><td>{}</td>"
+        "<td>{}</td></tr>",
+        name == device ? " style=\"font-weight:bold\"" : "",
+        Escape(text(u.value("slot", nlohmann::json()))), Escape(name),
+        Escape(text(u.value("serial", nlohmann::json()))), state == "passed" ? "pass" : "fail",
+        Escape(state), u.value("poses", 0),
+        u.value("seconds", nlohmann::json()).is_number()
+            ? fmt::format("{:.0f} s", u["seconds"].get<double>())
+            : std::string("&#8212;"),
+        Escape(u.value("why", "")));
+  }
+  return o + "</table></section>\n";
+}
+
 }  // namespace
 
 bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const ReportOptions& options,
@@ -278,7 +319,8 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   if (pose_docs.empty() && free_docs.empty()) {
     const std::string device = thermal_docs[0].value("device", "");
     std::string o = PageStart(device, options);
-    o += "</header>\n" + thermal_body + DeviceWritesHtml(options.device_writes);
+    o += "</header>\n" + BatchHtml(options.batch, device) + thermal_body +
+         DeviceWritesHtml(options.device_writes);
     o += "</body>\n</html>\n";
     *html = std::move(o);
     return true;
@@ -308,6 +350,10 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
         in.lines.insert(in.lines.begin(), "generated " + options.generated_utc);
       }
       *html = FreeReportHtml(in);
+      if (const std::string batch = BatchHtml(options.batch, device); !batch.empty()) {
+        const std::size_t header = html->find("</header>");
+        if (header != std::string::npos) html->insert(header + 9, "\n" + batch);
+      }
       if (!thermal_body.empty()) {
         const std::size_t end = html->rfind("</body>");
         html->insert(end == std::string::npos ? html->size() : end, thermal_body);
@@ -347,6 +393,7 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   o += IdentityHtml(identity);
   o += SummaryHtml(docs);
   o += "</header>\n";
+  o += BatchHtml(options.batch, device);
   for (const auto& d : docs) o += ModelSection(d);
   o += TriadAngleHtml(docs);
   o += DeviceWritesHtml(options.device_writes);

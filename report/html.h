@@ -27,6 +27,11 @@ struct ReportOptions {
   // What turncal wrote into the device (the state directory's device_writes/DEVICE.UTCTIME.json
   // entries, oldest first): a section "Written into the device" when there are any.
   std::vector<nlohmann::json> device_writes;
+  // The session's batch as the station last published it (the state directory's batch.json,
+  // daemon/state/batch_file.h): the report opens with its summary, slot by slot -- serial,
+  // pass or what it waits for, the time each unit took -- when it has more than one unit or a
+  // fixture. Null: none.
+  nlohmann::json batch;
 };
 
 // Renders the report of the device all `calibrations` belong to (one per model, any order; the

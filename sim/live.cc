@@ -190,8 +190,10 @@ void LiveSim::OnMessage(const nlohmann::json& m, double vt) {
 
 // Every request of this announcement answered.
 void LiveSim::OnAllAnswered(double vt) {
-  if (!accepted_any_) {
-    // Refused outright (no device streaming yet): the same again in a moment.
+  if (!accepted_any_ && retry_devices_.empty()) {
+    // Refused outright (no device streaming yet): the same again in a moment. A retry to the
+    // devices left out that is refused again counts as a retry (a unit that never streams must
+    // not hold the table for ever).
     announced_ = false;
     retry_at_ = Clock::now() + std::chrono::milliseconds(500);
   } else if (rejected_by_.empty() && skipped_by_.empty()) {

@@ -40,6 +40,9 @@ void PrintStatus(const nlohmann::json& s) {
       fmt::print("  last error ({}): {}\n", text("last_error_time"), text("last_error"));
     }
   }
+  if (const std::string batch = BatchText(s.value("batch", nlohmann::json())); !batch.empty()) {
+    fmt::print("{}", batch);
+  }
   for (const auto& [name, d] : s["devices"].items()) {
     const auto& k = d["counters"];
     fmt::print("\n{} ({} on {}): {}  {:.1f} Hz\n", name, d.value("protocol", "?"),

@@ -25,6 +25,36 @@ std::string ProgressBar(double fraction, int width) {
          std::string(static_cast<std::size_t>(width - full), '.') + "]";
 }
 
+std::string BatchText(const nlohmann::json& b) {
+  if (!b.is_object() || !b["units"].is_array()) return "";
+  const bool fixture = b["fixture"].is_string();
+  if (b["units"].size() < 2 && !fixture) return "";
+  auto text = [](const nlohmann::json& v) {
+    return v.is_string() ? v.get<std::string>() : v.is_null() ? std::string("-") : v.dump();
+  };
+  std::string out = fmt::format(
+      "batch {}{} (started {}): {} passed, {} waiting, {} held", text(b["id"]),
+      fixture ? " on fixture " + b["fixture"].get<std::string>() : std::string(),
+      text(b["started"]), b.value("passed", 0), b.value("waiting", 0), b.value("held", 0));
+  if (b["seconds_to_last_gate"].is_number()) {
+    out += fmt::format("; the last gate after {:.0f} s", b["seconds_to_last_gate"].get<double>());
+  }
+  out += fmt::format("\n  {:6} {:10} {:12} {:8} {:>5} {:>7}  {}\n", "slot", "device", "serial",
+                     "state", "poses", "time", "why");
+  for (const auto& u : b["units"]) {
+    const std::string link = u.value("link", "");
+    const std::string why = u.value("why", "");
+    out += fmt::format(
+        "  {:6} {:10} {:12} {:8} {:>5} {:>7}  {}\n", text(u["slot"]), text(u["device"]),
+        text(u["serial"]), text(u["state"]), u.value("poses", 0),
+        u["seconds"].is_number() ? fmt::format("{:.0f} s", u["seconds"].get<double>()) : "-",
+        why + (!link.empty() && link != "streaming" && why.find(link) == std::string::npos
+                   ? " (device " + link + ")"
+                   : ""));
+  }
+  return out;
+}
+
 std::string PoseJsonText(const nlohmann::json& p) {
   if (!p.is_object()) return "?";
   return fmt::format("phi {:.1f} gamma {:.1f} psi {:.1f}", p.value("phi_deg", 0.0),

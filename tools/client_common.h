@@ -28,6 +28,11 @@ std::string ProgressBar(double fraction, int width);
 // "phi P gamma G psi S" of a pose's JSON, "?" when it is none.
 std::string PoseJsonText(const nlohmann::json& p);
 
+// The batch slot by slot (status' and BATCH's "batch", docs/BATCH.md): a heading with the counts,
+// then a line per unit -- slot, device, serial, state, poses, its time to its last gate and why
+// it waits or is held. "" for a batch of one unit without a fixture (nothing to add).
+std::string BatchText(const nlohmann::json& batch);
+
 // One request, its reply printed (as JSON with --json, else by `human`); 0, or 2 when the daemon
 // cannot be reached or answers ERROR.
 int Simple(const std::string& command, const Common& c, const nlohmann::json& request,

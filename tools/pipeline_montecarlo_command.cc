@@ -37,6 +37,34 @@ bool WriteRuns(const std::string& path, const montecarlo::PipelineMonteCarloSumm
   return true;
 }
 
+// A fixture's units (--units): each unit's mount and its parameters' rows.
+nlohmann::json UnitRows(const montecarlo::PipelineMonteCarloSummary& s) {
+  nlohmann::json units = nlohmann::json::array();
+  for (std::size_t u = 0; u < s.unit_z.size(); ++u) {
+    units.push_back({{"unit", u + 1},
+                     {"mount", s.unit_mounts[u]},
+                     {"runs", s.unit_z[u].runs()},
+                     {"params", ZScoreRows(s.parameters, s.unit_z[u], false)}});
+  }
+  return units;
+}
+
+// Per unit: the spread of its parameters' std z and the largest |mean z|, and how many fail.
+std::string UnitLines(const montecarlo::PipelineMonteCarloSummary& s) {
+  std::string out;
+  for (std::size_t u = 0; u < s.unit_z.size(); ++u) {
+    const auto& z = s.unit_z[u];
+    int bad = 0;
+    for (int i = 0; i < z.parameters(); ++i) bad += !z.Honest(i);
+    out += fmt::format(
+        "unit {} ({}): {} sessions, std z {:.3f}-{:.3f}, largest |mean z| {:.3f}; {} of {} "
+        "parameters fail\n",
+        u + 1, s.unit_mounts[u], z.runs(), z.Std().minCoeff(), z.Std().maxCoeff(),
+        z.Mean().cwiseAbs().maxCoeff(), bad, z.parameters());
+  }
+  return out.empty() ? out : "\n" + out;
+}
+
 void PrintPipelineJson(const montecarlo::PipelineMonteCarloOptions& o,
                        const montecarlo::PipelineMonteCarloSummary& s) {
   fmt::print("{}\n", nlohmann::json{{"model", o.model},
@@ -71,6 +99,8 @@ void PrintPipelineJson(const montecarlo::PipelineMonteCarloOptions& o,
                                     {"seconds_to_gate", s.seconds_to_gate},
                                     {"chi2_ks_d", s.ks.d},
                                     {"chi2_ks_p", s.ks.p},
+                                    {"units", o.units},
+                                    {"unit_params", UnitRows(s)},
                                     {"params", ZScoreRows(s.parameters, s.z, false)}}
                          .dump());
 }
@@ -85,7 +115,8 @@ std::string PlanConditions(const montecarlo::PipelineMonteCarloOptions& o) {
 }
 
 std::string DriftText(const montecarlo::PipelineMonteCarloOptions& o) {
-  return (o.random_walk > 0 ? fmt::format(", random walk {}", o.random_walk) : "") +
+  return (o.units > 1 ? fmt::format(", a fixture of {} units, each scored", o.units) : "") +
+         (o.random_walk > 0 ? fmt::format(", random walk {}", o.random_walk) : "") +
          (o.lever_arm_m.size() == 3
               ? fmt::format(", lever arm [{:g}, {:g}, {:g}] m", o.lever_arm_m[0], o.lever_arm_m[1],
                             o.lever_arm_m[2])
@@ -104,7 +135,7 @@ void PrintPipelineText(const montecarlo::PipelineMonteCarloOptions& o,
       "jobs\n\n{}",
       o.runs, o.model, o.sensor_class, o.protocol, o.plan + PlanConditions(o),
       o.warmup > 0 ? fmt::format(", warm-up {} x bias instability", o.warmup) : "", DriftText(o),
-      s.poses_mean, s.session_s_mean, o.seed, s.solved, s.wall_s, o.jobs, z_table);
+      s.poses_mean, s.session_s_mean, o.seed, s.solved, s.wall_s, o.jobs, z_table + UnitLines(s));
   fmt::print(
       "\nchi^2 p-values against uniform: Kolmogorov-Smirnov D = {:.3f}, p = {:.3g} ({})\n"
       "gate passed in {} of {} runs; first passed after {:.2f} poses (at most {}) and {:.1f} s "
@@ -117,9 +148,10 @@ void PrintPipelineText(const montecarlo::PipelineMonteCarloOptions& o,
           ? fmt::format("; the planner predicted it after {} poses", s.predicted_poses)
           : "",
       bad, s.parameters.size(),
-      s.solved < o.runs ? fmt::format("; {} runs without an estimate (first: {})",
-                                      o.runs - s.solved, s.first_error)
-                        : "");
+      s.solved < static_cast<int>(s.runs.size())
+          ? fmt::format("; {} runs without an estimate (first: {})",
+                        static_cast<int>(s.runs.size()) - s.solved, s.first_error)
+          : "");
 }
 
 }  // namespace
@@ -254,6 +286,12 @@ void AddPipelineMonteCarloOptions(CLI::App* mc, PipelineMonteCarloArgs* args) {
       "--keep", pipe->keep_dir,
       "with --pipeline: keep the captures of runs with a parameter beyond 4 sigma in "
       "this folder (run-SEED.tcap), for turncald --replay");
+  mc->add_option("--units", pipe->units,
+                 "with --pipeline: a fixture of this many units on one table, in four mounts in "
+                 "turn (+x+y+z, -y+x+z, +x-y-z, +z+x+y), each scored against its own truth; "
+                 "every unit's parameters must be honest (docs/BATCH.md)")
+      ->check(CLI::Range(1, 16))
+      ->capture_default_str();
   mc->add_option("--keep-p-below", pipe->keep_p_below,
                  "with --keep: also keep the runs whose chi^2 p-value is below this")
       ->check(CLI::Range(0.0, 1.0))

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/frames/mount.h"
+#include "sim/fixture_capture.h"
 #include "sim/simulated_batch.h"
 #include "sim/simulated_session.h"
 #include "tools/help_text.h"
@@ -29,9 +30,8 @@ struct PlanCompareArgs {
   int units = 0;  // > 0: a fixture of that many units (docs/BATCH.md)
 };
 
-// A fixture's units turn through four orientations: as placed, a quarter turn about the
-// vertical, upside down, and on its side (the case's z along the table's y).
-const char* const kBatchMounts[] = {"+x+y+z", "-y+x+z", "+x-y-z", "+z+x+y"};
+// A fixture's units turn through four orientations (sim::kFixtureMounts): as placed, a quarter
+// turn about the vertical, upside down, and on its side (the case's z along the table's y).
 
 // Table seconds of the first `count` poses from home: moves, settling and dwells.
 double SessionSeconds(const std::vector<TablePose>& poses, int count, const TableMotion& table,
@@ -96,7 +96,7 @@ int RunBatchCompare(const PlanCompareArgs& args, const SensorClass& sensor, cons
   std::vector<std::unique_ptr<MeasurementModel>> models;
   for (int k = 0; k < args.units; ++k) {
     ModelContext context;
-    ParseMountAxes(kBatchMounts[k % 4], &context.mounting, nullptr);
+    ParseMountAxes(sim::kFixtureMounts[k % 4], &context.mounting, nullptr);
     models.push_back(MakeModel(args.model, context, &error));
     if (!models.back()) {
       fmt::print(stderr, "turncal plan-vs-cube: {}\n", error);
@@ -153,7 +153,7 @@ int RunBatchCompare(const PlanCompareArgs& args, const SensorClass& sensor, cons
   }
   std::string mounts;
   for (int k = 0; k < std::min(args.units, 4); ++k)
-    mounts += std::string(k ? ", " : "") + kBatchMounts[k];
+    mounts += std::string(k ? ", " : "") + sim::kFixtureMounts[k];
   fmt::print(
       "{} units of {} ({} class tolerances) on one table, mounts {}, {} runs: poses and table "
       "seconds to the last unit's gate (table {:g} deg/s, {:g} deg/s^2, settle {:g} s, dwell {:g} "

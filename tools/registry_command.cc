@@ -14,6 +14,7 @@
 #include "report/certificate.h"
 #include "tools/certificate_command.h"
 #include "tools/help_text.h"
+#include "tools/registry_common.h"
 
 namespace turncal::tools {
 
@@ -22,16 +23,6 @@ namespace {
 using daemon::RegistryDb;
 using daemon::RegistryRows;
 
-struct RegistryArgs {
-  std::string conninfo;       // --db
-  std::string config_path;    // --config: turncald.toml's [registry]
-  std::string password_file;  // --password-file
-  std::string serial, model, station, format = "text", output, pdf, issued;
-  int version = 0;
-  bool json = false;
-  bool passing_only = false;
-};
-
 // The codes Open and the Run functions below return.
 constexpr Manual kRegistryManual = {
     "The calibration registry that every station's outbox fills (PostgreSQL; [registry] in "
@@ -39,7 +30,10 @@ constexpr Manual kRegistryManual = {
     "(a device that moved between stations shows both); latest SERIAL shows its latest "
     "passing calibration of each model with the parameters and their sigma; export writes "
     "CSV (one row per calibration and parameter) or JSON (whole documents with the writes "
-    "into the device); stations shows each station's last contact; certificate SERIAL "
+    "into the device); stations shows each station's last contact; yield lists each batch's units "
+    "and the share "
+    "that passed every gate (--by station: per station); batch ID lists a batch's units slot "
+    "by slot (docs/BATCH.md); certificate SERIAL "
     "--model M writes the calibration certificate of its latest passing (or --version N) "
     "calibration (docs/CERTIFICATES.md) and records it with its hash; verify FILE checks that "
     "a "
@@ -51,105 +45,14 @@ constexpr Manual kRegistryManual = {
     "turncal registry latest 6251.12345 --model accel13 --json\n"
     "turncal registry export --format csv --passing -o calibrations.csv\n"
     "turncal registry stations --config /etc/turncal/turncald.toml\n"
+    "turncal registry yield --by station\n"
+    "turncal registry batch cube4-20261129T045012Z --json\n"
     "turncal registry certificate 6251.12345 --model mag13 -o cert.html --pdf cert.pdf\n"
     "turncal registry verify cert.html",
     "0 done (verify: unchanged and issued by the registry); 1 nothing found (history, "
     "latest, certificate), or verify: edited or not issued by the registry; 2 the registry "
     "cannot be reached, refused the query, or a command-line mistake",
     "docs/REGISTRY.md, README (A registry for several stations)"};
-
-// The connection: --db, else TURNCAL_REGISTRY, else --config's (or /etc/turncal/turncald.toml's)
-// [registry]. Exit 2 with a message when none works.
-int Open(const RegistryArgs& a, RegistryDb* db, bool migrate = false) {
-  daemon::RegistryOptions options;
-  std::string error;
-  std::string config = a.config_path;
-  if (a.conninfo.empty() && config.empty() && !std::getenv("TURNCAL_REGISTRY") &&
-      std::filesystem::exists("/etc/turncal/turncald.toml")) {
-    config = "/etc/turncal/turncald.toml";
-  }
-  if (!a.conninfo.empty()) {
-    options.conninfo = a.conninfo;
-  } else if (const char* env = std::getenv("TURNCAL_REGISTRY"); env && *env) {
-    options.conninfo = env;
-  } else if (!config.empty()) {
-    daemon::Config c;
-    if (!daemon::LoadConfig(config, &c, &error)) {
-      fmt::print(stderr, "turncal registry: {}\n", error);
-      return 2;
-    }
-    if (!c.registry.enabled()) {
-      fmt::print(stderr, "turncal registry: {} has no [registry]\n", config);
-      return 2;
-    }
-    options = c.registry;
-  } else {
-    fmt::print(stderr,
-               "turncal registry: no registry: give --db CONNINFO, TURNCAL_REGISTRY, or --config "
-               "with a [registry] section\n");
-    return 2;
-  }
-  if (!a.password_file.empty()) options.password_file = a.password_file;
-  if (!db->Connect(options, migrate, &error)) {
-    fmt::print(stderr, "turncal registry: {}\n", error);
-    return 2;
-  }
-  return 0;
-}
-
-std::string Cell(const std::optional<std::string>& v) { return v.value_or(""); }
-
-// A table of rows for people: columns padded to their widest cell.
-void PrintTable(const RegistryRows& r) {
-  std::vector<std::size_t> width(r.columns.size());
-  for (std::size_t c = 0; c < r.columns.size(); ++c) width[c] = r.columns[c].size();
-  for (const auto& row : r.rows) {
-    for (std::size_t c = 0; c < row.size(); ++c) width[c] = std::max(width[c], Cell(row[c]).size());
-  }
-  auto line = [&](const std::vector<std::string>& cells) {
-    std::string s;
-    for (std::size_t c = 0; c < cells.size(); ++c) {
-      s += fmt::format("{:<{}}", cells[c], c + 1 < cells.size() ? width[c] + 2 : 0);
-    }
-    fmt::print("{}\n", s);
-  };
-  line(r.columns);
-  for (const auto& row : r.rows) {
-    std::vector<std::string> cells;
-    for (const auto& v : row) cells.push_back(Cell(v));
-    line(cells);
-  }
-}
-
-nlohmann::json RowsJson(const RegistryRows& r) {
-  nlohmann::json list = nlohmann::json::array();
-  for (const auto& row : r.rows) {
-    nlohmann::json o = nlohmann::json::object();
-    for (std::size_t c = 0; c < row.size(); ++c) {
-      if (!row[c]) {
-        o[r.columns[c]] = nullptr;
-        continue;
-      }
-      // By the column's type: jsonb and numbers as JSON, booleans ("t"/"f"), text as strings.
-      const auto kind = r.kinds[c];
-      nlohmann::json parsed =
-          kind == RegistryRows::Kind::kJson || kind == RegistryRows::Kind::kNumber
-              ? nlohmann::json::parse(*row[c], nullptr, false)
-              : nlohmann::json();
-      if (kind == RegistryRows::Kind::kBoolean) {
-        o[r.columns[c]] = *row[c] == "t";
-      } else if (kind == RegistryRows::Kind::kJson && !parsed.is_discarded()) {
-        o[r.columns[c]] = parsed;  // jsonb, null included
-      } else if (!parsed.is_null() && !parsed.is_discarded()) {
-        o[r.columns[c]] = parsed;
-      } else {
-        o[r.columns[c]] = *row[c];
-      }
-    }
-    list.push_back(o);
-  }
-  return list;
-}
 
 constexpr const char* kHistorySql = R"sql(
 SELECT c.calibrated_at, s.name AS station, c.device_name AS device, c.model, c.version,
@@ -207,10 +110,6 @@ WHERE ($1::text IS NULL OR d.serial = $1) AND ($2::text IS NULL OR s.name = $2)
   AND ($3::text IS NULL OR c.model = $3) AND (NOT $4::boolean OR c.passed)
 ORDER BY c.calibrated_at, c.id)sql";
 
-std::optional<std::string> Maybe(const std::string& s) {
-  return s.empty() ? std::nullopt : std::optional<std::string>(s);
-}
-
 // RFC 4180: quoted when a cell holds a comma, a quote or a line break.
 std::string CsvCell(const std::string& s) {
   if (s.find_first_of(",\"\r\n") == std::string::npos) return s;
@@ -219,23 +118,9 @@ std::string CsvCell(const std::string& s) {
   return q + "\"";
 }
 
-int Emit(const RegistryArgs& a, const std::string& text) {
-  if (a.output.empty() || a.output == "-") {
-    fmt::print("{}", text);
-    return 0;
-  }
-  std::string error;
-  if (!daemon::WriteFileAtomically(a.output, text, &error)) {
-    fmt::print(stderr, "turncal registry: {}\n", error);
-    return 2;
-  }
-  fmt::print(stderr, "turncal registry: wrote {}\n", a.output);
-  return 0;
-}
-
 int RunHistory(const RegistryArgs& a) {
   RegistryDb db;
-  if (int rc = Open(a, &db)) return rc;
+  if (int rc = OpenRegistry(a, &db)) return rc;
   RegistryRows rows;
   std::string error;
   if (!db.Query(kHistorySql, {a.serial, Maybe(a.model)}, &rows, &error)) {
@@ -255,7 +140,7 @@ int RunHistory(const RegistryArgs& a) {
 
 int RunLatest(const RegistryArgs& a) {
   RegistryDb db;
-  if (int rc = Open(a, &db)) return rc;
+  if (int rc = OpenRegistry(a, &db)) return rc;
   RegistryRows rows;
   std::string error;
   if (!db.Query(kLatestSql, {a.serial, Maybe(a.model)}, &rows, &error)) {
@@ -297,7 +182,7 @@ int RunLatest(const RegistryArgs& a) {
 
 int RunStations(const RegistryArgs& a) {
   RegistryDb db;
-  if (int rc = Open(a, &db)) return rc;
+  if (int rc = OpenRegistry(a, &db)) return rc;
   RegistryRows rows;
   std::string error;
   if (!db.Query(kStationsSql, {}, &rows, &error)) {
@@ -314,7 +199,7 @@ int RunStations(const RegistryArgs& a) {
 
 int RunExport(const RegistryArgs& a) {
   RegistryDb db;
-  if (int rc = Open(a, &db)) return rc;
+  if (int rc = OpenRegistry(a, &db)) return rc;
   RegistryRows rows;
   std::string error;
   const bool csv = a.format == "csv";
@@ -360,7 +245,7 @@ bool HasCertificates(const RegistryDb& db) {
 
 int RunCertificate(const RegistryArgs& a) {
   RegistryDb db;
-  if (int rc = Open(a, &db)) return rc;
+  if (int rc = OpenRegistry(a, &db)) return rc;
   if (!HasCertificates(db)) return 2;
   RegistryRows rows;
   std::string error;
@@ -441,7 +326,7 @@ int RunVerify(const RegistryArgs& a) {
     return 1;
   }
   RegistryDb db;
-  if (int rc = Open(a, &db)) return rc;
+  if (int rc = OpenRegistry(a, &db)) return rc;
   if (!HasCertificates(db)) return 2;
   RegistryRows rows;
   std::string error;
@@ -467,21 +352,10 @@ int RunVerify(const RegistryArgs& a) {
 
 int RunMigrate(const RegistryArgs& a) {
   RegistryDb db;
-  if (int rc = Open(a, &db, /*migrate=*/true)) return rc;
+  if (int rc = OpenRegistry(a, &db, /*migrate=*/true)) return rc;
   fmt::print("registry schema: version {} (this turncal knows {})\n", db.schema_version(),
              daemon::kRegistrySchemaVersion);
   return 0;
-}
-
-void AddConnectionOptions(CLI::App* sub, const std::shared_ptr<RegistryArgs>& a) {
-  sub->add_option("--db", a->conninfo,
-                  "the registry: a libpq connection string or postgresql:// URI (else "
-                  "TURNCAL_REGISTRY, else --config's [registry])");
-  sub->add_option("--config", a->config_path,
-                  "turncald.toml whose [registry] to use (default /etc/turncal/turncald.toml "
-                  "when it exists)");
-  sub->add_option("--password-file", a->password_file,
-                  "the password's file (mode 600; relative: in $CREDENTIALS_DIRECTORY)");
 }
 
 }  // namespace
@@ -490,7 +364,7 @@ void AddRegistryCommand(CLI::App* app) {
   CLI::App* cmd =
       app->add_subcommand("registry",
                           "the calibration registry across stations (PostgreSQL): history, latest, "
-                          "export, stations, migrate");
+                          "export, stations, yield, batch, certificate, verify, migrate");
   SetManual(cmd, kRegistryManual);
   cmd->require_subcommand(1);
   auto run = [](int rc) { throw CLI::RuntimeError(rc); };
@@ -558,6 +432,8 @@ void AddRegistryCommand(CLI::App* app) {
       "migrate", "bring the registry's schema to this turncal's version (stations do it too)");
   AddConnectionOptions(m, migrate);
   m->callback([migrate, run] { run(RunMigrate(*migrate)); });
+
+  AddRegistryBatchCommands(cmd);
 }
 
 }  // namespace turncal::tools

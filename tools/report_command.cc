@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/state/atomic_file.h"
+#include "daemon/state/batch_file.h"
 #include "daemon/state/device_write_record.h"
 #include "drivers/transport/transport.h"
 #include "report/html.h"
@@ -69,6 +70,7 @@ int RunHtmlReport(const HtmlReportArgs& args) {
       if (!note.empty()) fmt::print(stderr, "turncal report: {}: {}\n", d.paths[i], note);
     }
     options.device_writes = daemon::ReadDeviceWriteHistory(state_dir, device);
+    options.batch = daemon::ReadBatchStatus(state_dir);
     std::string html;
     if (!report::RenderReportHtml(d.calibrations, options, &html, &error)) {
       std::string files;

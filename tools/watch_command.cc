@@ -43,10 +43,15 @@ struct WatchView {
   };
   std::map<std::string, Device> devices;
   std::vector<std::string> log;
+  nlohmann::json batch;  // the latest BATCH: the fixture slot by slot
 
   void Take(const nlohmann::json& e) {
     const std::string kind = e.value("class", "");
     const std::string name = e.value("device", "");
+    if (kind == "BATCH") {
+      batch = e;
+      return;
+    }
     if (name.empty()) {
       if (kind != "WATCH") log.push_back(e.dump().substr(0, 160));
       return;
@@ -85,6 +90,14 @@ struct WatchView {
     const std::string kind = e.value("class", "");
     const std::string name = e.value("device", "");
     if (kind == "POSE_PROGRESS" || kind == "WATCH" || kind == "POSE_COLLECTING") return "";
+    if (kind == "BATCH") {
+      // The table once per change; its heading alone for a batch of one.
+      const std::string table = BatchText(e);
+      return !table.empty()
+                 ? table.substr(0, table.size() - 1)
+                 : fmt::format("batch {}: {} passed, {} waiting, {} held", e.value("id", ""),
+                               e.value("passed", 0), e.value("waiting", 0), e.value("held", 0));
+    }
     if (kind == "COVERAGE") {
       Device& d = devices[name];
       const int tenth = static_cast<int>(std::floor(10 * e.value("fraction", 0.0)));
@@ -170,7 +183,7 @@ struct WatchView {
   }
 
   std::string Render() const {
-    std::string out;
+    std::string out = BatchText(batch);
     for (const auto& [name, d] : devices) {
       out += fmt::format("{}: {} poses captured, {} rejected   {}\n", name, d.captured, d.rejected,
                          d.last);

@@ -76,7 +76,8 @@ RETURNING id)sql";
 constexpr const char* kInsertCalibration = R"sql(
 INSERT INTO calibrations (idempotency_key, station_id, device_id, device_name, model, version,
   passed, gate, parameters, parameter_order, covariance, observability, chi2, dof, p_value,
-  tolerances, reference, calibrator, provenance, software, calibrated_at, document, temperature)
+  tolerances, reference, calibrator, provenance, software, calibrated_at, document, temperature,
+  batch_id, slot)
 SELECT $1, $2::bigint, $3::bigint, d->>'device', d->>'model', (d->>'version')::integer,
   COALESCE((d->'gate'->>'pass')::boolean, false), d->'gate',
   COALESCE(d->'params', d->'temperature'->'at'->'t0'), d->'parameter_order',
@@ -90,9 +91,22 @@ SELECT $1, $2::bigint, $3::bigint, d->>'device', d->>'model', (d->>'version')::i
   COALESCE(d->>'p_value', d->'temperature'->>'p_value')::double precision, d->'tolerances',
   d->'context', d->'calibrator',
   CASE WHEN jsonb_typeof(d->'provenance') = 'object' THEN (d->'provenance') - 'records' END,
-  d->>'software', (d->>'time')::timestamptz, d, d->'temperature'
+  d->>'software', (d->>'time')::timestamptz, d, d->'temperature', $5::bigint,
+  d->'batch'->>'slot'
 FROM (SELECT $4::jsonb AS d) AS s
 ON CONFLICT (idempotency_key) DO NOTHING
+RETURNING id)sql";
+
+// The calibration's batch (issue 38): one row per station and batch id; the units on the
+// fixture as the largest any of its calibrations said.
+constexpr const char* kUpsertBatch = R"sql(
+INSERT INTO batches (station_id, name, fixture, units, started_at)
+SELECT $1::bigint, b->>'id', b->>'fixture', (b->>'units')::integer,
+  (b->>'started')::timestamptz
+FROM (SELECT $2::jsonb AS b) AS s
+ON CONFLICT (station_id, name) DO UPDATE
+  SET units = GREATEST(batches.units, EXCLUDED.units),
+      fixture = COALESCE(batches.fixture, EXCLUDED.fixture)
 RETURNING id)sql";
 
 // The poses and their records are aligned (daemon/station/device_pipeline.cc CalibrationJson).
@@ -353,7 +367,16 @@ bool RegistryDb::Put(const nlohmann::json& entry, PutResult* result, std::string
     result->permanent = true;
     return false;
   }
-  RegistryRows station_row, device_row, row;
+  // A calibration's batch (issue 38; none before it): {"id", "fixture", "units", "started"}.
+  std::optional<std::string> batch;
+  if (kind == "calibration") {
+    const nlohmann::json& d = entry.at("document");
+    if (d.is_object() && d.contains("batch") && d["batch"].is_object() &&
+        d["batch"].value("id", nlohmann::json()).is_string()) {
+      batch = d["batch"].dump();
+    }
+  }
+  RegistryRows station_row, device_row, batch_row, row;
   std::string why;
   bool ok = Exec("BEGIN", {}, nullptr, &why) &&
             Exec(kUpsertStation,
@@ -363,10 +386,18 @@ bool RegistryDb::Put(const nlohmann::json& entry, PutResult* result, std::string
                  {device.serial, device.reported ? "true" : "false", device.model_name,
                   device.firmware, device.protocol},
                  &device_row, &why) &&
-            Exec(kind == "calibration" ? kInsertCalibration : kUpsertDeviceWrite,
-                 {entry.value("key", ""), station_row.rows.at(0).at(0), device_row.rows.at(0).at(0),
-                  document},
-                 &row, &why);
+            (!batch || Exec(kUpsertBatch, {station_row.rows.at(0).at(0), batch}, &batch_row, &why));
+  if (ok && kind == "calibration") {
+    ok = Exec(kInsertCalibration,
+              {entry.value("key", ""), station_row.rows.at(0).at(0), device_row.rows.at(0).at(0),
+               document, batch ? batch_row.rows.at(0).at(0) : std::nullopt},
+              &row, &why);
+  } else if (ok) {
+    ok = Exec(kUpsertDeviceWrite,
+              {entry.value("key", ""), station_row.rows.at(0).at(0), device_row.rows.at(0).at(0),
+               document},
+              &row, &why);
+  }
   if (ok && kind == "calibration") {
     result->already_there = row.rows.empty();
     if (!row.rows.empty()) ok = Exec(kInsertPoses, {row.rows[0][0], provenance}, nullptr, &why);

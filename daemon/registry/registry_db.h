@@ -18,6 +18,8 @@
 //                      entry)
 //   certificates       sha256 (the content hash), calibration, number, issued_at, issued_by,
 //                      html (the certificate as issued: `turncal registry certificate`)
+//   batches            station, name (the batch id), fixture, units (on the fixture),
+//                      started_at; calibrations.batch_id and .slot point into it (issue 38)
 
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -32,7 +34,7 @@ struct pg_cancel;
 
 namespace turncal::daemon {
 
-inline constexpr int kRegistrySchemaVersion = 3;
+inline constexpr int kRegistrySchemaVersion = 4;
 
 // A query's answer: column names and rows of text (null: SQL NULL).
 struct RegistryRows {

@@ -91,6 +91,21 @@ CREATE INDEX certificates_by_calibration ON certificates (calibration_id);
       {"calibrations over temperature (issue 36): their polynomials", R"sql(
 ALTER TABLE calibrations ADD COLUMN temperature jsonb;
 )sql"},
+      {"batches (issue 38): the units calibrated together, each calibration's batch and slot",
+       R"sql(
+CREATE TABLE batches (
+  id         bigserial PRIMARY KEY,
+  station_id bigint NOT NULL REFERENCES stations(id),
+  name       text NOT NULL,
+  fixture    text,
+  units      integer,
+  started_at timestamptz,
+  UNIQUE (station_id, name)
+);
+ALTER TABLE calibrations ADD COLUMN batch_id bigint REFERENCES batches(id);
+ALTER TABLE calibrations ADD COLUMN slot text;
+CREATE INDEX calibrations_by_batch ON calibrations (batch_id);
+)sql"},
   };
   return migrations;
 }

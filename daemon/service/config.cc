@@ -516,6 +516,7 @@ bool ParseConfig(const std::string& text, const std::string& source, Config* out
   if (const toml::table* t = root["fixture"].as_table()) {
     if (!ParseFixture(*t, source, &c.fixture, error)) return false;
     st.fixture = c.fixture.name;
+    st.batch_id = c.fixture.batch;
   } else if (const toml::node* f = root.get("fixture")) {
     *error =
         fmt::format("{}: [fixture] is a table (name, file or [[fixture.slot]])", Where(*f, source));

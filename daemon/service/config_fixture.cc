@@ -93,12 +93,16 @@ bool ParseSlots(const toml::table& t, const std::string& source, const std::stri
 
 bool ParseFixture(const toml::table& t, const std::string& source, Fixture* out,
                   std::string* error) {
-  if (!OnlyKeys(t, {"name", "file", "slot"}, "[fixture]", source, error)) return false;
+  if (!OnlyKeys(t, {"name", "file", "slot", "batch"}, "[fixture]", source, error)) return false;
   Fixture f;
-  std::string file;
-  if (!GetString(t, "file", &file, source, error)) return false;
+  std::string file, batch;
+  if (!GetString(t, "file", &file, source, error) ||
+      !GetString(t, "batch", &batch, source, error)) {
+    return false;
+  }
   if (file.empty()) {
     if (!ParseSlots(t, source, "[fixture]", &f, error)) return false;
+    f.batch = batch;
     *out = std::move(f);
     return true;
   }
@@ -125,6 +129,7 @@ bool ParseFixture(const toml::table& t, const std::string& source, Fixture* out,
   if (!GetString(t, "name", &name, source, error)) return false;
   if (!name.empty()) f.name = name;  // turncald.toml's name over the file's
   f.file = path.string();
+  f.batch = batch;
   *out = std::move(f);
   return true;
 }

@@ -34,6 +34,9 @@ struct FixtureSlot {
 struct Fixture {
   std::string name;  // the fixture's (empty: none configured)
   std::string file;  // where its slots were read ("": turncald.toml itself)
+  // The batch id a new session takes ([fixture] batch in turncald.toml, never in the fixture's
+  // own file: the fixture outlives its batches); "": FIXTURE-UTCTIME (daemon/state/batch_file.h).
+  std::string batch;
   std::vector<FixtureSlot> slots;
   const FixtureSlot* Find(const std::string& slot) const;
 };

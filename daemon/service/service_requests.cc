@@ -25,6 +25,26 @@ nlohmann::json Service::StatusJson() const {
     if (station_) d["station"] = station_->Status(static_cast<int>(i));
     devices[devices_[i]->spec().name] = d;
   }
+  // The batch slot by slot (issue 38), each unit with its link: a unit whose device does not
+  // stream (never did, or was unplugged) waits for that first.
+  nlohmann::json batch = station_ ? station_->BatchStatus() : nlohmann::json();
+  if (batch.is_object()) {
+    for (auto& u : batch["units"]) {
+      for (const auto& dev : devices_) {
+        if (dev->spec().name != u["device"].get<std::string>()) continue;
+        const nlohmann::json s = dev->Status();
+        const std::string link = s.value("state", "");
+        const bool silent = link == "streaming" && s.value("rate_hz", 0.0) <= 0.0;
+        u["link"] = silent ? "silent" : link;
+        if (u["state"] == "waiting" && (link != "streaming" || silent)) {
+          u["why"] =
+              silent ? std::string("no samples from the device")
+                     : "the device does not stream (" + link + ")" +
+                           (s.value("message", "").empty() ? "" : ": " + s.value("message", ""));
+        }
+      }
+    }
+  }
   return {{"class", "STATUS"},
           {"release", kVersion},
           {"uptime_s", static_cast<double>(drivers::MonotonicNowNs() - started_ns_) / 1e9},
@@ -44,6 +64,7 @@ nlohmann::json Service::StatusJson() const {
           // The registry's outbox: entries waiting, sent, the last error (null: no registry).
           {"registry", registry_.get() ? registry_.get()->Status() : nlohmann::json()},
           {"summary", status_line_},
+          {"batch", batch},
           {"devices", devices}};
 }
 

@@ -1,5 +1,7 @@
 #include "daemon/state/persistence.h"
 
+#include "daemon/state/batch_file.h"
+
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <unistd.h>
@@ -235,6 +237,7 @@ bool WriteDeviceReport(const std::string& state_dir, const std::string& device,
   options.source = state_dir;
   options.generated_utc = generated_utc;
   options.device_writes = ReadDeviceWriteHistory(state_dir, device);
+  options.batch = ReadBatchStatus(state_dir);
   if (!report::RenderReportHtml(calibrations, options, &html, &why)) {
     *error = fmt::format("report of {}: {}", device, why);
     return false;
@@ -255,12 +258,14 @@ bool ArchiveSession(const std::string& state_dir, std::string* archived, std::st
   std::error_code ec;
   const bool journal = fs::exists(places.Journal(), ec);
   const bool noise = fs::exists(places.NoiseDir(), ec);
-  if (!journal && !noise) return true;
+  const bool batch = fs::exists(places.Batch(), ec);
+  if (!journal && !noise && !batch) return true;
   const fs::path target = UniqueStamped(places.SessionsDir(), "", UtcStamp(), "");
   const StateDir archive(target);
   fs::create_directories(target, ec);
   if (!ec && journal) fs::rename(places.Journal(), archive.Journal(), ec);
   if (!ec && noise) fs::rename(places.NoiseDir(), archive.NoiseDir(), ec);
+  if (!ec && batch) fs::rename(places.Batch(), archive.Batch(), ec);
   if (ec) {
     *error = fmt::format("cannot archive the session to '{}': {}", target.string(), ec.message());
     return false;

@@ -5,10 +5,12 @@
 // daemon/state/device_write_record.h, the registry's outbox to daemon/registry/registry_outbox.h.
 //
 //   journal.jsonl                      every captured pose record (appended, fsynced)
+//   batch.json                         the session's batch: id, fixture, start (issue 38)
 //   calibrations/DEVICE.MODEL.json     the active calibration
 //   history/DEVICE.MODEL.vN.json       every earlier active calibration
 //   noise/DEVICE.json                  the noise profile this session measured
-//   sessions/UTCTIME[-N]/              earlier sessions' journals and noise profiles (`reset`)
+//   sessions/UTCTIME[-N]/              earlier sessions' journals, noise profiles and batch files
+//                                      (`reset`)
 //   reports/DEVICE.html                the calibration report of the device
 //   device_writes/DEVICE.json          the writes into the device in effect
 //   device_writes/DEVICE.UTCTIME[-N].json  every write and restore
@@ -28,6 +30,7 @@ class StateDir {
   const std::filesystem::path& root() const { return root_; }
 
   std::filesystem::path Journal() const { return root_ / "journal.jsonl"; }
+  std::filesystem::path Batch() const { return root_ / "batch.json"; }
 
   std::filesystem::path CalibrationsDir() const { return root_ / "calibrations"; }
   std::filesystem::path ActiveCalibration(const std::string& device,

@@ -128,4 +128,14 @@ nlohmann::json DevicePipeline::ResultJson() const {
           {"models", model_results}};
 }
 
+std::string DevicePipeline::Serial() const {
+  if (!identity.is_object()) return "";
+  for (const char* key : {"serial", "device_id"}) {
+    if (auto it = identity.find(key); it != identity.end() && it->is_string()) {
+      return it->get<std::string>();
+    }
+  }
+  return "";
+}
+
 }  // namespace turncal::daemon

@@ -45,6 +45,9 @@ struct DevicePipeline {
   // Another device of the station that reported the same serial first ("": none): this one's
   // calibrations are held (Station::SetDeviceIdentity).
   std::string duplicate_serial_of;
+  // When every calibration of the unit had passed its gate and was activated (session time, s;
+  // NaN: not yet): the batch's summary counts the unit's time from it (issue 38).
+  double passed_t_s = std::numeric_limits<double>::quiet_NaN();
   nlohmann::json current;  // the pose being collected: its last sequencer event
   // reports/NAME.html is rewritten after an activation, at most every kReportIntervalNs (the
   // render re-solves the calibration pose by pose: tens of ms on the worker).
@@ -79,6 +82,9 @@ struct DevicePipeline {
   // The check's verdict for an operator: "" while the unit sits as configured, else what is
   // wrong and what to configure ("slot 3 looks rotated 90 deg about its +z: ...").
   std::string MountProblem() const;
+  // The serial number the device's dialogue reported (a MIP's serial, an Xbus device id); "" if
+  // none (a replay).
+  std::string Serial() const;
   // Adds a static pose's accelerometer mean to the mount check; true when the verdict changed.
   bool CheckMountWith(const PoseRecord& record);
 };

@@ -61,10 +61,44 @@ Station::Station(std::vector<std::string> device_names, const StationOptions& op
     // After the device is in place (a free set announces the first interval it waits for).
     devices_.back()->calibrations->Start(*devices_.back()->sequencer);
   }
+  OpenSessionBatch();
   if (!options_.state_dir.empty()) {
     LoadApplied();
     Resume();
   }
+  PublishBatchIfChanged();
+}
+
+// The session's batch: the state directory's (a resumed session keeps its id), else a new one.
+void Station::OpenSessionBatch() {
+  if (options_.state_dir.empty()) {
+    batch_ = NewBatch(options_.batch_id, options_.fixture);
+  } else {
+    std::string note, error;
+    if (!OpenBatch(options_.state_dir, options_.batch_id, options_.fixture, &batch_, &note,
+                   &error)) {
+      NoteWrite("", "the batch file: " + error);
+    }
+    if (!note.empty()) Publish({{"class", "ERROR"}, {"message", note}});
+  }
+}
+
+void Station::PublishBatchIfChanged() {
+  if (resuming_) return;
+  nlohmann::json b = BatchStatus();
+  // Changed: a unit's state, why or poses (not the link, which `status` adds).
+  nlohmann::json key = nlohmann::json::array();
+  for (const auto& u : b["units"]) key.push_back({u["state"], u.value("why", ""), u["poses"]});
+  if (key == batch_published_) return;
+  batch_published_ = key;
+  if (!options_.state_dir.empty()) {
+    // batch.json with the units' states: the report's batch summary reads it.
+    auto error = std::make_shared<std::string>();
+    DeferWrite([dir = options_.state_dir, b, error] { WriteBatchStatus(dir, b, error.get()); },
+               [this, error] { NoteWrite("", *error); });
+  }
+  b["class"] = "BATCH";
+  Publish(b);
 }
 
 // The calibrations stored in the state directory are applied to live samples from the start:
@@ -111,19 +145,6 @@ const MeasurementModel* Station::ModelOf(const std::string& device,
   return c ? c->writable_model() : nullptr;
 }
 
-namespace {
-// The serial number a device's dialogue reported (a MIP's serial, an Xbus device id); "" if none.
-std::string SerialOf(const nlohmann::json& identity) {
-  if (!identity.is_object()) return "";
-  for (const char* key : {"serial", "device_id"}) {
-    if (auto it = identity.find(key); it != identity.end() && it->is_string()) {
-      return it->get<std::string>();
-    }
-  }
-  return "";
-}
-}  // namespace
-
 void Station::SetDeviceIdentity(int device, nlohmann::json identity) {
   DeviceState& d = *devices_[static_cast<std::size_t>(device)];
   d.identity = std::move(identity);
@@ -131,10 +152,10 @@ void Station::SetDeviceIdentity(int device, nlohmann::json identity) {
   // serial was cloned. Their calibrations would be filed under one unit (certificate, registry):
   // the later one to report is named and its calibrations held until the conflict is gone (a
   // device answering with another serial clears it).
-  const std::string serial = SerialOf(d.identity);
+  const std::string serial = d.Serial();
   std::string other;
   for (const auto& o : devices_) {
-    if (o.get() != &d && !serial.empty() && SerialOf(o->identity) == serial &&
+    if (o.get() != &d && !serial.empty() && o->Serial() == serial &&
         o->duplicate_serial_of.empty()) {
       other = o->name;
       break;
@@ -142,13 +163,17 @@ void Station::SetDeviceIdentity(int device, nlohmann::json identity) {
   }
   if (other == d.duplicate_serial_of) return;
   d.duplicate_serial_of = other;
-  if (other.empty()) return;
+  if (other.empty()) {
+    PublishBatchIfChanged();
+    return;
+  }
   Publish({{"class", "ERROR"},
            {"device", d.name},
            {"message", fmt::format("{} reports serial {}, as {} does: two units with one serial "
                                    "(one unit on two ports, or a cloned serial). {}'s "
                                    "calibrations are held until it reports a serial of its own",
                                    d.name, serial, other, d.name)}});
+  PublishBatchIfChanged();
 }
 
 Station::~Station() { *alive_ = false; }
@@ -403,6 +428,7 @@ void Station::HandleSequencerEvent(std::size_t device, const SequencerEvent& e) 
 void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
   DeviceState& d = *devices_[device];
   ++d.poses;
+  if (!(record.t_start_s >= batch_t0_s_)) batch_t0_s_ = record.t_start_s;  // NaN: the first
   d.poses_used.push_back(record.pose);
   d.records_used.push_back(record);
   // Does the unit sit as its mount says? Checked before its calibrations learn from the pose, so
@@ -412,6 +438,7 @@ void Station::Update(std::size_t device, const PoseRecord& record, double t_s) {
     PublishMount(d);
   }
   d.calibrations->OnRecord(d, record, t_s, resuming_, *this);
+  PublishBatchIfChanged();
 }
 
 void Station::PublishMount(DeviceState& d) {
@@ -420,6 +447,7 @@ void Station::PublishMount(DeviceState& d) {
   nlohmann::json e = {{"class", "MOUNT"}, {"device", d.name}, {"message", d.MountProblem()}};
   e.update(d.MountJson());
   Publish(e);
+  PublishBatchIfChanged();
 }
 
 void Station::SaveNoiseProfile(DeviceState& d) {
@@ -448,6 +476,22 @@ void Station::Activate(DeviceState& d, Calibration& c, double t_s,
     a.document["override"] = override_who;
     a.event["override"] = override_who;
   }
+  // The batch it belongs to (issue 38): the registry, the report and the certificate read it.
+  nlohmann::json batch = batch_.Json();
+  batch["slot"] = d.slot.empty() ? nlohmann::json() : nlohmann::json(d.slot);
+  batch["units"] = devices_.size();
+  batch["seconds"] = std::isfinite(batch_t0_s_) && t_s > 0.0 ? nlohmann::json(t_s - batch_t0_s_)
+                                                             : nlohmann::json();
+  a.document["batch"] = batch;
+  a.event["batch"] = batch_.id;
+  if (override_who.is_null() && !std::isfinite(d.passed_t_s) && t_s > 0.0) {
+    bool all = true;
+    for (std::size_t i = 0; i < d.calibrations->size(); ++i) {
+      const Calibration& k = d.calibrations->at(i);
+      all = all && k.GatePassed() && (&k == &c || k.active_version() > 0);
+    }
+    if (all) d.passed_t_s = t_s;
+  }
   // Persisted (atomically, fsynced: off the loop), then applied and announced.
   auto write_error = std::make_shared<std::string>();
   DeferWrite(
@@ -467,6 +511,7 @@ void Station::Activate(DeviceState& d, Calibration& c, double t_s,
         announced["saved"] = !options_.state_dir.empty() && write_error->empty();
         if (!write_error->empty()) announced["save_error"] = *write_error;
         Publish(announced);
+        PublishBatchIfChanged();
       });
 }
 

@@ -13,6 +13,7 @@
 
 #include <atomic>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -28,6 +29,7 @@
 #include "core/estimation/thermal_calibrator.h"
 #include "core/planning/pose_planner.h"
 #include "core/sequencing/sequencer.h"
+#include "daemon/state/batch_file.h"
 #include "daemon/station/calibration.h"
 #include "daemon/station/capture_replay.h"
 #include "daemon/station/device_pipeline.h"
@@ -133,6 +135,9 @@ struct StationOptions {
   bool gate_tolerances_set = false;
   std::map<std::string, DeviceModelOptions> per_device;  // by device name
   std::string fixture;  // the fixture's name ([fixture] name; "": none)
+  // The batch id a new session takes ([fixture] batch; "": FIXTURE-UTCTIME). A session that
+  // resumes keeps the one in its state directory's batch.json (daemon/state/batch_file.h).
+  std::string batch_id;
   // Where the pose journal and the active calibrations live (daemon/state/persistence.h); empty:
   // nothing is persisted. A journal found there is replayed first: the session resumes.
   std::string state_dir;
@@ -208,6 +213,13 @@ class Station : public ReplayTarget, private CalibrationHost {
   // gate planned together, so that the session ends at the last unit's gate; NEXT_POSE with
   // "batch" (each unit's state) and each model's "device".
   nlohmann::json NextPoseBatch() const;
+  // The session's batch (issue 38; docs/BATCH.md): id, fixture, started, and each unit in order
+  // with its slot, serial, poses and state -- "passed" (every gate, every calibration active;
+  // "seconds": from the batch's first pose to the unit's last gate), "waiting" (why: the first
+  // gate not passed, or no pose yet) or "held" (why: a wrong mount or a duplicate serial) -- and
+  // the counts; "seconds_to_last_gate" once every unit passed. `status` adds each unit's link.
+  nlohmann::json BatchStatus() const;
+  const BatchInfo& batch() const { return batch_; }
 
   int DeviceIndex(const std::string& name) const;  // -1 when unknown
   // DEVICE's model MODEL (a pose model of an announced station), nullptr when it has none.
@@ -265,6 +277,9 @@ class Station : public ReplayTarget, private CalibrationHost {
   void PublishMount(DeviceState& d);
   void JournalMotion(DeviceState& d, std::vector<MotionValue> values) override;
   void Resume();
+  void OpenSessionBatch();
+  // BATCH (BatchStatus with "class") when a unit's state, why or poses changed since the last.
+  void PublishBatchIfChanged();
   void LoadApplied();
   // Counts a state-directory write's outcome; publishes ERROR when it failed.
   void NoteWrite(const std::string& device, const std::string& error);
@@ -273,6 +288,10 @@ class Station : public ReplayTarget, private CalibrationHost {
   void DeferWrite(std::function<void()> work, std::function<void()> done);
 
   StationOptions options_;
+  BatchInfo batch_;                 // the session's (daemon/state/batch_file.h)
+  nlohmann::json batch_published_;  // the units' states the last BATCH event carried
+  // The session's first pose's start (host clock, s; NaN before one): the batch's time zero.
+  double batch_t0_s_ = std::numeric_limits<double>::quiet_NaN();
   SensorClass sensor_;
   EventSink sink_;
   std::vector<std::unique_ptr<DeviceState>> devices_;

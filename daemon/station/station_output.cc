@@ -144,7 +144,7 @@ nlohmann::json Station::NextPoseBatch() const {
 nlohmann::json Station::Result() const {
   nlohmann::json devices = nlohmann::json::object();
   for (const auto& d : devices_) devices[d->name] = d->ResultJson();
-  return {{"class", "RESULT"}, {"devices", devices}};
+  return {{"class", "RESULT"}, {"batch", BatchStatus()}, {"devices", devices}};
 }
 
 }  // namespace turncal::daemon

@@ -332,10 +332,12 @@ TEST(Config, AFixturesSlotsGiveTheirDevicesMounts) {
          "[[slot]]\nname = \"2\"\nmount = \"-y+x+z\"\n";
   }
   Config from_file;
-  ASSERT_TRUE(ParseConfig("[fixture]\nfile = \"cube8.toml\"\n" + devices, dir + "/turncald.toml",
-                          &from_file, &error))
+  ASSERT_TRUE(ParseConfig("[fixture]\nfile = \"cube8.toml\"\nbatch = \"LOT-117\"\n" + devices,
+                          dir + "/turncald.toml", &from_file, &error))
       << error;
   EXPECT_EQ(from_file.station.fixture, "cube8 from its file");
+  EXPECT_EQ(from_file.station.batch_id, "LOT-117");  // turncald.toml's, the file has none
+  EXPECT_EQ(c.station.batch_id, "");
   EXPECT_EQ(from_file.fixture.file, dir + "/cube8.toml");
   EXPECT_TRUE(from_file.station.per_device.at("a").mount->isApprox(*a.mount));
 }
@@ -365,7 +367,9 @@ INSTANTIATE_TEST_SUITE_P(
         Bad{"[fixture]\nslots = 3\n", "unknown key 'slots' in [fixture]"},
         Bad{"[fixture]\n[[fixture.slot]]\nname = \"1\"\nmount = \"+x+y+z\"\n[[device]]\nname = "
             "\"a\"\nprotocol = \"mip\"\nport = \"/dev/x\"\nslot = \"1\"\nmount = \"+x+y+z\"\n",
-            "device 'a' has a slot and a mount"}));
+            "device 'a' has a slot and a mount"},
+        Bad{"[fixture]\nbatch = 117\n[[fixture.slot]]\nname = \"1\"\nmount = \"+x+y+z\"\n",
+            "batch"}));
 
 }  // namespace
 }  // namespace turncal::daemon

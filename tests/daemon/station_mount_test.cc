@@ -91,6 +91,25 @@ TEST(StationMount, AUnitMountedAt90DegreesIsCalibratedInItsOwnCaseFrame) {
   for (const char* eps : {"eps_x", "eps_y", "eps_z"}) {
     EXPECT_LT(std::abs(dev["models"]["accel13"]["params"][eps]["value"].get<double>()), 0.02);
   }
+  // The batch of one: passed, with the time from its first pose to its last gate (within the
+  // session's span), which is the batch's time to its last gate.
+  const nlohmann::json& batch = outcome.result["batch"];
+  ASSERT_EQ(batch["units"].size(), 1u) << batch;
+  EXPECT_EQ(batch["units"][0]["state"], "passed") << batch;
+  EXPECT_EQ(batch["units"][0]["slot"], "3");
+  const double span_s = 1e-9 * static_cast<double>(c.records.back().t_ns - c.records.front().t_ns);
+  EXPECT_GT(batch["units"][0]["seconds"].get<double>(), 0.0);
+  EXPECT_LE(batch["units"][0]["seconds"].get<double>(), span_s + 1e-6);
+  EXPECT_EQ(batch["seconds_to_last_gate"], batch["units"][0]["seconds"]);
+  // Every activation names the batch.
+  int named = 0, activations = 0;
+  for (const auto& e : events) {
+    if (e["class"] != "CALIBRATION_ACTIVE") continue;
+    ++activations;
+    named += e["batch"] == batch["id"];
+  }
+  EXPECT_GT(activations, 0);
+  EXPECT_EQ(named, activations);
   std::remove(path.c_str());
 }
 
@@ -139,6 +158,10 @@ TEST(StationMount, AWrongSlotIsNamedHeldAndCalibratedFromItsPosesOnceFixed) {
   EXPECT_FALSE(dev["mount"]["check"]["ok"].get<bool>());
   EXPECT_EQ(dev["mount"]["check"]["observed_mount"], "\"-y+x+z\"");
   EXPECT_EQ(dev["models"]["accel13"]["active_version"], 0);
+  EXPECT_EQ(outcome.result["batch"]["units"][0]["state"], "held");
+  EXPECT_NE(outcome.result["batch"]["units"][0]["why"].get<std::string>().find(
+                "slot 3 looks rotated 90 deg about its -z"),
+            std::string::npos);
 
   // The operator fixes the configuration and reloads: the journal's 36 poses give the
   // calibration.
@@ -155,6 +178,9 @@ TEST(StationMount, AWrongSlotIsNamedHeldAndCalibratedFromItsPosesOnceFixed) {
     }
   }
   EXPECT_EQ(resumed_active, 2);
+  // The same batch (the state directory's batch.json), now passed.
+  EXPECT_EQ(result["batch"]["id"], outcome.result["batch"]["id"]);
+  EXPECT_EQ(result["batch"]["units"][0]["state"], "passed") << result["batch"];
   const nlohmann::json& fixed = result["devices"]["imu"];
   EXPECT_TRUE(fixed["mount"]["check"]["ok"].get<bool>());
   for (const std::string name : {"accel13", "mag13"}) {
@@ -228,9 +254,19 @@ TEST(StationBatch, TwoUnitsWithOneSerialAreNamedAndTheLaterIsHeld) {
   std::vector<nlohmann::json> events;
   daemon::Station station({"imu", "imu2"}, daemon::StationOptions{},
                           [&](const nlohmann::json& e) { events.push_back(e); });
+  // The session's batch: no state directory, no [fixture] batch: "batch-UTCTIME", two units.
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0]["class"], "BATCH");
+  EXPECT_EQ(events[0]["id"].get<std::string>().rfind("batch-", 0), 0u) << events[0];
+  ASSERT_EQ(events[0]["units"].size(), 2u);
+  EXPECT_EQ(events[0]["units"][1]["state"], "waiting");
+  events.clear();
   station.SetDeviceIdentity(1, {{"protocol", "mip"}, {"serial", "SIM0001"}});
   station.SetDeviceIdentity(0, {{"protocol", "mip"}, {"serial", "SIM0001"}});
-  ASSERT_EQ(events.size(), 1u);
+  // The error, and the batch with imu held.
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[1]["class"], "BATCH");
+  EXPECT_EQ(events[1]["units"][0]["state"], "held");
   EXPECT_EQ(events[0]["class"], "ERROR");
   EXPECT_EQ(events[0]["device"], "imu");
   EXPECT_NE(events[0]["message"].get<std::string>().find(
@@ -252,6 +288,18 @@ TEST(StationBatch, TwoUnitsWithOneSerialAreNamedAndTheLaterIsHeld) {
   const nlohmann::json result = station.Result();
   EXPECT_TRUE(result["devices"]["imu"]["models"]["accel13"]["gate"]["pass"].get<bool>());
   EXPECT_EQ(result["devices"]["imu"]["models"]["accel13"]["active_version"], 0);
+  // The batch slot by slot: imu held and why; imu2 (the capture has no stream of it) waits.
+  const nlohmann::json& batch = result["batch"];
+  ASSERT_EQ(batch["units"].size(), 2u) << batch;
+  EXPECT_EQ(batch["units"][0]["state"], "held") << batch;
+  EXPECT_EQ(batch["units"][0]["why"], "reports the serial of imu2");
+  EXPECT_EQ(batch["units"][1]["state"], "waiting") << batch;
+  EXPECT_EQ(batch["units"][1]["why"], "no pose yet");
+  EXPECT_EQ(batch["units"][1]["serial"], "SIM0001");
+  EXPECT_EQ(batch["passed"], 0);
+  EXPECT_EQ(batch["held"], 1);
+  EXPECT_EQ(batch["waiting"], 1);
+  EXPECT_TRUE(batch["seconds_to_last_gate"].is_null());
   // The unit answers with its own serial (the cable moved): the conflict is gone.
   station.SetDeviceIdentity(0, {{"protocol", "mip"}, {"serial", "SIM0003"}});
   EXPECT_TRUE(station.Status(0)["duplicate_serial_of"].is_null());

@@ -304,10 +304,18 @@ TEST(StationPersistence, ResumesAfterACrashWithEveryCapturedPose) {
   const nlohmann::json a = run(first, dir, &a_events);
   EXPECT_EQ(a["devices"]["imu"]["poses"], 13);
   const nlohmann::json b = run(second, dir, &b_events);
-  ASSERT_FALSE(b_events.empty());
-  EXPECT_EQ(b_events.front()["class"], "SESSION_RESUMED");
-  EXPECT_EQ(b_events.front()["poses"], 13);
-  EXPECT_EQ(b_events.front()["noise"], "stored");
+  // The resume, then the session's batch (the one batch.json holds: the session goes on).
+  ASSERT_GE(b_events.size(), 2u);
+  // Each run: SESSION_RESUMED (0 poses the first time), then the batch.
+  ASSERT_GE(a_events.size(), 2u);
+  EXPECT_EQ(a_events[1]["class"], "BATCH");
+  EXPECT_EQ(b_events[0]["class"], "SESSION_RESUMED");
+  EXPECT_EQ(b_events[0]["poses"], 13);
+  EXPECT_EQ(b_events[0]["noise"], "stored");
+  EXPECT_EQ(b_events[1]["class"], "BATCH");
+  EXPECT_EQ(b_events[1]["id"], a_events[1]["id"]);
+  EXPECT_EQ(b_events[1]["units"][0]["poses"], 13);
+  EXPECT_EQ(b["batch"]["id"], a_events[1]["id"]);
   EXPECT_EQ(b["devices"]["imu"]["poses"], 26);
   const nlohmann::json whole = run(c, "", &whole_events);
   EXPECT_EQ(whole["devices"]["imu"]["poses"], 26);
@@ -518,10 +526,12 @@ TEST(StationLive, PerDeviceModelsCorrectionRestartAndOverride) {
   so.state_dir = dir;
   so.per_device["imu"].models = std::vector<std::string>{"accel12"};
   const std::string path = WriteSimCaptureFile(c, "live");
+  std::string first_batch;
   {
     drivers::CaptureReader reader;
     ASSERT_TRUE(reader.Open(path, &error)) << error;
     daemon::Station station({"imu"}, so, {});
+    first_batch = station.batch().id;
     daemon::ReplayStats stats;
     ASSERT_TRUE(daemon::ReplayInto(&reader, &station, true, {}, &stats, &error)) << error;
     const nlohmann::json r = station.Result();
@@ -537,6 +547,13 @@ TEST(StationLive, PerDeviceModelsCorrectionRestartAndOverride) {
   EXPECT_FALSE(archived.empty());
   daemon::Station restarted({"imu"}, so, {});
   EXPECT_TRUE(restarted.HasAppliedCalibration(0));
+  // The batch went with the archived session (its batch.json, with the unit passed), and the new
+  // session is a batch of its own, even when it begins within the same second.
+  const nlohmann::json archived_batch = daemon::ReadBatchStatus(archived);
+  EXPECT_EQ(archived_batch["id"], first_batch);
+  EXPECT_EQ(archived_batch["units"][0]["state"], "passed") << archived_batch;
+  EXPECT_NE(restarted.batch().id, first_batch);
+  EXPECT_EQ(restarted.batch().id.rfind("batch-", 0), 0u);
   EXPECT_EQ(restarted.Status(0)["poses"], 0);
   // The correction of a sample at the first pose: the true specific force within 4 sigma, where
   // sigma combines the calibration's (J Sigma J^T) with the noise and wander of one sample.
@@ -600,6 +617,47 @@ TEST(StationLive, PerDeviceModelsCorrectionRestartAndOverride) {
   std::remove(path.c_str());
   std::filesystem::remove_all(dir);
   std::filesystem::remove_all(dir2);
+}
+
+}  // namespace
+}  // namespace turncal
+
+namespace turncal {
+namespace {
+
+// Issue 38: the session's batch file. A configured id is the session's; a restart keeps it (a
+// newly configured one waits for the next session, and says so); an unreadable file is kept
+// aside and a new batch begun.
+TEST(BatchFile, TheSessionsIdSurvivesRestartsAndAnUnreadableFileIsKeptAside) {
+  const std::string dir = ::testing::TempDir() + "batch_file_" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  daemon::BatchInfo b;
+  std::string note, error;
+  ASSERT_TRUE(daemon::OpenBatch(dir, "LOT-117", "cube4", &b, &note, &error)) << error;
+  EXPECT_EQ(b.id, "LOT-117");
+  EXPECT_EQ(b.fixture, "cube4");
+  EXPECT_EQ(note, "");
+  daemon::BatchInfo again;
+  ASSERT_TRUE(daemon::OpenBatch(dir, "LOT-118", "cube4", &again, &note, &error)) << error;
+  EXPECT_EQ(again.id, "LOT-117");
+  EXPECT_EQ(again.started, b.started);
+  EXPECT_NE(note.find("the configured 'LOT-118' applies from the next session"), std::string::npos)
+      << note;
+  {
+    std::ofstream f(dir + "/batch.json");
+    f << "{\"id\": ";
+  }
+  daemon::BatchInfo fresh;
+  ASSERT_TRUE(daemon::OpenBatch(dir, "", "cube4", &fresh, &note, &error)) << error;
+  EXPECT_EQ(fresh.id.rfind("cube4-", 0), 0u) << fresh.id;
+  EXPECT_NE(note.find("kept as batch.json.unreadable"), std::string::npos) << note;
+  EXPECT_TRUE(std::filesystem::exists(dir + "/batch.json.unreadable"));
+  // `reset` archives it; the configured id used again is the next session's with -2.
+  std::string archived;
+  ASSERT_TRUE(daemon::ArchiveSession(dir, &archived, &error)) << error;
+  ASSERT_TRUE(daemon::OpenBatch(dir, fresh.id, "cube4", &b, &note, &error)) << error;
+  EXPECT_EQ(b.id, fresh.id + "-2");
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

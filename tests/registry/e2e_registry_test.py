@@ -319,6 +319,62 @@ def moved_imu(d, pg, b, db):
           f"registry stations: {sorted(stations)} with their last contact")
 
 
+def batches(pg, stations, db):
+    """7. The batches (issue 38): every calibration names its session's batch; a restarted
+    station keeps it, `reset` begins another. `registry yield` (per batch and per station) and
+    `registry batch ID` agree with the stations' own files."""
+    expected = {}  # (station, batch) -> {serial: {model: (version, passed)}}
+    units_on_fixture = {}
+    for st in stations:
+        files = st.calibration_files().values()
+        unnamed = [f"{c['device']} {c['model']} v{c['version']}" for c in files
+                   if not (c.get("batch") or {}).get("id") or c["batch"].get("units") != 2]
+        check(files and not unnamed,
+              f"{st.name}: each of its {len(files)} calibrations names its batch of 2 units "
+              f"(not: {unnamed[:3]})")
+        for c in files:
+            b = c.get("batch") or {}
+            ident = (c.get("provenance") or {}).get("device_identity") or {}
+            serial = ident.get("serial") or ident.get("device_id") or c["device"]
+            models = expected.setdefault((st.name, b.get("id")), {}).setdefault(serial, {})
+            passed = bool(c["gate"]["pass"]) and "override" not in c
+            if c["model"] not in models or models[c["model"]][0] < c["version"]:
+                models[c["model"]] = (c["version"], passed)
+            units_on_fixture[(st.name, b.get("id"))] = b.get("units")
+    per_station = {}
+    for (station, batch), units in expected.items():
+        per_station.setdefault(station, set()).add(batch)
+    check(len(per_station.get("line-b", ())) == 2 and len(per_station.get("line-a", ())) == 1,
+          f"line-a has one batch, line-b two (restarts keep it, reset begins one): {per_station}")
+    r = run("registry", "yield", "--json", "--db", db)
+    rows = json.loads(r.stdout) if r.returncode == 0 else []
+    got = {(x["station"], x["batch"]): x for x in rows}
+    check(r.returncode == 0 and set(got) == set(expected),
+          f"registry yield: the batches {sorted(got)} are the stations' {sorted(expected)}")
+    for key, units in expected.items():
+        passed = sum(all(p for _, p in m.values()) for m in units.values())
+        row = got.get(key, {})
+        check(row.get("units") == units_on_fixture[key] and row.get("passed") == passed and
+              abs(row.get("yield_percent", -1) - round(100.0 * passed / units_on_fixture[key], 1))
+              < 1e-9,
+              f"registry yield {key}: {row.get('passed')}/{row.get('units')} passed "
+              f"({row.get('yield_percent')} %), the files say {passed}/{units_on_fixture[key]}")
+    r = run("registry", "yield", "--by", "station", "--json", "--db", db)
+    by_station = {x["station"]: x for x in json.loads(r.stdout)} if r.returncode == 0 else {}
+    for station, ids in per_station.items():
+        row = by_station.get(station, {})
+        check(row.get("batches") == len(ids) and row.get("units") == 2 * len(ids),
+              f"registry yield --by station {station}: {row}")
+    key = sorted(k for k in expected if k[0] == "line-b")[-1]
+    r = run("registry", "batch", key[1], "--json", "--db", db)
+    listed = json.loads(r.stdout) if r.returncode == 0 else []
+    check({x["serial"] for x in listed} == set(expected[key]) and
+          all(x["station"] == "line-b" for x in listed),
+          f"registry batch {key[1]}: its units {sorted(x['serial'] for x in listed)}")
+    r = run("registry", "batch", "NOSUCH", "--db", db)
+    check(r.returncode == 1, f"registry batch NOSUCH: exit {r.returncode}, said")
+
+
 def registry_certificate(d, db):
     """A certificate of the moved IMU's latest passing accel13, straight from the registry; a
     forgery with a recomputed hash passes certificate --verify but not registry verify."""
@@ -393,6 +449,7 @@ def main(d):
     b, waiting, lost_key = line_b_server_stops(d, pg, db)
     line_b_restarts(pg, b, waiting, lost_key)
     moved_imu(d, pg, b, db)
+    batches(pg, [a, b], db)
     registry_certificate(d, db)
     line_t(d, pg)
     dup = pg.psql("SELECT count(*) - count(DISTINCT document) FROM calibrations")[0][0]

@@ -174,8 +174,8 @@ TEST_F(CalibrationReport, IsOneWellFormedScriptFreeDocumentWithEveryPlotAndParam
   for (const Session& s : Sessions()) {
     std::string html, error;
     const auto start = std::chrono::steady_clock::now();
-    ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "2030-01-01T00:00:00Z", {}}, &html,
-                                         &error))
+    ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "2030-01-01T00:00:00Z", {}, {}},
+                                         &html, &error))
         << error;
     const double render_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
@@ -306,12 +306,65 @@ TEST_F(CalibrationReport, WithoutRecordsThePlotsSayWhatIsMissing) {
   EXPECT_NE(html.find("class=\"pose-directions\""), std::string::npos);
 }
 
+// Issue 38: the report opens with the batch's summary, slot by slot (the station's batch.json),
+// with this report's unit in bold and each unit's reason; a batch of one without a fixture has
+// none.
+TEST_F(CalibrationReport, OpensWithTheBatchSummarySlotBySlot) {
+  const std::vector<nlohmann::json>& calibrations = Sessions(1)[0].calibrations;
+  const std::string device = calibrations[0]["device"];
+  report::ReportOptions options;
+  options.batch = {{"id", "LOT-117"},
+                   {"fixture", "cube4"},
+                   {"started", "2026-11-29T04:50:12Z"},
+                   {"passed", 1},
+                   {"waiting", 0},
+                   {"held", 1},
+                   {"seconds_to_last_gate", nullptr},
+                   {"units",
+                    {{{"device", device},
+                      {"slot", "1"},
+                      {"serial", "6251.00001"},
+                      {"state", "passed"},
+                      {"poses", 12},
+                      {"seconds", 612.4}},
+                     {{"device", "imu3"},
+                      {"slot", "3"},
+                      {"serial", nullptr},
+                      {"state", "held"},
+                      {"poses", 3},
+                      {"seconds", nullptr},
+                      {"why", "slot 3 looks rotated 90 deg about its -z"}}}}};
+  std::string html, error;
+  ASSERT_TRUE(report::RenderReportHtml(calibrations, options, &html, &error)) << error;
+  EXPECT_EQ(CheckWellFormed(html), "");
+  const std::size_t batch = html.find("<section class=\"batch\"><h2>Batch LOT-117</h2>");
+  ASSERT_NE(batch, std::string::npos);
+  EXPECT_LT(batch, html.find("<section", html.find("</header>") + 1) + 1);  // the first section
+  EXPECT_NE(html.find("Fixture cube4, 2 units, started 2026-11-29T04:50:12Z: 1 passed, 0 "
+                      "waiting, 1 held. This report is of " +
+                      device),
+            std::string::npos);
+  EXPECT_NE(html.find("<tr style=\"font-weight:bold\"><td>1</td><td>" + device +
+                      "</td><td>6251.00001</td><td class=\"pass\">passed</td><td>12</td>"
+                      "<td>612 s</td>"),
+            std::string::npos);
+  EXPECT_NE(html.find("<td class=\"fail\">held</td><td>3</td><td>&#8212;</td><td>slot 3 looks "
+                      "rotated 90 deg about its -z</td>"),
+            std::string::npos);
+  // A batch of one unit without a fixture: nothing to add.
+  options.batch["fixture"] = nullptr;
+  options.batch["units"].erase(1);
+  ASSERT_TRUE(report::RenderReportHtml(calibrations, options, &html, &error)) << error;
+  EXPECT_EQ(html.find("class=\"batch\""), std::string::npos);
+}
+
 // Issue 21: a gyroscope's report shows G_w, which source determined which parameter, and the
 // angle between the gyro and accelerometer triads.
 TEST(GyroReport, SaysWhichSourceDeterminedWhatAndTheTriadAngle) {
   const Session s = RunSession("gyro", drivers::Protocol::kMip, "accel13", "mag13", 9, "gyro12");
   std::string html, error;
-  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}}, &html, &error)) << error;
+  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}, {}}, &html, &error))
+      << error;
   std::filesystem::remove_all(s.dir);
   EXPECT_NE(html.find("G (gyroscope)"), std::string::npos);
   ASSERT_NE(html.find("id=\"sources-gyro12\""), std::string::npos);
@@ -359,7 +412,8 @@ TEST(GyroReport, MovesAloneSayWhatTheyDetermine) {
   const Session s =
       RunSession("gyro_moves", drivers::Protocol::kXbus, "accel13", "mag13", 11, "gyro12", false);
   std::string html, error;
-  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}}, &html, &error)) << error;
+  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}, {}}, &html, &error))
+      << error;
   std::filesystem::remove_all(s.dir);
   EXPECT_NE(html.find("from static poses alone (26)"), std::string::npos);
   EXPECT_NE(html.find("from moves alone (25)"), std::string::npos);
