@@ -574,9 +574,17 @@ bool PipelineMonteCarloSummary::Passed() const {
   int honest = 0;
   for (int i = 0; i < z.parameters(); ++i) honest += z.Honest(i);
   for (const auto& u : unit_z) {
-    for (int i = 0; i < u.parameters(); ++i) honest -= !u.Honest(i);
+    for (int i = 0; i < u.parameters(); ++i) honest -= !UnitHonest(u, i);
   }
   return honest == z.parameters() && ks.p > 0.01 && solved == static_cast<int>(runs.size());
+}
+
+bool PipelineMonteCarloSummary::UnitHonest(const ZScoreSummary& u, int parameter) {
+  const double n = u.runs();
+  if (n < 2) return false;
+  const double std_z = u.Std()[parameter], mean_z = u.Mean()[parameter];
+  return std::abs(std_z - 1.0) <= kUnitHonestZ / std::sqrt(2.0 * n) &&
+         std::abs(mean_z) <= kUnitHonestZ / std::sqrt(n);
 }
 
 PipelineMonteCarloSummary RunPipelineMonteCarlo(const PipelineMonteCarloOptions& options) {

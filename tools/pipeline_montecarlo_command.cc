@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
@@ -41,9 +43,15 @@ bool WriteRuns(const std::string& path, const montecarlo::PipelineMonteCarloSumm
 nlohmann::json UnitRows(const montecarlo::PipelineMonteCarloSummary& s) {
   nlohmann::json units = nlohmann::json::array();
   for (std::size_t u = 0; u < s.unit_z.size(); ++u) {
+    nlohmann::json honest = nlohmann::json::object();
+    for (int i = 0; i < s.unit_z[u].parameters(); ++i) {
+      honest[s.parameters[static_cast<std::size_t>(i)]] =
+          montecarlo::PipelineMonteCarloSummary::UnitHonest(s.unit_z[u], i);
+    }
     units.push_back({{"unit", u + 1},
                      {"mount", s.unit_mounts[u]},
                      {"runs", s.unit_z[u].runs()},
+                     {"honest", honest},
                      {"params", ZScoreRows(s.parameters, s.unit_z[u], false)}});
   }
   return units;
@@ -54,13 +62,20 @@ std::string UnitLines(const montecarlo::PipelineMonteCarloSummary& s) {
   std::string out;
   for (std::size_t u = 0; u < s.unit_z.size(); ++u) {
     const auto& z = s.unit_z[u];
-    int bad = 0;
-    for (int i = 0; i < z.parameters(); ++i) bad += !z.Honest(i);
+    std::string bad;
+    for (int i = 0; i < z.parameters(); ++i) {
+      if (!montecarlo::PipelineMonteCarloSummary::UnitHonest(z, i)) {
+        bad += (bad.empty() ? "" : ", ") + s.parameters[static_cast<std::size_t>(i)];
+      }
+    }
+    const double n = std::max(1, z.runs());
+    const double k = montecarlo::PipelineMonteCarloSummary::kUnitHonestZ;
     out += fmt::format(
-        "unit {} ({}): {} sessions, std z {:.3f}-{:.3f}, largest |mean z| {:.3f}; {} of {} "
-        "parameters fail\n",
+        "unit {} ({}): {} sessions, std z {:.3f}-{:.3f} (within [{:.3f}, {:.3f}]), largest "
+        "|mean z| {:.3f} (within {:.3f}): {}\n",
         u + 1, s.unit_mounts[u], z.runs(), z.Std().minCoeff(), z.Std().maxCoeff(),
-        z.Mean().cwiseAbs().maxCoeff(), bad, z.parameters());
+        1 - k / std::sqrt(2 * n), 1 + k / std::sqrt(2 * n), z.Mean().cwiseAbs().maxCoeff(),
+        k / std::sqrt(n), bad.empty() ? std::string("honest") : "NOT HONEST: " + bad);
   }
   return out.empty() ? out : "\n" + out;
 }

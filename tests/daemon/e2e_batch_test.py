@@ -91,18 +91,8 @@ def corrected_z(d, truth):
                       if "acc_sigma" in s and "mag_sigma" in s]
             if len(inside) < 20 or done == 4:
                 continue
-            true = t["poses"][index]["true_output"]
-            for triad, inst in (("acc", t["acc_bias_instability"]),
-                                ("mag", t["mag_bias_instability"])):
-                n = len(inside)
-                for k in range(3):
-                    xs = [s[triad][k] for s in inside]
-                    mean = sum(xs) / n
-                    scatter = math.sqrt(sum((x - mean) ** 2 for x in xs) / (n - 1) / n)
-                    cal = max(s[f"{triad}_sigma"][k] for s in inside)
-                    sigma = math.sqrt(scatter ** 2 + cal ** 2 + inst ** 2)
-                    zs.append((abs(mean - true[triad][k]) / sigma,
-                               f"{name} pose {index} {triad}[{k}]"))
+            for z, axis in live_session.window_z(inside, t["poses"][index]["true_output"], t):
+                zs.append((z, f"{name} pose {index} {axis}"))
             done += 1
         per_unit[name] = done
     return zs, per_unit

@@ -18,7 +18,6 @@ turncald runs on the two ptys. Scenarios (each a fresh state directory):
 Usage: e2e_live_test.py TURNCAL TURNCALD [clean|kill|all]
 """
 import json
-import math
 import os
 import re
 import signal
@@ -118,17 +117,8 @@ def check_corrected(d, truth, result):
             inside = [s for s in in_window(lines.get(name, []), r) if "acc_sigma" in s]
             if len(inside) < 20:
                 continue  # before the first active calibration
-            true = t["poses"][index]["true_output"]
-            for triad, inst in (("acc", t["acc_bias_instability"]), ("mag", t["mag_bias_instability"])):
-                n = len(inside)
-                for k in range(3):
-                    xs = [s[triad][k] for s in inside]
-                    mean = sum(xs) / n
-                    scatter = math.sqrt(sum((x - mean) ** 2 for x in xs) / (n - 1) / n)
-                    cal = max(s[f"{triad}_sigma"][k] for s in inside)
-                    sigma = math.sqrt(scatter ** 2 + cal ** 2 + inst ** 2)
-                    z = abs(mean - true[triad][k]) / sigma
-                    worst = max(worst, (z, f"{name} pose {index} {triad}[{k}]"))
+            for z, axis in live_session.window_z(inside, t["poses"][index]["true_output"], t):
+                worst = max(worst, (z, f"{name} pose {index} {axis}"))
             compared += 1
     check(compared >= 20, f"corrected output compared at {compared} captured windows")
     check(worst[0] <= 4.0, f"corrected output: largest |mean - truth| = {worst[0]:.2f} sigma "

@@ -2,6 +2,7 @@
 poses as CSV, waiting for a path, and `turncal sim --live --controller` with a simulated MIP and
 Xbus IMU on one table (ptys DIR/mip and DIR/xbus, turncald's socket DIR/t.sock)."""
 import json
+import math
 import os
 import shutil
 import signal
@@ -118,3 +119,22 @@ def gap_free(lines, inside):
         return False
     span = times[first - 1:last + 2]
     return all(0 < b - a <= 1.5 * period for a, b in zip(span, span[1:]))
+
+
+def window_z(inside, true, device_truth):
+    """|mean - truth| / sigma of each axis of both triads over a record window's corrected lines
+    INSIDE (each with acc_sigma and mag_sigma), against TRUE (the pose's true_output): sigma
+    combines the window's scatter of the mean, the largest calibration sigma of its lines and the
+    class's bias instability. [(z, "acc[k]")]."""
+    out = []
+    n = len(inside)
+    for triad, inst in (("acc", device_truth["acc_bias_instability"]),
+                        ("mag", device_truth["mag_bias_instability"])):
+        for k in range(3):
+            xs = [s[triad][k] for s in inside]
+            mean = sum(xs) / n
+            scatter = math.sqrt(sum((x - mean) ** 2 for x in xs) / (n - 1) / n)
+            cal = max(s[f"{triad}_sigma"][k] for s in inside)
+            sigma = math.sqrt(scatter ** 2 + cal ** 2 + inst ** 2)
+            out.append((abs(mean - true[triad][k]) / sigma, f"{triad}[{k}]"))
+    return out

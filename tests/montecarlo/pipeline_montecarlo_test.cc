@@ -81,6 +81,44 @@ TEST(PipelineMonteCarlo, AFewSessionsThroughTheStationGiveHonestZScores) {
   EXPECT_EQ(s.gate_pass, 4);
 }
 
+// Issue 38: a fixture of 4 units (the four mounts) replayed as one capture through one station:
+// every unit of every session is scored against its own truth, its first activation its own,
+// with the spread of an honest sigma (RMS within [0.5, 1.6] over 2 x 4 x 13 z-scores, none
+// beyond 5 sigma); a fixture in a chamber is refused.
+TEST(PipelineMonteCarlo, AFixtureOfFourUnitsIsScoredUnitByUnit) {
+  PipelineMonteCarloOptions o;
+  o.model = "accel13";
+  o.protocol = "mip";
+  o.runs = 2;
+  o.jobs = 2;
+  o.seed = 38;
+  o.units = 4;
+  const PipelineMonteCarloSummary s = RunPipelineMonteCarlo(o);
+  ASSERT_TRUE(s.error.empty()) << s.error;
+  ASSERT_EQ(s.runs.size(), 8u);
+  EXPECT_EQ(s.solved, 8) << s.first_error;
+  ASSERT_EQ(s.unit_z.size(), 4u);
+  EXPECT_EQ(s.unit_mounts[1], "-y+x+z");
+  double sum_sq = 0;
+  for (std::size_t r = 0; r < s.runs.size(); ++r) {
+    const PipelineRun& run = s.runs[r];
+    EXPECT_EQ(run.unit, static_cast<int>(r % 4));
+    ASSERT_TRUE(run.ok) << run.error;
+    EXPECT_LT(run.z.cwiseAbs().maxCoeff(), 5.0) << "unit " << run.unit;
+    EXPECT_GT(run.gate_poses, 5) << "unit " << run.unit;
+    sum_sq += run.z.squaredNorm();
+  }
+  const double rms = std::sqrt(sum_sq / (8 * 13));
+  EXPECT_GT(rms, 0.5);
+  EXPECT_LT(rms, 1.6);
+  for (const auto& u : s.unit_z) EXPECT_EQ(u.runs(), 2);
+  o.chamber = "0; ramp 40 4 300";
+  o.model = "mag13";
+  const PipelineMonteCarloSummary refused = RunPipelineMonteCarlo(o);
+  EXPECT_TRUE(refused.bad_options);
+  EXPECT_EQ(refused.error, "--units: a fixture is not simulated in a chamber");
+}
+
 // In a climate chamber (issue 36): three sessions of mag13 through a 0 -> 40 degC ramp, the station
 // calibrating mag13@T with the truth's orders; every run scores the 31 coefficients and the 13
 // parameters at the 3 default held-out temperatures (the ramp's quarter points), with the spread
