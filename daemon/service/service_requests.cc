@@ -30,9 +30,9 @@ nlohmann::json Service::StatusJson() const {
   nlohmann::json batch = station_ ? station_->BatchStatus() : nlohmann::json();
   if (batch.is_object()) {
     for (auto& u : batch["units"]) {
-      for (const auto& dev : devices_) {
-        if (dev->spec().name != u["device"].get<std::string>()) continue;
-        const nlohmann::json s = dev->Status();
+      // The device's status, as `devices` above holds it.
+      if (const auto it = devices.find(u["device"].get<std::string>()); it != devices.end()) {
+        const nlohmann::json& s = *it;
         const std::string link = s.value("state", "");
         const bool silent = link == "streaming" && s.value("rate_hz", 0.0) <= 0.0;
         u["link"] = silent ? "silent" : link;

@@ -38,17 +38,15 @@ bool OpenBatch(const std::string& state_dir, const std::string& configured_id,
   const fs::path path = StateDir(state_dir).Batch();
   std::error_code ec;
   if (fs::exists(path, ec)) {
-    std::ifstream in(path);
-    const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
-    if (j.is_object() && j.value("id", nlohmann::json()).is_string() &&
-        !j["id"].get<std::string>().empty()) {
-      batch->id = j["id"].get<std::string>();
-      batch->fixture = j.value("fixture", nlohmann::json()).is_string()
-                           ? j["fixture"].get<std::string>()
-                           : std::string();
-      batch->started = j.value("started", nlohmann::json()).is_string()
-                           ? j["started"].get<std::string>()
-                           : std::string();
+    const nlohmann::json j = ReadBatchStatus(state_dir);
+    const auto text = [&j](const char* key) {
+      return j.is_object() && j.value(key, nlohmann::json()).is_string() ? j[key].get<std::string>()
+                                                                         : std::string();
+    };
+    if (!text("id").empty()) {
+      batch->id = text("id");
+      batch->fixture = text("fixture");
+      batch->started = text("started");
       if (!configured_id.empty() && configured_id != batch->id) {
         *note = "this session's batch is " + batch->id + " (batch.json); the configured '" +
                 configured_id + "' applies from the next session (reset)";
@@ -63,8 +61,7 @@ bool OpenBatch(const std::string& state_dir, const std::string& configured_id,
   // two sessions in one second) gets -2, -3, ...: each session is its own batch.
   std::vector<std::string> used;
   for (const auto& entry : fs::directory_iterator(StateDir(state_dir).SessionsDir(), ec)) {
-    std::ifstream in(StateDir(entry.path()).Batch());
-    const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+    const nlohmann::json j = ReadBatchStatus(entry.path().string());
     if (j.is_object() && j.value("id", nlohmann::json()).is_string()) {
       used.push_back(j["id"].get<std::string>());
     }
