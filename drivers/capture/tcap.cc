@@ -130,19 +130,50 @@ bool LooksLikeCapture(std::span<const std::uint8_t> b) {
 }
 
 bool CaptureReader::Open(const std::string& path, std::string* error) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "rb"),
+                                                       &std::fclose);
+  if (!file) {
     if (error) *error = "cannot open '" + path + "'";
     return false;
   }
-  std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)),
-                                  std::istreambuf_iterator<char>());
-  return Parse(std::move(bytes), error);
+  std::uint64_t size = 0;
+  if (std::fseek(file.get(), 0, SEEK_END) == 0) {
+    const long end = std::ftell(file.get());
+    if (end > 0) size = static_cast<std::uint64_t>(end);
+    std::rewind(file.get());
+  }
+  // The header line, at most kCaptureMaxHeaderLine, and the records' first bytes.
+  std::vector<std::uint8_t> bytes(kCaptureMaxHeaderLine + 1);
+  bytes.resize(std::fread(bytes.data(), 1, bytes.size(), file.get()));
+  if (!Parse(std::move(bytes), error)) return false;
+  file_ = std::move(file);
+  size_ = size;
+  return true;
+}
+
+bool CaptureReader::Refill(std::size_t need) {
+  if (bytes_.size() - at_ >= need) return true;
+  if (!file_) return false;
+  bytes_.erase(bytes_.begin(), bytes_.begin() + static_cast<long>(at_));
+  consumed_ += at_;
+  at_ = 0;
+  constexpr std::size_t kChunk = 1u << 20;
+  while (bytes_.size() < need && file_) {
+    const std::size_t had = bytes_.size();
+    bytes_.resize(had + std::max(kChunk, need - had));
+    const std::size_t got = std::fread(bytes_.data() + had, 1, bytes_.size() - had, file_.get());
+    bytes_.resize(had + got);
+    if (got == 0) file_.reset();
+  }
+  return bytes_.size() >= need;
 }
 
 bool CaptureReader::Parse(std::vector<std::uint8_t> bytes, std::string* error) {
   bytes_ = std::move(bytes);
   at_ = 0;
+  file_.reset();
+  consumed_ = 0;
+  size_ = bytes_.size();
   truncated_ = false;
   error_.clear();
   header_ = {};
@@ -187,9 +218,8 @@ bool CaptureReader::Parse(std::vector<std::uint8_t> bytes, std::string* error) {
 }
 
 bool CaptureReader::Next(CaptureRecord* r) {
-  if (!error_.empty() || at_ >= bytes_.size()) return false;
-  const std::size_t left = bytes_.size() - at_;
-  if (left < kCaptureRecordHeader) {
+  if (!error_.empty() || (at_ >= bytes_.size() && !Refill(1))) return false;
+  if (!Refill(kCaptureRecordHeader)) {
     truncated_ = true;
     return false;
   }
@@ -197,13 +227,14 @@ bool CaptureReader::Next(CaptureRecord* r) {
   const auto type = p[0];
   const auto length = static_cast<std::uint32_t>(GetLe(p + 10, 4));
   if ((type != 'D' && type != 'T' && type != 'E') || length > kCaptureMaxPayload) {
-    error_ = "corrupt record at byte " + std::to_string(at_);
+    error_ = "corrupt record at byte " + std::to_string(consumed_ + at_);
     return false;
   }
-  if (left < kCaptureRecordHeader + length) {
+  if (!Refill(kCaptureRecordHeader + length)) {
     truncated_ = true;
     return false;
   }
+  p = bytes_.data() + at_;
   r->type = static_cast<RecordType>(type);
   r->device = p[1];
   r->t_ns = GetLe(p + 2, 8);

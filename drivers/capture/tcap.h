@@ -82,12 +82,18 @@ class CaptureWriter {
 
 // Reads a capture from memory or a file. A truncated last record ends the records cleanly
 // (truncated() is then true); a record whose type or length cannot be valid stops with an error.
+// A file is read as the records are asked for, a MiB at a time: hours of recording take no more
+// memory than a minute (turncal noise reads 10-hour captures).
 class CaptureReader {
  public:
   // From the bytes of a whole file; false with a message when the header line is not a TCAP1
   // header.
   bool Parse(std::vector<std::uint8_t> bytes, std::string* error);
   bool Open(const std::string& path, std::string* error);
+  // Bytes of the file (or of the parsed bytes) read past so far, and the file's size (0 when
+  // unknown): for progress.
+  std::uint64_t position() const { return consumed_ + at_; }
+  std::uint64_t size() const { return size_; }
 
   const CaptureHeader& header() const { return header_; }
   // The next whole record; false at the end (see truncated() and error()).
@@ -97,8 +103,14 @@ class CaptureReader {
   std::size_t trailing_bytes() const { return truncated_ ? bytes_.size() - at_ : 0; }
 
  private:
+  // Keeps at least `need` bytes after at_ when the file has them; false when it has not.
+  bool Refill(std::size_t need);
+
   std::vector<std::uint8_t> bytes_;
   std::size_t at_ = 0;
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> file_{nullptr, &std::fclose};
+  std::uint64_t consumed_ = 0;  // file bytes before bytes_[0]
+  std::uint64_t size_ = 0;
   CaptureHeader header_;
   bool truncated_ = false;
   std::string error_;

@@ -25,6 +25,10 @@
 #   the daemon first drains what the ptys buffered while it started); KEEP=1 keeps the work directory (logs, result.json); WORK=DIR uses DIR (created);
 #   NICE=N runs simulator, turncald and subscribers under `nice -n N` (e.g. -10 as root: on a
 #   shared machine, other people's builds then take the CPU only when these do not need it).
+#   FIXTURE=1 makes the devices a batch on a fixture (issue 38): [fixture] with one slot per device,
+#   the slots' mounts cycling through the cube fixture's four (+x+y+z -y+x+z +x-y-z +z+x+y, the
+#   simulator mounting each unit so), batch "LOAD-FIXTURE"; the batch's state at the end is
+#   printed (units passed, waiting, held; seconds to the last gate).
 #   CLIENTS=0 measures the daemon without subscribers. PERF=1 records `perf record $PERF_ARGS`
 #   (default -g) of the daemon for the first min(SECONDS, 30) s of the window (perf.data in the
 #   work directory, which is then kept; PERF_ARGS="--call-graph dwarf" for usable call chains).
@@ -43,6 +47,8 @@ SEED=${SEED:-1}
 SETTLE=${SETTLE:-5}
 KEEP=${KEEP:-0}
 PERF=${PERF:-0}
+FIXTURE=${FIXTURE:-0}
+MOUNTS=("+x+y+z" "-y+x+z" "+x-y-z" "+z+x+y")
 NICE=${NICE:-}
 RUN=()
 [[ -n $NICE ]] && RUN=(nice -n "$NICE")
@@ -93,9 +99,17 @@ fi
 # turncald's configuration: the devices at RATE Hz (the MIP dialogue asks for this rate).
 {
   echo "# written by tests/bench/daemon_load.sh"
+  if [[ $FIXTURE == 1 ]]; then
+    printf '[fixture]\nname = "load%d"\nbatch = "LOAD-FIXTURE"\n\n' "$DEVICES"
+    for i in $(seq 1 "$DEVICES"); do
+      printf '[[fixture.slot]]\nname = "%d"\nmount = "%s"\n\n' "$i" "${MOUNTS[$(((i - 1) % 4))]}"
+    done
+  fi
   for i in $(seq 1 "$DEVICES"); do
-    printf '[[device]]\nname = "imu%d"\nprotocol = "%s"\nport = "%s/imu%d"\nbaud = %d\nrate_hz = %s\n\n' \
+    printf '[[device]]\nname = "imu%d"\nprotocol = "%s"\nport = "%s/imu%d"\nbaud = %d\nrate_hz = %s\n' \
       "$i" "$PROTOCOL" "$WORK" "$i" "$BAUD" "$RATE"
+    [[ $FIXTURE == 1 ]] && printf 'slot = "%d"\n' "$i"
+    echo
   done
   # REGISTRY=CONNINFO: the station also sends every activated calibration to that registry
   # (docs/REGISTRY.md), to measure the sample path with and without it.
@@ -105,7 +119,10 @@ fi
 } > "$WORK/turncald.toml"
 
 LIVES=()
-for i in $(seq 1 "$DEVICES"); do LIVES+=(--live "$WORK/imu$i"); done
+for i in $(seq 1 "$DEVICES"); do
+  LIVES+=(--live "$WORK/imu$i")
+  [[ $FIXTURE == 1 ]] && LIVES+=("--mount=${MOUNTS[$(((i - 1) % 4))]}")
+done
 
 echo "daemon_load.sh: $DEVICES x $PROTOCOL at $RATE Hz ($BAUD baud), $CLIENTS subscribers, ${DURATION} s window;" \
      "session $POSES poses x (4 + $DWELL) s; work $WORK${NICE:+; nice $NICE}"
@@ -159,6 +176,14 @@ set -e
 if [[ -n ${REGISTRY:-} ]]; then
   echo "daemon_load.sh: registry: $("$TURNCAL" status --socket "$WORK/t.sock" --json |
     python3 -c 'import json, sys; print(json.load(sys.stdin)["registry"])')"
+fi
+if [[ $FIXTURE == 1 ]]; then
+  echo "daemon_load.sh: batch: $("$TURNCAL" status --socket "$WORK/t.sock" --json | python3 -c '
+import json, sys
+b = json.load(sys.stdin)["batch"]
+units = " ".join("%s:%s:%d" % (u["device"], u["state"], u["poses"]) for u in b["units"])
+print("%s on %s: %d passed, %d waiting, %d held; seconds to the last gate %s; %s" % (
+    b["id"], b["fixture"], b["passed"], b["waiting"], b["held"], b["seconds_to_last_gate"], units))')"
 fi
 echo "daemon_load.sh: after: $(uptime)"
 echo "daemon_load.sh: top processes at the end:"

@@ -62,11 +62,11 @@ def worst_sigma(model_result, device_truth, model):
 
 
 def finish_dir(d):
-    """Kills what still runs in the temporary directory DIR, then keeps it when a check failed
-    (and says so) or removes it."""
+    """Kills what still runs in the temporary directory DIR, then keeps it when a check failed or
+    TURNCAL_KEEP_E2E is set (and says so), or removes it."""
     for p in subprocess.run(["pgrep", "-f", d], capture_output=True, text=True).stdout.split():
         os.kill(int(p), signal.SIGKILL)
-    if failures:
+    if failures or os.environ.get("TURNCAL_KEEP_E2E"):
         print(f"(kept {d} for inspection)")
     else:
         shutil.rmtree(d, ignore_errors=True)

@@ -65,6 +65,55 @@ TEST(Tcap, WriteThenReadPreservesEveryByteAndRecordInOrder) {
   std::filesystem::remove(path);
 }
 
+// A file is read a MiB at a time: records that straddle the reads (sizes 1 to 70 000 bytes,
+// 6 MiB in all, a 3 MiB one among them) come back whole and in order, the position reaches the
+// size, and a file cut inside its last record still ends cleanly with the rest counted.
+TEST(Tcap, ALargeFileIsReadInPiecesWithEveryRecordWhole) {
+  const auto path = std::filesystem::temp_directory_path() / "turncal_tcap_large.tcap";
+  std::string error;
+  auto w = CaptureWriter::Create(path.string(), Header(), &error);
+  ASSERT_NE(w, nullptr) << error;
+  std::vector<std::vector<std::uint8_t>> payloads;
+  std::size_t total = 0;
+  for (std::size_t k = 0; total < (3u << 20); ++k) {
+    std::vector<std::uint8_t> p((k * 7919) % 70000 + 1);
+    for (std::size_t i = 0; i < p.size(); ++i) p[i] = static_cast<std::uint8_t>(i + k);
+    total += p.size();
+    payloads.push_back(std::move(p));
+  }
+  payloads.emplace_back(3u << 20, 0x5A);
+  for (std::size_t k = 0; k < payloads.size(); ++k) {
+    ASSERT_TRUE(w->Append(RecordType::kReceived, 0, k, payloads[k], &error)) << error;
+  }
+  ASSERT_TRUE(w->Close(&error)) << error;
+  const auto size = std::filesystem::file_size(path);
+  for (const std::uintmax_t cut : {std::uintmax_t{0}, std::uintmax_t{1000}}) {
+    std::filesystem::resize_file(path, size - cut);
+    CaptureReader reader;
+    ASSERT_TRUE(reader.Open(path.string(), &error)) << error;
+    EXPECT_EQ(reader.size(), size - cut);
+    CaptureRecord r;
+    std::size_t k = 0;
+    while (reader.Next(&r)) {
+      ASSERT_LT(k, payloads.size());
+      ASSERT_EQ(r.t_ns, k);
+      ASSERT_EQ(r.payload, payloads[k]) << "record " << k;
+      ++k;
+    }
+    EXPECT_TRUE(reader.error().empty()) << reader.error();
+    if (cut == 0) {
+      EXPECT_EQ(k, payloads.size());
+      EXPECT_FALSE(reader.truncated());
+      EXPECT_EQ(reader.position(), size);
+    } else {
+      EXPECT_EQ(k, payloads.size() - 1);  // the last record lost its end
+      EXPECT_TRUE(reader.truncated());
+      EXPECT_EQ(reader.trailing_bytes(), payloads.back().size() + kCaptureRecordHeader - cut);
+    }
+  }
+  std::filesystem::remove(path);
+}
+
 TEST(Tcap, ATruncatedCaptureIsReadableUpToItsLastWholeRecordAtEveryOffset) {
   const std::string header = EncodeCaptureHeader(Header());
   std::vector<std::uint8_t> file(header.begin(), header.end());

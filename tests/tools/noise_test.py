@@ -1,11 +1,16 @@
 #!/usr/bin/env python3
 """turncal noise: on a simulated 200 s rest of known white density it recovers the density (the
 Allan deviation of 100 000 samples scatters by well under 5 % at the short cluster times that
-fix N); the plot is written; a missing file is exit 2; on imu_tk's real Xsens recording (raw
-counts, the 50 s rest first) it reports every axis with a fitted curve (skipped without
-../shared/fixtures)."""
+fix N); the plot is written; a missing file is exit 2; on a NumPy array of white noise of known
+sigma the Allan and Hadamard deviations' 95 % intervals hold the truth (sigma / sqrt(m)) at all
+but a few of the cluster sizes, and the progress line reaches 100 %; a truncated array and one
+with the wrong columns are exit 2 and say why; on imu_tk's real Xsens recording (raw counts, the
+50 s rest first) it reports every axis with a fitted curve (skipped without ../shared/fixtures).
+"""
+import array
 import json
 import os
+import random
 import subprocess
 import sys
 import tempfile
@@ -42,6 +47,61 @@ with tempfile.TemporaryDirectory() as d:
         check(os.path.exists(svg) and "<svg" in open(svg).read(), "the plot is written")
     r = subprocess.run([TURNCAL, "noise", os.path.join(d, "none.tcap")], capture_output=True)
     check(r.returncode == 2, f"a missing file: exit {r.returncode}")
+
+    # A .npy array (written by hand: numpy need not be here) of unit white noise, t x y z.
+    def write_npy(path, rows, columns, values, cut=0):
+        header = "{'descr': '<f8', 'fortran_order': False, 'shape': (%d, %d), }" % (rows, columns)
+        header += " " * (63 - (10 + len(header)) % 64) + "\n"
+        with open(path, "wb") as f:
+            f.write(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode())
+            data = array.array("d", values).tobytes()
+            f.write(data[:len(data) - cut])
+
+    rng = random.Random(39)
+    n = 200000
+    values = []
+    for i in range(n):
+        values += [i / 100.0, rng.gauss(0, 1), rng.gauss(0, 1), rng.gauss(0, 1)]
+    npy = os.path.join(d, "white.npy")
+    write_npy(npy, n, 4, values)
+    r = subprocess.run([TURNCAL, "noise", npy, "--triad", "gyr", "--json", "--progress", "always"],
+                       capture_output=True, text=True)
+    check(r.returncode == 0 and "turncal noise: 100 %" in r.stderr,
+          f"a .npy array of 200 000 samples: exit {r.returncode}, progress "
+          f"{r.stderr.strip().splitlines()[-1:] if r.stderr else 'none'}")
+    if r.returncode == 0:
+        axes = json.loads(r.stdout)["axes"]
+        check(len(axes) == 3 and all(a["triad"] == "gyr" and a["samples"] == n for a in axes),
+              "three gyro axes of 200 000 samples")
+        misses = {"Allan": 0, "Hadamard": 0}
+        points = 0
+        for a in axes:
+            for p in a["allan"]:
+                truth = 1.0 / p["m"] ** 0.5  # sigma^2(m) = sigma^2 / m for white rate noise
+                points += 1
+                misses["Allan"] += not (p["ci95"][0] <= truth <= p["ci95"][1])
+                if "hdev" in p:
+                    misses["Hadamard"] += not (p["hdev_ci95"][0] <= truth <= p["hdev_ci95"][1])
+                ok = p["ci95"][0] <= p["ci68"][0] <= p["adev"] <= p["ci68"][1] <= p["ci95"][1]
+                if not ok:
+                    check(False, f"ci68 inside ci95 around the deviation at m {p['m']}")
+        # About 5 % of the points miss their 95 % interval; the points of an axis are correlated,
+        # so the count scatters more than a binomial's: 15 % of them is far out.
+        for name, count in misses.items():
+            check(count <= 0.15 * points,
+                  f"{name}: the 95 % interval misses sigma/sqrt(m) at {count} of {points} points")
+        longest = max(p["m"] for p in axes[0]["allan"])
+        check(2 * longest <= n and longest >= n / 4,
+              f"cluster sizes up to {longest} samples (a half of the recording at most)")
+    write_npy(os.path.join(d, "cut.npy"), n, 4, values, cut=100)
+    r = subprocess.run([TURNCAL, "noise", os.path.join(d, "cut.npy"), "--triad", "gyr"],
+                       capture_output=True, text=True)
+    check(r.returncode == 2 and "ends after" in r.stderr,
+          f"a truncated .npy: exit {r.returncode}: {r.stderr.strip()}")
+    r = subprocess.run([TURNCAL, "noise", npy, "--triad", "acc,gyr"], capture_output=True,
+                       text=True)
+    check(r.returncode == 2 and "4 columns" in r.stderr,
+          f"a .npy with fewer columns than --triad asks: exit {r.returncode}: {r.stderr.strip()}")
 
 shared = os.environ.get("TURNCAL_SHARED_DIR", os.path.join(os.path.dirname(__file__), "../../../shared"))
 acc = os.path.join(shared, "fixtures/imu_tk/xsens_acc.mat")
