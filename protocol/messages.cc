@@ -142,7 +142,7 @@ bool ParseCommand(const nlohmann::json& request, std::string* cmd, std::string* 
   }
   *cmd = request["cmd"].get<std::string>();
   for (const char* known : {"status", "devices", "pose", "rate", "watch", "result", "next_pose",
-                            "reset", "publish", "device_write", "version", "chamber"}) {
+                            "reset", "publish", "device_write", "version", "chamber", "noise"}) {
     if (*cmd == known) return true;
   }
   *error = fmt::format("unknown command '{}' (commands: {})", *cmd, kCommands);
@@ -249,6 +249,20 @@ bool ParseChamberRequest(const nlohmann::json& request, std::optional<double>* s
     return false;
   }
   *setpoint_c = it->get<double>();
+  return true;
+}
+
+bool ParseNoiseRequest(const nlohmann::json& request, std::string* device, std::string* action,
+                       std::string* error) {
+  if (!StringArgument(request, "device", device) || !StringArgument(request, "action", action)) {
+    *error = "noise: 'device' and 'action' must be strings";
+    return false;
+  }
+  if (action->empty()) *action = "status";
+  if (*action != "start" && *action != "status" && *action != "stop") {
+    *error = "noise: 'action' must be start, status or stop, not '" + *action + "'";
+    return false;
+  }
   return true;
 }
 

@@ -34,7 +34,7 @@ nlohmann::json ErrorMessage(const std::string& message);
 // The commands, as an ERROR lists them.
 inline constexpr const char* kCommands =
     "status, devices, pose, rate, watch, result, next_pose, reset, publish, device_write, "
-    "version, chamber";
+    "version, chamber, noise";
 // pose, rate, reset, publish, device_write and chamber change the session or a device: only
 // control peers
 // may send them.
@@ -105,6 +105,11 @@ bool ParseNextPoseRequest(const nlohmann::json& request, std::string* device, bo
 // sensor's temperature to settle); "setpoint_c": null or absent: a ramp, or no chamber.
 bool ParseChamberRequest(const nlohmann::json& request, std::optional<double>* setpoint_c,
                          std::string* error);
+
+// {"cmd":"noise","device":"imu1","action":"start"|"status"|"stop"}: a rest's noise on a device
+// (docs/NOISE.md); the action defaults to "status", the device to "" (the caller's first).
+bool ParseNoiseRequest(const nlohmann::json& request, std::string* device, std::string* action,
+                       std::string* error);
 
 // reset: its note (empty: none).
 bool ParseResetRequest(const nlohmann::json& request, std::string* note, std::string* error);

@@ -124,7 +124,8 @@ std::optional<nlohmann::json> ClientConnection::Request(const nlohmann::json& re
       if (kind == "ERROR" && !j.contains("device")) return j;
       if (kind == "STATUS" || kind == "DEVICES" || kind == "RESULT" || kind == "NEXT_POSE" ||
           kind == "WATCH" || kind == "POSE_ACCEPTED" || kind == "RESET" || kind == "PUBLISHED" ||
-          kind == "DEVICE_WRITE_PLAN" || kind == "DEVICE_WRITTEN" || kind == "VERSION") {
+          kind == "DEVICE_WRITE_PLAN" || kind == "DEVICE_WRITTEN" || kind == "VERSION" ||
+          kind == "NOISE") {
         return j;
       }
     }

@@ -2,18 +2,25 @@
 
 #include <fmt/format.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
+#include <thread>
 #include <tuple>
 
 #include "core/analysis/allan.h"
 #include "core/analysis/allan_edf.h"
 #include "daemon/state/atomic_file.h"
+#include "protocol/noise_json.h"
+#include "tools/client_connection.h"
 #include "tools/help_text.h"
 #include "tools/noise_input.h"
 
@@ -25,36 +32,14 @@ struct NoiseArgs {
   NoiseInputArgs input;
   std::string svg;
   bool json = false;
+  // --live DEVICE: a rest measured by turncald ({"cmd":"noise"}).
+  std::string live, socket = DefaultSocketPath();
+  double seconds = 60.0;
+  bool stop_only = false;
 };
-
-// One Allan point with its interval, the Hadamard deviation beside it.
-struct PointOut {
-  std::int64_t m = 0, stride = 1;
-  double tau_s = 0.0;
-  int alpha = 0;  // the noise type its edf assumes (core/analysis/allan_edf.h)
-  double adev = 0.0, edf = 0.0;
-  VarianceInterval ci68, ci95;  // of the Allan deviation
-  double hdev = NAN, hedf = 0.0;
-  VarianceInterval hci68, hci95;
-};
-
-struct AxisResult {
-  std::string triad;
-  int axis = 0;
-  std::vector<AllanPoint> points;  // the fitted ones (up to a ninth of the recording)
-  std::vector<PointOut> detail;    // every one, with intervals
-  std::int64_t gaps = 0;
-  NoiseFit fit;
-  std::size_t samples = 0;
-  double rate_hz = 0.0;
-};
-
-const char* Unit(const std::string& triad) {
-  return triad == "acc" ? "m/s^2" : triad == "gyr" ? "rad/s" : "G";
-}
 
 // The plot: log-log Allan deviation per triad, the points and the fitted model's curve.
-std::string Svg(const std::vector<AxisResult>& results) {
+std::string Svg(const std::vector<RestNoiseAxis>& results) {
   std::vector<std::string> triads;
   for (const auto& r : results)
     if (std::find(triads.begin(), triads.end(), r.triad) == triads.end()) triads.push_back(r.triad);
@@ -69,7 +54,7 @@ std::string Svg(const std::vector<AxisResult>& results) {
     double tmin = INFINITY, tmax = 0, amin = INFINITY, amax = 0;
     for (const auto& r : results) {
       if (r.triad != triads[k]) continue;
-      for (const auto& p : r.detail) {
+      for (const auto& p : r.points) {
         if (!(p.adev > 0)) continue;
         tmin = std::min(tmin, p.tau_s), tmax = std::max(tmax, p.tau_s);
         amin = std::min(amin, p.adev), amax = std::max(amax, p.adev);
@@ -83,7 +68,7 @@ std::string Svg(const std::vector<AxisResult>& results) {
     auto Y = [&](double a) { return H - B - (std::log10(a) - ly0) / (ly1 - ly0) * (H - B - T); };
     o +=
         fmt::format("<text x=\"{}\" y=\"18\" font-weight=\"bold\">{} Allan deviation ({})</text>\n",
-                    x0 + L, triads[k], Unit(triads[k]));
+                    x0 + L, triads[k], RestNoiseUnit(triads[k]));
     o += fmt::format(
         "<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#888\"/>\n",
         x0 + L, T, W - L - R, H - B - T);
@@ -100,7 +85,7 @@ std::string Svg(const std::vector<AxisResult>& results) {
     for (const auto& r : results) {
       if (r.triad != triads[k]) continue;
       const char* c = colors[r.axis];
-      for (const auto& p : r.detail) {
+      for (const auto& p : r.points) {
         if (!(p.adev > 0)) continue;
         o += fmt::format("<circle cx=\"{:.1f}\" cy=\"{:.1f}\" r=\"2\" fill=\"{}\"/>\n", X(p.tau_s),
                          Y(p.adev), c);
@@ -149,128 +134,15 @@ constexpr Manual kNoiseManual = {
     "turncal noise imu.bin --protocol mip --to 600 --json\n"
     "turncal noise rest10h.tcap --triad acc,gyr      # leave the magnetometer out\n"
     "turncal noise imu.npy --triad acc,gyr           # columns t ax ay az gx gy gz\n"
-    "turncal noise xsens_acc.mat --triad acc --to 45   # imu_tk's text columns (raw counts)",
+    "turncal noise xsens_acc.mat --triad acc --to 45   # imu_tk's text columns (raw counts)\n"
+    "turncal noise --live imu1 --seconds 3600          # turncald measures imu1's rest",
     "0 done; 1 no triad with enough samples, or the plot cannot be written; 2 the input "
     "cannot be read or a command-line mistake",
     "docs/NOISE.md, docs/ACCURACY.md (the noise model), SENSORS.md"};
 
-// The log-log slope of the Allan variance at tau: the fitted model's, or the measured points'
-// about it when there is no fit.
-double AvarSlope(const NoiseFit& fit, const std::vector<PointOut>& points, std::size_t i) {
-  if (fit.ok) {
-    const double t = points[i].tau_s, k = 1.2;
-    const double hi = fit.Adev(t * k), lo = fit.Adev(t / k);
-    if (hi > 0 && lo > 0) return 2.0 * (std::log(hi) - std::log(lo)) / (2.0 * std::log(k));
-  }
-  const std::size_t a = i > 0 ? i - 1 : i, b = i + 1 < points.size() ? i + 1 : i;
-  if (a == b || !(points[a].adev > 0) || !(points[b].adev > 0)) return -1.0;
-  return 2.0 * std::log(points[b].adev / points[a].adev) /
-         std::log(points[b].tau_s / points[a].tau_s);
-}
-
-VarianceInterval DeviationInterval(double deviation, double edf, double confidence) {
-  const VarianceInterval v = ChiSquaredInterval(deviation * deviation, edf, confidence);
-  return {std::sqrt(v.low), std::sqrt(v.high)};
-}
-
-// The Allan deviation, its intervals, the Hadamard deviation and the noise fit of every axis of
-// every triad with at least 16 intervals in [from, to] (the median of the first intervals as the
-// sample period).
-std::vector<AxisResult> AnalyseTriads(const NoiseInput& input) {
-  std::vector<AxisResult> results;
-  // The axes of a triad share cluster sizes and mostly noise types: each edf once.
-  std::map<std::tuple<int, int, std::int64_t, std::int64_t, std::int64_t>, double> edfs;
-  auto edf = [&edfs](int alpha, int d, std::int64_t m, std::int64_t stride, std::int64_t n) {
-    const auto key = std::make_tuple(alpha, d, m, stride, n);
-    auto it = edfs.find(key);
-    if (it == edfs.end()) it = edfs.emplace(key, OverlappingEdf(alpha, d, m, stride, n)).first;
-    return it->second;
-  };
-  for (const TriadStream* triad : {&input.acc, &input.gyr, &input.mag}) {
-    const double dt = triad->period_s();
-    const std::int64_t n = triad->samples();
-    if (n < 17 || !(dt > 0)) continue;
-    const std::vector<StreamingAllanPoint> points = triad->allan().Points();
-    for (int axis = 0; axis < 3; ++axis) {
-      AxisResult r;
-      r.triad = triad->name();
-      r.axis = axis;
-      r.samples = static_cast<std::size_t>(n);
-      r.rate_hz = 1.0 / dt;
-      r.gaps = triad->gaps();
-      for (const StreamingAllanPoint& p : points) {
-        PointOut o;
-        o.m = p.m;
-        o.stride = p.stride;
-        o.tau_s = static_cast<double>(p.m) * dt;
-        o.adev = std::sqrt(p.avar[static_cast<std::size_t>(axis)]);
-        if (!p.hvar.empty()) o.hdev = std::sqrt(p.hvar[static_cast<std::size_t>(axis)]);
-        r.detail.push_back(o);
-        if (9 * p.m <= n) {
-          r.points.push_back({o.tau_s, o.adev, static_cast<double>(n) / static_cast<double>(p.m)});
-        }
-      }
-      r.fit = FitNoiseModel(r.points);
-      for (std::size_t i = 0; i < r.detail.size(); ++i) {
-        PointOut& o = r.detail[i];
-        o.alpha = NoiseTypeOfSlope(AvarSlope(r.fit, r.detail, i));
-        o.edf = edf(o.alpha, 2, o.m, o.stride, n);
-        o.ci68 = DeviationInterval(o.adev, o.edf, 0.683);
-        o.ci95 = DeviationInterval(o.adev, o.edf, 0.95);
-        if (std::isfinite(o.hdev)) {
-          o.hedf = edf(o.alpha, 3, o.m, o.stride, n);
-          o.hci68 = DeviationInterval(o.hdev, o.hedf, 0.683);
-          o.hci95 = DeviationInterval(o.hdev, o.hedf, 0.95);
-        }
-      }
-      results.push_back(std::move(r));
-    }
-  }
-  return results;
-}
-
-nlohmann::json Interval(const VarianceInterval& v) {
-  return nlohmann::json::array({v.low, v.high});
-}
-
 void PrintNoiseJson(const NoiseArgs& args, const NoiseInput& input,
-                    const std::vector<AxisResult>& results) {
-  nlohmann::json out = nlohmann::json::array();
-  for (const auto& r : results) {
-    nlohmann::json points = nlohmann::json::array();
-    for (const auto& p : r.detail) {
-      nlohmann::json j = {{"tau_s", p.tau_s},
-                          {"m", p.m},
-                          {"stride", p.stride},
-                          {"adev", p.adev},
-                          {"edf", p.edf},
-                          {"alpha", p.alpha},
-                          {"ci68", Interval(p.ci68)},
-                          {"ci95", Interval(p.ci95)}};
-      if (std::isfinite(p.hdev)) {
-        j["hdev"] = p.hdev;
-        j["hdev_edf"] = p.hedf;
-        j["hdev_ci68"] = Interval(p.hci68);
-        j["hdev_ci95"] = Interval(p.hci95);
-      }
-      points.push_back(std::move(j));
-    }
-    out.push_back({{"triad", r.triad},
-                   {"axis", std::string(1, "xyz"[r.axis])},
-                   {"unit", Unit(r.triad)},
-                   {"samples", r.samples},
-                   {"rate_hz", r.rate_hz},
-                   {"gaps", r.gaps},
-                   {"white_density", r.fit.white_density},
-                   {"gauss_markov_sigma", r.fit.gm_sigma},
-                   {"gauss_markov_tau_s", r.fit.gm_tau_s},
-                   {"random_walk", r.fit.random_walk},
-                   {"bias_instability", r.fit.bias_instability},
-                   {"bias_instability_tau_s", r.fit.bias_instability_tau_s},
-                   {"longest_tau_s", r.fit.longest_tau_s},
-                   {"rms_log_error", r.fit.rms_log_error},
-                   {"allan", points}});
-  }
+                    const std::vector<RestNoiseAxis>& results) {
+  const nlohmann::json out = RestNoiseAxesJson(results);
   fmt::print("{}\n", nlohmann::json{{"source", args.input.file},
                                     {"device", input.source},
                                     {"bytes", input.bytes},
@@ -281,8 +153,8 @@ void PrintNoiseJson(const NoiseArgs& args, const NoiseInput& input,
 }
 
 void PrintNoiseText(const NoiseArgs& args, const NoiseInput& input,
-                    const std::vector<AxisResult>& results) {
-  const AxisResult& first = results.front();
+                    const std::vector<RestNoiseAxis>& results) {
+  const RestNoiseAxis& first = results.front();
   fmt::print("{}{}: {} samples at {:.4g} Hz ({:.1f} s){}{}; read and summed in {:.2f} s\n",
              args.input.file, input.source.empty() ? "" : " (" + input.source + ")", first.samples,
              first.rate_hz, static_cast<double>(first.samples) / first.rate_hz,
@@ -302,7 +174,7 @@ void PrintNoiseText(const NoiseArgs& args, const NoiseInput& input,
   for (const auto& r : results) {
     std::string line = fmt::format("{:<5} {:<4}", r.triad, std::string(1, "xyz"[r.axis]));
     double next = 0.0;
-    for (const auto& p : r.detail) {
+    for (const auto& p : r.points) {
       if (p.tau_s < next * 0.999) continue;
       line += fmt::format("  {:.3g} s: {:.3g} ({:.3g}-{:.3g})", p.tau_s, p.adev, p.ci68.low,
                           p.ci68.high);
@@ -320,10 +192,89 @@ void PrintNoiseText(const NoiseArgs& args, const NoiseInput& input,
   if (!args.svg.empty()) fmt::print("plot: {}\n", args.svg);
 }
 
+// A live rest: turncald sums the device's samples for --seconds (or, with --stop, ends a
+// measurement already running); the answer printed as the file's would be.
+int RunLive(const NoiseArgs& args) {
+  ClientConnection client;
+  std::string error;
+  if (!client.Connect(args.socket, &error)) {
+    fmt::print(stderr, "turncal noise: {}\n", error);
+    return 2;
+  }
+  auto request = [&](const char* action) -> std::optional<nlohmann::json> {
+    auto r = client.Request({{"cmd", "noise"}, {"device", args.live}, {"action", action}}, &error);
+    if (r && r->value("class", "") == "ERROR") {
+      error = r->value("message", r->dump());
+      return std::nullopt;
+    }
+    return r;
+  };
+  if (!args.stop_only) {
+    if (!request("start")) {
+      fmt::print(stderr, "turncal noise: {}\n", error);
+      return 2;
+    }
+    const bool progress =
+        args.input.progress == "always" || (args.input.progress == "auto" && isatty(2) != 0);
+    const auto start = std::chrono::steady_clock::now();
+    auto next = start;
+    for (;;) {
+      const double elapsed =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (elapsed >= args.seconds) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+      if (!progress || std::chrono::steady_clock::now() < next) continue;
+      next += std::chrono::seconds(5);
+      const auto status = request("status");
+      if (!status) {
+        fmt::print(stderr, "turncal noise: {}\n", error);
+        return 1;
+      }
+      fmt::print(stderr, "turncal noise: {}: {:.0f} of {:.0f} s, {} samples, {:.1f} s of data\n",
+                 args.live, elapsed, args.seconds, status->value("samples", 0),
+                 status->value("seconds", 0.0));
+    }
+  }
+  const auto result = request("stop");
+  if (!result) {
+    fmt::print(stderr, "turncal noise: {}\n", error);
+    return 1;
+  }
+  if (args.json) {
+    fmt::print("{}\n", result->dump());
+    return (*result)["axes"].empty() ? 1 : 0;
+  }
+  fmt::print("{} (live, turncald): {} samples, {:.1f} s of data since {}{}\n", args.live,
+             result->value("samples", 0), result->value("seconds", 0.0),
+             result->value("started", ""),
+             result->contains("file") ? "; saved in " + (*result)["file"].get<std::string>() : "");
+  if (result->contains("warning"))
+    fmt::print("warning: {}\n", (*result)["warning"].get<std::string>());
+  fmt::print("\n{:<5} {:<4} {:>13} {:>13} {:>10} {:>13} {:>13} {:>10}\n", "triad", "axis",
+             "white N", "GM sigma", "GM tau s", "random walk", "flat bottom B", "at tau s");
+  for (const auto& a : (*result)["axes"]) {
+    fmt::print("{:<5} {:<4} {:>13.4g} {:>13.4g} {:>10.4g} {:>13.4g} {:>13.4g} {:>10.3g}\n",
+               a.value("triad", ""), a.value("axis", ""), a.value("white_density", 0.0),
+               a.value("gauss_markov_sigma", 0.0), a.value("gauss_markov_tau_s", 0.0),
+               a.value("random_walk", 0.0), a.value("bias_instability", 0.0),
+               a.value("bias_instability_tau_s", 0.0));
+  }
+  if ((*result)["axes"].empty()) {
+    fmt::print(stderr, "turncal noise: {} sent too few samples to analyse\n", args.live);
+    return 1;
+  }
+  return 0;
+}
+
 int Run(const NoiseArgs& args) {
+  if (!args.live.empty()) return RunLive(args);
+  if (args.input.file.empty()) {
+    fmt::print(stderr, "turncal noise: give a file, or --live DEVICE\n");
+    return 2;
+  }
   NoiseInput input;
   if (const int code = ReadNoiseInput(args.input, &input); code != 0) return code;
-  const std::vector<AxisResult> results = AnalyseTriads(input);
+  const std::vector<RestNoiseAxis> results = AnalyseRestNoise(input.noise);
   if (results.empty()) {
     fmt::print(stderr, "turncal noise: '{}' has no triad with enough samples in the window\n",
                args.input.file);
@@ -353,8 +304,17 @@ void AddNoiseCommand(CLI::App* app) {
   SetManual(cmd, kNoiseManual);
   cmd->add_option("file", args->input.file,
                   "a .tcap capture, a raw device stream (with --protocol), a NumPy .npy array or "
-                  "text columns: time in s then x y z per triad (imu_tk's .mat files, CSV)")
-      ->required();
+                  "text columns: time in s then x y z per triad (imu_tk's .mat files, CSV)");
+  cmd->add_option(
+      "--live", args->live,
+      "instead of a file: turncald measures this device's rest live for --seconds "
+      "({\"cmd\":\"noise\"}); the result is also saved in its state directory's rest_noise/");
+  cmd->add_option("--seconds", args->seconds, "with --live: how long to measure")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_flag("--stop", args->stop_only,
+                "with --live: end a measurement already running and print it");
+  cmd->add_option("--socket", args->socket, "with --live: turncald's socket ($TURNCAL_SOCKET)");
   cmd->add_option("--protocol", args->input.protocol,
                   "raw streams: mip | gx2 | xbus | xbus-legacy");
   cmd->add_option("--triad", args->input.text_triads,

@@ -20,8 +20,6 @@ namespace turncal::tools {
 
 namespace {
 
-constexpr std::size_t kPeriodIntervals = 4096;
-
 double SampleTime(const Sample& s) {
   return s.t_device_s ? *s.t_device_s : static_cast<double>(s.t_host_ns) * 1e-9;
 }
@@ -73,9 +71,10 @@ bool Wanted(const NoiseInputArgs& args, const char* triad) {
 }
 
 void AddSample(const Sample& s, double t, const NoiseInputArgs& args, NoiseInput* out) {
-  if (s.acc_mps2 && Wanted(args, "acc")) out->acc.Add(t, *s.acc_mps2, args.from_s, args.to_s);
-  if (s.gyr_radps && Wanted(args, "gyr")) out->gyr.Add(t, *s.gyr_radps, args.from_s, args.to_s);
-  if (s.mag && Wanted(args, "mag")) out->mag.Add(t, *s.mag, args.from_s, args.to_s);
+  if (s.acc_mps2 && Wanted(args, "acc")) out->noise.acc.Add(t, *s.acc_mps2, args.from_s, args.to_s);
+  if (s.gyr_radps && Wanted(args, "gyr"))
+    out->noise.gyr.Add(t, *s.gyr_radps, args.from_s, args.to_s);
+  if (s.mag && Wanted(args, "mag")) out->noise.mag.Add(t, *s.mag, args.from_s, args.to_s);
 }
 
 class Collector : public daemon::ReplayTarget, public drivers::DecoderSink {
@@ -317,39 +316,6 @@ int ReadRaw(const NoiseInputArgs& args, NoiseInput* out) {
 }
 
 }  // namespace
-
-void TriadStream::Add(double t_s, const Eigen::Vector3d& v, double from_s, double to_s) {
-  if (!started_) t_first_ = t_s, started_ = true;
-  const double t = t_s - t_first_;
-  if (!(t >= from_s && t <= to_s) || !v.allFinite()) return;
-  if (samples() == 0) {
-    t_kept_ = t_s;
-  } else if (first_intervals_.size() < kPeriodIntervals) {
-    first_intervals_.push_back(t_s - t_last_);
-  } else if (t_s - t_last_ > 1.5 * period_s()) {
-    ++late_gaps_;
-  }
-  t_last_ = t_s;
-  allan_.Add(v.data());
-}
-
-double TriadStream::period_s() const {
-  if (period_s_ > 0) return period_s_;
-  if (first_intervals_.empty()) return 0.0;
-  std::vector<double> sorted = first_intervals_;
-  std::nth_element(sorted.begin(), sorted.begin() + static_cast<long>(sorted.size() / 2),
-                   sorted.end());
-  const double median = sorted[sorted.size() / 2];
-  if (first_intervals_.size() >= kPeriodIntervals) period_s_ = median;
-  return median;
-}
-
-std::int64_t TriadStream::gaps() const {
-  const double period = period_s();
-  std::int64_t gaps = late_gaps_;
-  for (double dt : first_intervals_) gaps += dt > 1.5 * period;
-  return gaps;
-}
 
 int ReadNoiseInput(const NoiseInputArgs& args, NoiseInput* out) {
   const auto start = std::chrono::steady_clock::now();

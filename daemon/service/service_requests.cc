@@ -137,6 +137,22 @@ void Service::OnRequest(const std::shared_ptr<ClientSession>& client,
     HandlePublish(client, request, id);
   } else if (cmd == "device_write") {
     HandleDeviceWrite(client, request, id);
+  } else if (cmd == "noise") {
+    std::string device, action;
+    if (!protocol::ParseNoiseRequest(request, &device, &action, &why)) {
+      error(why);
+      return;
+    }
+    if (device.empty() && !options_.devices.empty()) device = options_.devices.front().name;
+    nlohmann::json answer = station_->RestNoiseRequest(device, action);
+    if (answer.value("class", "") == "NOISE" && action != "status") {
+      spdlog::info("{}", nlohmann::json{{"class", "NOISE"},
+                                        {"device", device},
+                                        {"state", answer.value("state", "")},
+                                        {"file", answer.value("file", "")}}
+                             .dump());
+    }
+    reply(answer);
   } else if (cmd == "chamber") {
     std::optional<double> setpoint_c;
     if (!protocol::ParseChamberRequest(request, &setpoint_c, &why)) {

@@ -259,6 +259,10 @@ void Station::OnSample(int device, const Sample& sample) {
   DeviceState& d = *devices_[static_cast<std::size_t>(device)];
   d.sequencer->Push(sample);
   d.calibrations->OnSample(d, sample, *this);
+  if (static_cast<std::size_t>(device) < rest_noise_.size() &&
+      rest_noise_[static_cast<std::size_t>(device)]) {
+    AddRestNoise(device, sample);
+  }
 }
 
 void Station::JournalMotion(DeviceState& d, std::vector<MotionValue> values) {
@@ -333,6 +337,7 @@ bool Station::OnAnnounce(const Announcement& a, const std::vector<int>& devices,
   for (std::size_t i = 0; i < devices_.size(); ++i) {
     if (AnnouncedTo(devices, static_cast<int>(i))) {
       ok = devices_[i]->sequencer->Announce(a, error) && ok;
+      if (i < rest_noise_.size() && rest_noise_[i]) NoteRestNoiseMove(i);
     }
   }
   return ok;

@@ -181,6 +181,12 @@ class Station : public ReplayTarget, private CalibrationHost {
   //  "rank","gate":{"pass","reasons"},"active_version",...}}}}}
   nlohmann::json Result() const;
 
+  // A rest's noise on a device, live ({"cmd":"noise"}; docs/NOISE.md): "start" begins (or
+  // begins again) summing its samples' Allan and Hadamard sums; "status" answers the analysis so
+  // far; "stop" answers it, writes it to the state directory's rest_noise/DEVICE.STAMP.json and
+  // ends the measurement. A NOISE reply, or an ERROR. station_noise.cc.
+  nlohmann::json RestNoiseRequest(const std::string& device, const std::string& action);
+
   // What the live dialogue learned about a device (identity, firmware, device-side stored
   // calibration): recorded in the provenance of every calibration it gets.
   void SetDeviceIdentity(int device, nlohmann::json identity);
@@ -295,6 +301,10 @@ class Station : public ReplayTarget, private CalibrationHost {
   SensorClass sensor_;
   EventSink sink_;
   std::vector<std::unique_ptr<DeviceState>> devices_;
+  struct RestNoiseRun;  // station_noise.cc; per device, null when none is measured
+  std::vector<std::shared_ptr<RestNoiseRun>> rest_noise_;
+  void AddRestNoise(int device, const Sample& sample);
+  void NoteRestNoiseMove(std::size_t device);
   std::shared_ptr<class PoseJournal> journal_;  // shared with queued appends
   bool journal_wanted_ = false;  // the session has a state directory: keep trying to open it
   std::uint64_t writes_ok_ = 0, writes_failed_ = 0;

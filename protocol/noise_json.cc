@@ -1,0 +1,55 @@
+#include "protocol/noise_json.h"
+
+#include <cmath>
+
+namespace turncal {
+
+namespace {
+
+nlohmann::json Interval(const VarianceInterval& v) {
+  return nlohmann::json::array({v.low, v.high});
+}
+
+}  // namespace
+
+nlohmann::json RestNoiseAxesJson(const std::vector<RestNoiseAxis>& results) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& r : results) {
+    nlohmann::json points = nlohmann::json::array();
+    for (const auto& p : r.points) {
+      nlohmann::json j = {{"tau_s", p.tau_s},
+                          {"m", p.m},
+                          {"stride", p.stride},
+                          {"adev", p.adev},
+                          {"edf", p.edf},
+                          {"alpha", p.alpha},
+                          {"ci68", Interval(p.ci68)},
+                          {"ci95", Interval(p.ci95)}};
+      if (std::isfinite(p.hdev)) {
+        j["hdev"] = p.hdev;
+        j["hdev_edf"] = p.hedf;
+        j["hdev_ci68"] = Interval(p.hci68);
+        j["hdev_ci95"] = Interval(p.hci95);
+      }
+      points.push_back(std::move(j));
+    }
+    out.push_back({{"triad", r.triad},
+                   {"axis", std::string(1, "xyz"[r.axis])},
+                   {"unit", RestNoiseUnit(r.triad)},
+                   {"samples", r.samples},
+                   {"rate_hz", r.rate_hz},
+                   {"gaps", r.gaps},
+                   {"white_density", r.fit.white_density},
+                   {"gauss_markov_sigma", r.fit.gm_sigma},
+                   {"gauss_markov_tau_s", r.fit.gm_tau_s},
+                   {"random_walk", r.fit.random_walk},
+                   {"bias_instability", r.fit.bias_instability},
+                   {"bias_instability_tau_s", r.fit.bias_instability_tau_s},
+                   {"longest_tau_s", r.fit.longest_tau_s},
+                   {"rms_log_error", r.fit.rms_log_error},
+                   {"allan", points}});
+  }
+  return out;
+}
+
+}  // namespace turncal
