@@ -29,6 +29,7 @@ import sys
 import time
 
 from live_session import check, run_in_temp_dir, wait_for
+import live_session
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
 SPEED = 10
@@ -62,13 +63,7 @@ protocol = "mip"
 port = "{d}/device"
 configure = false
 """)
-    socat = subprocess.Popen(["socat", f"pty,raw,echo=0,link={d}/device",
-                              f"pty,raw,echo=0,link={d}/sim"])
-    check(wait_for(f"{d}/device", 10) and wait_for(f"{d}/sim", 10), "socat's pty pair is up")
-    daemon = subprocess.Popen(
-        [TURNCALD, "--config", f"{d}/turncald.toml", "--socket", f"{d}/t.sock", "--state-dir",
-         f"{d}/state"], stdout=open(f"{d}/daemon.log", "w"), stderr=subprocess.STDOUT)
-    check(wait_for(f"{d}/t.sock", 30), "turncald's socket is up")
+    socat, daemon = live_session.start_on_pty_pair(TURNCALD, d)
     watch = subprocess.Popen([TURNCAL, "watch", "--json", "--corrected", "--raw", "--uncertainty",
                               "--socket", f"{d}/t.sock"], stdout=open(f"{d}/watch.jsonl", "w"))
     # The live guidance as an operator's log (standard output not a terminal): a line per tenth of

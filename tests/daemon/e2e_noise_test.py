@@ -44,13 +44,7 @@ protocol = "mip"
 port = "{d}/device"
 configure = false
 """)
-    socat = subprocess.Popen(["socat", f"pty,raw,echo=0,link={d}/device",
-                              f"pty,raw,echo=0,link={d}/sim"])
-    check(wait_for(f"{d}/device", 10) and wait_for(f"{d}/sim", 10), "socat's pty pair is up")
-    daemon = subprocess.Popen(
-        [TURNCALD, "--config", f"{d}/turncald.toml", "--socket", f"{d}/t.sock", "--state-dir",
-         f"{d}/state"], stdout=open(f"{d}/daemon.log", "w"), stderr=subprocess.STDOUT)
-    check(wait_for(f"{d}/t.sock", 30), "turncald's socket is up")
+    socat, daemon = live_session.start_on_pty_pair(TURNCALD, d)
     sock = ["--socket", f"{d}/t.sock"]
     r = subprocess.run([TURNCAL, "noise", "--live", "nosuch", "--seconds", "1"] + sock,
                        capture_output=True, text=True, timeout=30)

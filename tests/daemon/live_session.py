@@ -84,6 +84,20 @@ def run_in_temp_dir(main, prefix):
     sys.exit(1 if failures else 0)
 
 
+def start_on_pty_pair(turncald, d):
+    """A socat pty pair (the daemon's end DIR/device, the simulator's DIR/sim) and turncald on
+    DIR/turncald.toml (socket DIR/t.sock, state DIR/state, log DIR/daemon.log), each checked up.
+    Returns (socat, turncald)."""
+    socat = subprocess.Popen(["socat", f"pty,raw,echo=0,link={d}/device",
+                              f"pty,raw,echo=0,link={d}/sim"])
+    check(wait_for(f"{d}/device", 10) and wait_for(f"{d}/sim", 10), "socat's pty pair is up")
+    daemon = subprocess.Popen(
+        [turncald, "--config", f"{d}/turncald.toml", "--socket", f"{d}/t.sock", "--state-dir",
+         f"{d}/state"], stdout=open(f"{d}/daemon.log", "w"), stderr=subprocess.STDOUT)
+    check(wait_for(f"{d}/t.sock", 30), "turncald's socket is up")
+    return socat, daemon
+
+
 def start_daemon_on_mip(turncald, d, models):
     """turncald with [station] models = MODELS on one MIP device, imu on the pty DIR/mip; its
     socket DIR/t.sock, state DIR/state, configuration DIR/turncald.toml, log DIR/daemon.log."""
