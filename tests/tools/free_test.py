@@ -234,8 +234,16 @@ else:
         check(r.returncode == 2 and "--rate" in r.stderr,
               f"turncald: a raw stream without time asks for --rate: {r.stderr.strip()[-200:]}")
         out = os.path.join(d, "compass.json")
+        # Instrumented, its refits in motion were 54 % of this test (649 s of the sanitizer
+        # suite, 2026-11-29): 100 points a fit there, as for the tumble above.
+        extra, points = [], (400, 736)
+        if SANITIZED:
+            config = os.path.join(d, "turncald.toml")
+            with open(config, "w") as f:
+                f.write("[free]\nmax_motion_points = 100\n")
+            extra, points = ["--config", config], (50, 100)
         r = turncald(["--replay", compass, "--protocol", "mip", "--rate", "50", "--once",
-                      "--pose-source", "free", "--result-out", out])
+                      "--pose-source", "free", "--result-out", out] + extra)
         check(r.returncode == 0, f"turncald raw MIP magnetometer: exit {r.returncode}")
         if os.path.exists(out):
             res = json.load(open(out))
@@ -245,10 +253,12 @@ else:
             # The station takes the samples in motion too ([free] motion): the same sphere as
             # `turncal free`, refused (the class's noise does not explain its misfit).
             motion = res["devices"]["compass"]["free"]["motion"]
-            check(400 <= motion.get("points", 0) <= 736,
+            check(points[0] <= motion.get("points", 0) <= points[1],
                   f"turncald raw MIP magnetometer: the points in motion: {motion.get('summary')}")
+            # (Capped at 100 points, the coverage is of those: 6.8 %.)
+            coverage = r"coverage [0-9.]+ %" if SANITIZED else r"coverage 12\.[0-9] %"
             check(m.get("model") == "magsphere" and "cannot carry an ellipsoid" in m.get("note", "")
-                  and re.search(r"coverage 12\.[0-9] %", m.get("note", "")) and not m["gate"]["pass"],
+                  and re.search(coverage, m.get("note", "")) and not m["gate"]["pass"],
                   f"turncald raw MIP magnetometer: a sphere, refused with the reason: "
                   f"{m.get('note', '')[:160]} {m.get('gate')}")
 
