@@ -25,7 +25,7 @@
 namespace turncal {
 
 struct StreamingAllanOptions {
-  int per_decade = 10;       // cluster sizes per decade (log spaced, from one sample)
+  int per_decade = 10;  // cluster sizes per decade (log spaced, from one sample)
   // R above: a power of two, at least 16. At 32 the starting points of a long cluster are at
   // most m / 32 apart, which costs the estimator under 0.1 % of its degrees of freedom
   // (OverlappingEdf with and without the stride) and halves the time of R = 256.
