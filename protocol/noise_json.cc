@@ -10,6 +10,31 @@ nlohmann::json Interval(const VarianceInterval& v) {
   return nlohmann::json::array({v.low, v.high});
 }
 
+// The IEEE 952 terms: each with its value, sigma, 95 % interval and whether it is resolved, in SI
+// and in the datasheet's unit.
+nlohmann::json IeeeJson(const std::string& triad, const IeeeNoiseFit& fit) {
+  if (!fit.ok) return {{"ok", false}, {"error", fit.error}};
+  nlohmann::json j = {
+      {"ok", true},           {"chi2", fit.chi2},           {"dof", fit.dof},
+      {"points", fit.points}, {"tau_min_s", fit.tau_min_s}, {"tau_max_s", fit.tau_max_s}};
+  for (int k = 0; k < kIeeeTerms; ++k) {
+    const IeeeTermEstimate& e = fit.terms[static_cast<std::size_t>(k)];
+    const IeeeUnit u = IeeeTermUnit(triad, k);
+    const double f = u.to_datasheet;
+    j[IeeeTermName(k)] = {{"value", e.value},
+                          {"sigma", e.sigma},
+                          {"ci95", {e.low95, e.high95}},
+                          {"resolved", e.resolved},
+                          {"unit", u.si},
+                          {"datasheet",
+                           {{"value", e.value * f},
+                            {"sigma", e.sigma * f},
+                            {"ci95", {e.low95 * f, e.high95 * f}},
+                            {"unit", u.datasheet}}}};
+  }
+  return j;
+}
+
 }  // namespace
 
 nlohmann::json RestNoiseAxesJson(const std::vector<RestNoiseAxis>& results) {
@@ -47,6 +72,7 @@ nlohmann::json RestNoiseAxesJson(const std::vector<RestNoiseAxis>& results) {
                    {"bias_instability_tau_s", r.fit.bias_instability_tau_s},
                    {"longest_tau_s", r.fit.longest_tau_s},
                    {"rms_log_error", r.fit.rms_log_error},
+                   {"ieee", IeeeJson(r.triad, r.ieee)},
                    {"allan", points}});
   }
   return out;

@@ -22,6 +22,7 @@
 #include "protocol/noise_json.h"
 #include "tools/client_connection.h"
 #include "tools/help_text.h"
+#include "tools/noise_exports.h"
 #include "tools/noise_input.h"
 
 namespace turncal::tools {
@@ -36,7 +37,34 @@ struct NoiseArgs {
   std::string live, socket = DefaultSocketPath();
   double seconds = 60.0;
   bool stop_only = false;
+  // Exports (tools/noise_exports.h).
+  std::string kalibr, kalibr_topic = "/imu0", station;
 };
+
+// Writes the Kalibr and [station] exports asked for; false (after saying why) when one cannot be.
+bool WriteExports(const NoiseArgs& args, const nlohmann::json& axes, const std::string& source) {
+  std::string error;
+  if (!args.kalibr.empty()) {
+    const std::string yaml = KalibrImuYaml(axes, source, args.kalibr_topic, &error);
+    if (yaml.empty() || !daemon::WriteFileAtomically(args.kalibr, yaml, &error)) {
+      fmt::print(stderr, "turncal noise: --kalibr: {}\n", error);
+      return false;
+    }
+  }
+  if (!args.station.empty()) {
+    const std::string toml = StationNoiseToml(axes, source, &error);
+    if (toml.empty() || !daemon::WriteFileAtomically(args.station, toml, &error)) {
+      fmt::print(stderr, "turncal noise: --station: {}\n", error);
+      return false;
+    }
+  }
+  return true;
+}
+
+void PrintExportsWritten(const NoiseArgs& args) {
+  if (!args.kalibr.empty()) fmt::print("Kalibr imu.yaml: {}\n", args.kalibr);
+  if (!args.station.empty()) fmt::print("[station] noise prior: {}\n", args.station);
+}
 
 // The plot: log-log Allan deviation per triad, the points and the fitted model's curve.
 std::string Svg(const std::vector<RestNoiseAxis>& results) {
@@ -109,9 +137,22 @@ std::string Svg(const std::vector<RestNoiseAxis>& results) {
         o += fmt::format("<path d=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"1.2\"/>\n",
                          path, c);
       }
-      o +=
-          fmt::format("<text x=\"{}\" y=\"{}\" fill=\"{}\">{}: dots measured, line fitted</text>\n",
-                      X(tmax) - 150, T + 14 + 13 * r.axis, c, "xyz"[r.axis]);
+      if (r.ieee.ok) {  // IEEE 952's five terms, dashed
+        std::string path;
+        for (int i = 0; i <= 60; ++i) {
+          const double t =
+              std::pow(10, std::log10(tmin) + (std::log10(tmax) - std::log10(tmin)) * i / 60);
+          path += fmt::format("{}{:.1f},{:.1f}", i ? " L" : "M", X(t), Y(r.ieee.Adev(t)));
+        }
+        o += fmt::format(
+            "<path d=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"1\" "
+            "stroke-dasharray=\"4 3\"/>\n",
+            path, c);
+      }
+      o += fmt::format(
+          "<text x=\"{}\" y=\"{}\" fill=\"{}\">{}: dots data, line turncald, dashes "
+          "IEEE</text>\n",
+          X(tmax) - 215, T + 14 + 13 * r.axis, c, "xyz"[r.axis]);
     }
   }
   return o + "</svg>\n";
@@ -123,7 +164,12 @@ constexpr Manual kNoiseManual = {
     "and 95 % intervals (from the equivalent degrees of freedom of the noise type each cluster "
     "time shows), the overlapping Hadamard deviation (which a rate ramp or a drift does not "
     "bias), and the noise model fitted to it: white-noise density N, a Gauss-Markov bias "
-    "instability (sigma, tau), a random walk, and the IEEE flat-bottom figure. The input is "
+    "instability (sigma, tau), a random walk, and the IEEE flat-bottom figure; and IEEE Std "
+    "952-2020's five terms -- quantisation Q, random walk N, bias instability B, rate random "
+    "walk K, rate ramp R -- each with its sigma and 95 % interval, in SI and the datasheet's "
+    "units (deg/sqrt(h), deg/h, ug/sqrt(Hz) ...), by a generalised least squares that allows "
+    "for the Allan variances' correlation. --kalibr writes Kalibr's imu.yaml, --station the "
+    "[station] noise prior. The input is "
     "read as a stream: hours of recording take the memory of a minute's (docs/NOISE.md); a "
     "progress line shows on a terminal. Record the sensor at rest for several times the "
     "longest correlation time you care about; use --from/--to to keep only the rest. The "
@@ -135,8 +181,10 @@ constexpr Manual kNoiseManual = {
     "turncal noise rest10h.tcap --triad acc,gyr      # leave the magnetometer out\n"
     "turncal noise imu.npy --triad acc,gyr           # columns t ax ay az gx gy gz\n"
     "turncal noise xsens_acc.mat --triad acc --to 45   # imu_tk's text columns (raw counts)\n"
-    "turncal noise --live imu1 --seconds 3600          # turncald measures imu1's rest",
-    "0 done; 1 no triad with enough samples, or the plot cannot be written; 2 the input "
+    "turncal noise --live imu1 --seconds 3600          # turncald measures imu1's rest\n"
+    "turncal noise rest10h.tcap --kalibr imu.yaml --station prior.toml",
+    "0 done; 1 no triad with enough samples, or the plot or an export cannot be written; 2 the "
+    "input "
     "cannot be read or a command-line mistake",
     "docs/NOISE.md, docs/ACCURACY.md (the noise model), SENSORS.md"};
 
@@ -169,6 +217,8 @@ void PrintNoiseText(const NoiseArgs& args, const NoiseInput& input,
                r.fit.gm_tau_s, r.fit.random_walk, r.fit.bias_instability,
                r.fit.bias_instability_tau_s, r.fit.rms_log_error);
   }
+  fmt::print("\nIEEE 952 terms, value +- 1 sigma (< the 95 % upper bound where not resolved):\n{}",
+             IeeeTermsText(RestNoiseAxesJson(results)));
   // The Allan deviation at the decades, with its 68 % interval.
   fmt::print("\nAllan deviation (68 % interval) at each decade of cluster time:\n");
   for (const auto& r : results) {
@@ -184,12 +234,15 @@ void PrintNoiseText(const NoiseArgs& args, const NoiseInput& input,
   }
   fmt::print(
       "\nUnits: N in unit/sqrt(Hz) (a mean over T s has variance N^2/(2T)); GM sigma in the unit; "
-      "random walk in unit/sqrt(s); B = min Allan deviation / 0.664 (IEEE). acc m/s^2, gyr "
-      "rad/s, mag Gauss. A correlation time or random walk beyond a few times the longest "
+      "random walk in unit/sqrt(s); B = min Allan deviation / 0.664 (IEEE's flat-bottom "
+      "reading; the fitted IEEE B is above). acc m/s^2, gyr rad/s, mag Gauss. The IEEE terms' N "
+      "is the two-sided density (white N / sqrt(2)). A correlation time or random walk beyond a "
+      "few times the longest "
       "cluster time ({:.3g} s) is an extrapolation: record a longer rest. --json gives every "
       "point with its 68 % and 95 % intervals and the Hadamard deviation.\n",
       first.fit.longest_tau_s);
   if (!args.svg.empty()) fmt::print("plot: {}\n", args.svg);
+  PrintExportsWritten(args);
 }
 
 // A live rest: turncald sums the device's samples for --seconds (or, with --stop, ends a
@@ -240,6 +293,9 @@ int RunLive(const NoiseArgs& args) {
     fmt::print(stderr, "turncal noise: {}\n", error);
     return 1;
   }
+  if (!(*result)["axes"].empty() && !WriteExports(args, (*result)["axes"], "--live " + args.live)) {
+    return 1;
+  }
   if (args.json) {
     fmt::print("{}\n", result->dump());
     return (*result)["axes"].empty() ? 1 : 0;
@@ -263,6 +319,9 @@ int RunLive(const NoiseArgs& args) {
     fmt::print(stderr, "turncal noise: {} sent too few samples to analyse\n", args.live);
     return 1;
   }
+  fmt::print("\nIEEE 952 terms, value +- 1 sigma (< the 95 % upper bound where not resolved):\n{}",
+             IeeeTermsText((*result)["axes"]));
+  PrintExportsWritten(args);
   return 0;
 }
 
@@ -285,6 +344,7 @@ int Run(const NoiseArgs& args) {
     fmt::print(stderr, "turncal noise: {}\n", error);
     return 1;
   }
+  if (!WriteExports(args, RestNoiseAxesJson(results), args.input.file)) return 1;
   if (args.json) {
     PrintNoiseJson(args, input, results);
   } else {
@@ -337,7 +397,17 @@ void AddNoiseCommand(CLI::App* app) {
                   "seconds from the first sample to stop at (the rest only)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--svg", args->svg, "write the log-log plot with the fitted lines here");
-  cmd->add_flag("--json", args->json, "JSON: the fit and every Allan point per axis");
+  cmd->add_flag("--json", args->json,
+                "JSON: the fits (turncald's model and IEEE 952's terms with sigma) and every Allan "
+                "point per axis");
+  cmd->add_option("--kalibr", args->kalibr,
+                  "write Kalibr's imu.yaml here: noise densities (IEEE N) and random walks (IEEE "
+                  "K), the units beside each value");
+  cmd->add_option("--kalibr-topic", args->kalibr_topic, "with --kalibr: the rostopic it names")
+      ->capture_default_str();
+  cmd->add_option("--station", args->station,
+                  "write turncald.toml's [station] noise prior here (acc_noise_density, "
+                  "acc_bias_instability, bias_tau_s, acc_random_walk, mag_ ...)");
   cmd->callback([args] { throw CLI::RuntimeError(Run(*args)); });
 }
 

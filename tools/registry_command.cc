@@ -33,7 +33,9 @@ constexpr Manual kRegistryManual = {
     "into the device); stations shows each station's last contact; yield lists each batch's units "
     "and the share "
     "that passed every gate (--by station: per station); batch ID lists a batch's units slot "
-    "by slot (docs/BATCH.md); certificate SERIAL "
+    "by slot (docs/BATCH.md); drift SERIAL gives each parameter's turn-on-to-turn-on "
+    "repeatability, trend per month with its sigma and the recalibration date from the unit's "
+    "history (docs/REGISTRY.md \"Drift\"); certificate SERIAL "
     "--model M writes the calibration certificate of its latest passing (or --version N) "
     "calibration (docs/CERTIFICATES.md) and records it with its hash; verify FILE checks that "
     "a "
@@ -47,10 +49,11 @@ constexpr Manual kRegistryManual = {
     "turncal registry stations --config /etc/turncal/turncald.toml\n"
     "turncal registry yield --by station\n"
     "turncal registry batch cube4-20261129T045012Z --json\n"
+    "turncal registry drift 6251.12345 --model accel13 --tolerance ax=0.002\n"
     "turncal registry certificate 6251.12345 --model mag13 -o cert.html --pdf cert.pdf\n"
     "turncal registry verify cert.html",
     "0 done (verify: unchanged and issued by the registry); 1 nothing found (history, "
-    "latest, certificate), or verify: edited or not issued by the registry; 2 the registry "
+    "latest, drift, certificate), or verify: edited or not issued by the registry; 2 the registry "
     "cannot be reached, refused the query, or a command-line mistake",
     "docs/REGISTRY.md, README (A registry for several stations)"};
 
@@ -364,7 +367,7 @@ void AddRegistryCommand(CLI::App* app) {
   CLI::App* cmd =
       app->add_subcommand("registry",
                           "the calibration registry across stations (PostgreSQL): history, latest, "
-                          "export, stations, yield, batch, certificate, verify, migrate");
+                          "export, stations, yield, batch, drift, certificate, verify, migrate");
   SetManual(cmd, kRegistryManual);
   cmd->require_subcommand(1);
   auto run = [](int rc) { throw CLI::RuntimeError(rc); };
@@ -434,6 +437,7 @@ void AddRegistryCommand(CLI::App* app) {
   m->callback([migrate, run] { run(RunMigrate(*migrate)); });
 
   AddRegistryBatchCommands(cmd);
+  AddRegistryDriftCommand(cmd);
 }
 
 }  // namespace turncal::tools

@@ -41,5 +41,7 @@ int Emit(const RegistryArgs& a, const std::string& text);
 
 // `turncal registry yield` and `turncal registry batch ID` (tools/registry_batches.cc).
 void AddRegistryBatchCommands(CLI::App* registry);
+// `turncal registry drift SERIAL` (tools/registry_drift.cc).
+void AddRegistryDriftCommand(CLI::App* registry);
 
 }  // namespace turncal::tools

@@ -11,6 +11,7 @@
 #include "tools/free_montecarlo_command.h"
 #include "tools/models_command.h"
 #include "tools/noise_command.h"
+#include "tools/noise_montecarlo_command.h"
 #include "tools/observability_command.h"
 #include "tools/plan_compare_command.h"
 #include "tools/plan_thermal_command.h"
@@ -30,6 +31,7 @@ int main(int argc, char** argv) {
   turncal::tools::AddModelsCommand(&app);
   turncal::tools::AddSimFitCommands(&app);
   turncal::tools::AddNoiseCommand(&app);
+  turncal::tools::AddNoiseMonteCarloCommand(&app);
   turncal::tools::AddFreeCommand(&app);
   turncal::tools::AddFreeMonteCarloCommand(&app);
   turncal::tools::AddSimCommand(&app);

@@ -69,6 +69,11 @@ std::vector<RestNoiseAxis> AnalyseRestNoise(const RestNoise& noise) {
         }
       }
       r.fit = FitNoiseModel(r.fitted);
+      std::vector<IeeeAvarPoint> avars;
+      for (const StreamingAllanPoint& p : points) {
+        avars.push_back({p.m, p.avar[static_cast<std::size_t>(axis)]});
+      }
+      r.ieee = FitIeeeNoise(avars, dt, n);
       for (std::size_t i = 0; i < r.points.size(); ++i) {
         RestNoisePoint& o = r.points[i];
         o.alpha = NoiseTypeOfSlope(AvarSlope(r.fit, r.points, i));

@@ -13,6 +13,7 @@
 
 #include "core/analysis/allan.h"
 #include "core/analysis/allan_edf.h"
+#include "core/analysis/ieee_noise.h"
 #include "core/analysis/streaming_allan.h"
 
 namespace turncal {
@@ -64,7 +65,8 @@ struct RestNoiseAxis {
   std::vector<AllanPoint> fitted;      // the points fitted (up to a ninth of the recording)
   std::vector<RestNoisePoint> points;  // every one, with intervals
   std::int64_t gaps = 0;
-  NoiseFit fit;
+  NoiseFit fit;       // turncald's noise model (white, Gauss-Markov, random walk)
+  IeeeNoiseFit ieee;  // IEEE 952's Q, N, B, K, R with their sigma
   std::size_t samples = 0;
   double rate_hz = 0.0;
 };
