@@ -5,6 +5,7 @@
 
 #include "core/analysis/streaming_allan.h"
 #include "montecarlo/parallel_runs.h"
+#include "montecarlo/z_scores.h"
 
 namespace turncal::montecarlo {
 
@@ -23,7 +24,7 @@ std::array<NoiseTermSummary, kIeeeTerms> Summarise(const std::vector<NoiseRun>& 
                                                    const std::array<double, kIeeeTerms>& truth,
                                                    IeeeNoiseFit NoiseRun::*which) {
   std::array<NoiseTermSummary, kIeeeTerms> terms;
-  std::array<std::vector<double>, kIeeeTerms> z;
+  std::vector<ZScoreSummary> z(kIeeeTerms, ZScoreSummary(1));
   for (const NoiseRun& r : runs) {
     const IeeeNoiseFit& fit = r.*which;
     if (!fit.ok) continue;
@@ -36,19 +37,18 @@ std::array<NoiseTermSummary, kIeeeTerms> Summarise(const std::vector<NoiseRun>& 
       t.resolved += e.resolved;
       t.mean_value += e.value;
       t.mean_sigma += e.sigma;
-      if (e.sigma > 0) z[static_cast<size_t>(k)].push_back((e.value - truth_k) / e.sigma);
+      // A term fitted at zero has no sigma and no z.
+      if (e.sigma > 0)
+        z[static_cast<size_t>(k)].Add(Eigen::VectorXd::Constant(1, (e.value - truth_k) / e.sigma));
     }
   }
   for (int k = 0; k < kIeeeTerms; ++k) {
     NoiseTermSummary& t = terms[static_cast<size_t>(k)];
     if (t.fitted > 0) t.mean_value /= t.fitted, t.mean_sigma /= t.fitted;
-    const std::vector<double>& zk = z[static_cast<size_t>(k)];
-    if (zk.empty()) continue;
-    double sum = 0, sq = 0;
-    for (double v : zk) sum += v;
-    t.mean_z = sum / static_cast<double>(zk.size());
-    for (double v : zk) sq += (v - t.mean_z) * (v - t.mean_z);
-    t.std_z = zk.size() > 1 ? std::sqrt(sq / static_cast<double>(zk.size() - 1)) : 0.0;
+    const ZScoreSummary& zk = z[static_cast<size_t>(k)];
+    if (zk.runs() == 0) continue;
+    t.mean_z = zk.Mean()[0];
+    t.std_z = zk.Std()[0];
   }
   return terms;
 }

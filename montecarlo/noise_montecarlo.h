@@ -34,10 +34,11 @@ struct NoiseRun {
 };
 
 struct NoiseTermSummary {
-  int fitted = 0;                    // runs with a fit
-  int covered = 0;                   // truth within [low95, high95]
-  int resolved = 0;                  // runs where the term is 2 sigma from zero
-  double mean_z = 0.0, std_z = 0.0;  // over the runs where the term is non-zero
+  int fitted = 0;    // runs with a fit
+  int covered = 0;   // truth within [low95, high95]
+  int resolved = 0;  // runs where the term is 2 sigma from zero
+  // Over the runs where the term is non-zero (ZScoreSummary: the spread is the population one).
+  double mean_z = 0.0, std_z = 0.0;
   double mean_value = 0.0, mean_sigma = 0.0;
 };
 

@@ -5,7 +5,9 @@
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
+#include <unordered_map>
 
 namespace turncal {
 
@@ -125,6 +127,37 @@ PairSums SumPair(std::int64_t m1, std::int64_t m2, double dt_s, std::int64_t n,
     for (int l = 0; l < kRandomTerms; ++l) s.I[k][l] = static_cast<double>(2 * I[k][l] / norm);
   }
   return s;
+}
+
+// The pair sums depend only on (m1, m2, dt, n), so the axes of a triad (and the repeated fits of
+// one recording) share them: a memo per thread, cleared when it grows past a few thousand pairs
+// (each about 200 bytes).
+struct PairKey {
+  std::int64_t m1, m2, n;
+  std::uint64_t dt_bits;
+  bool operator==(const PairKey& o) const {
+    return m1 == o.m1 && m2 == o.m2 && n == o.n && dt_bits == o.dt_bits;
+  }
+};
+struct PairKeyHash {
+  std::size_t operator()(const PairKey& k) const {
+    std::uint64_t h = 1469598103934665603ULL;
+    for (std::uint64_t v : {static_cast<std::uint64_t>(k.m1), static_cast<std::uint64_t>(k.m2),
+                            static_cast<std::uint64_t>(k.n), k.dt_bits})
+      h = (h ^ v) * 1099511628211ULL;
+    return static_cast<std::size_t>(h);
+  }
+};
+
+const PairSums& SharedPairSums(std::int64_t m1, std::int64_t m2, double dt_s, std::int64_t n,
+                               const std::array<double, kRandomTerms>& kappa) {
+  thread_local std::unordered_map<PairKey, PairSums, PairKeyHash> memo;
+  std::uint64_t dt_bits = 0;
+  std::memcpy(&dt_bits, &dt_s, sizeof dt_bits);
+  const PairKey key{m1, m2, n, dt_bits};
+  if (auto it = memo.find(key); it != memo.end()) return it->second;
+  if (memo.size() >= 8192) memo.clear();
+  return memo.emplace(key, SumPair(m1, m2, dt_s, n, kappa)).first->second;
 }
 
 double Covariance(const PairSums& s, const std::array<double, kIeeeTerms>& theta) {
@@ -254,8 +287,8 @@ IeeeNoiseFit FitIeeeNoise(const std::vector<IeeeAvarPoint>& points, double dt_s,
   std::vector<PairSums> sums(static_cast<std::size_t>(rows * rows));
   for (int i = 0; i < rows; ++i)
     for (int j = 0; j <= i; ++j) {
-      sums[static_cast<size_t>(i * rows + j)] =
-          SumPair(use[static_cast<size_t>(i)].m, use[static_cast<size_t>(j)].m, dt_s, n, kappa);
+      sums[static_cast<size_t>(i * rows + j)] = SharedPairSums(
+          use[static_cast<size_t>(i)].m, use[static_cast<size_t>(j)].m, dt_s, n, kappa);
       sums[static_cast<size_t>(j * rows + i)] = sums[static_cast<size_t>(i * rows + j)];
     }
   Eigen::MatrixXd A(rows, kIeeeTerms);
