@@ -35,6 +35,28 @@ nlohmann::json IeeeJson(const std::string& triad, const IeeeNoiseFit& fit) {
   return j;
 }
 
+// The warm-up transient from the first sample (core/analysis/warm_up.h).
+nlohmann::json WarmUpJson(const WarmUpFit& w) {
+  if (!w.ok) return {{"ok", false}, {"error", w.error}};
+  nlohmann::json j = {{"ok", true},
+                      {"resolved", w.resolved},
+                      {"settled", w.settled},
+                      {"settled_sigma", w.settled_sigma},
+                      {"amplitude", w.amplitude},
+                      {"amplitude_sigma", w.amplitude_sigma},
+                      {"tau_s", w.tau_s},
+                      {"tau_sigma_s", w.tau_sigma},
+                      {"threshold", w.threshold},
+                      {"bins", w.bins},
+                      {"span_s", w.span_s},
+                      {"modelled", w.modelled}};
+  if (w.resolved) {
+    j["time_s"] = w.time_s;
+    j["time_sigma_s"] = w.time_sigma;
+  }
+  return j;
+}
+
 }  // namespace
 
 nlohmann::json RestNoiseAxesJson(const std::vector<RestNoiseAxis>& results) {
@@ -73,6 +95,7 @@ nlohmann::json RestNoiseAxesJson(const std::vector<RestNoiseAxis>& results) {
                    {"longest_tau_s", r.fit.longest_tau_s},
                    {"rms_log_error", r.fit.rms_log_error},
                    {"ieee", IeeeJson(r.triad, r.ieee)},
+                   {"warm_up", WarmUpJson(r.warm_up)},
                    {"allan", points}});
   }
   return out;

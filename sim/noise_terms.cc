@@ -6,16 +6,7 @@
 namespace turncal::sim {
 
 std::vector<FlickerPole> FlickerPoles(double b, double dt_s, double span_s) {
-  // Correlation times tau_i = dt r^i / 30, each of variance s^2: the sum's one-sided spectrum
-  // sum 4 s^2 tau_i / (1 + (2 pi f tau_i)^2) is s^2 / (f ln r) between the ends, which is
-  // IEEE 952's two-sided B^2 / (2 pi f) (one-sided: B^2 / (pi f)) for s^2 = B^2 ln r / pi.
-  std::vector<FlickerPole> poles;
-  if (!(b > 0) || !(dt_s > 0)) return poles;
-  const double ratio = std::pow(10.0, 1.0 / 3.0);
-  const double variance = b * b * std::log(ratio) / M_PI;
-  for (double tau = dt_s / 30.0; tau < 100.0 * span_s * ratio; tau *= ratio)
-    poles.push_back({tau, variance});
-  return poles;
+  return FlickerAsGaussMarkov(b, dt_s / 30.0, 100.0 * span_s);
 }
 
 NoiseTermsGenerator::NoiseTermsGenerator(const NoiseTerms& terms, double dt_s, double span_s,

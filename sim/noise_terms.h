@@ -13,6 +13,8 @@
 #include <random>
 #include <vector>
 
+#include "core/analysis/ieee_noise.h"
+
 namespace turncal::sim {
 
 struct NoiseTerms {
@@ -26,9 +28,8 @@ struct NoiseTerms {
 };
 
 // The flicker's Gauss-Markov processes: correlation time and stationary variance of each.
-struct FlickerPole {
-  double tau_s = 0.0, variance = 0.0;
-};
+// (core/analysis/ieee_noise.h's, from a thirtieth of the sample period to 100 spans).
+using FlickerPole = GaussMarkovPole;
 std::vector<FlickerPole> FlickerPoles(double b, double dt_s, double span_s);
 
 class NoiseTermsGenerator {

@@ -219,6 +219,8 @@ void PrintNoiseText(const NoiseArgs& args, const NoiseInput& input,
   }
   fmt::print("\nIEEE 952 terms, value +- 1 sigma (< the 95 % upper bound where not resolved):\n{}",
              IeeeTermsText(RestNoiseAxesJson(results)));
+  fmt::print("\nWarm-up from the first sample (bias = settled + amplitude e^(-t/tau)):\n{}",
+             WarmUpText(RestNoiseAxesJson(results)));
   // The Allan deviation at the decades, with its 68 % interval.
   fmt::print("\nAllan deviation (68 % interval) at each decade of cluster time:\n");
   for (const auto& r : results) {

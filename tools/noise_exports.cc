@@ -59,6 +59,30 @@ void GaussMarkovOf(const std::vector<const nlohmann::json*>& axes, double* sigma
 
 }  // namespace
 
+std::string WarmUpText(const nlohmann::json& axes) {
+  std::string o;
+  for (const auto& a : axes) {
+    const nlohmann::json& w = a.value("warm_up", nlohmann::json::object());
+    o += fmt::format("{:<5} {:<4} ", a.value("triad", ""), a.value("axis", ""));
+    if (!w.value("ok", false)) {
+      o += fmt::format("no fit: {}\n", w.value("error", "?"));
+    } else if (!w.value("resolved", false)) {
+      o += fmt::format(
+          "no transient from the first sample (amplitude {:.3g} +- {:.2g}): warm, "
+          "or the recording started after switch-on\n",
+          w.value("amplitude", 0.0), w.value("amplitude_sigma", 0.0));
+    } else {
+      o += fmt::format(
+          "{:.0f} +- {:.0f} s to within {:.3g} (the Allan floor); amplitude {:.3g} +- {:.2g}, "
+          "tau {:.0f} +- {:.0f} s\n",
+          w.value("time_s", 0.0), w.value("time_sigma_s", 0.0), w.value("threshold", 0.0),
+          w.value("amplitude", 0.0), w.value("amplitude_sigma", 0.0), w.value("tau_s", 0.0),
+          w.value("tau_sigma_s", 0.0));
+    }
+  }
+  return o;
+}
+
 std::string IeeeTermsText(const nlohmann::json& axes) {
   std::string o = fmt::format("{:<5} {:<4}", "triad", "axis");
   for (const char* t : kTerms) o += fmt::format(" {:>24}", t);

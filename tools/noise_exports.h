@@ -11,6 +11,8 @@ namespace turncal::tools {
 // The IEEE 952 terms of every axis in the datasheet's units, value +- sigma, or "< upper" for a
 // term the recording cannot tell from zero.
 std::string IeeeTermsText(const nlohmann::json& axes);
+// Each axis's warm-up transient (RestNoiseAxesJson's "warm_up"), one line each.
+std::string WarmUpText(const nlohmann::json& axes);
 
 // Kalibr's imu.yaml: noise densities (IEEE N) and random walks (IEEE K) of the accelerometer and
 // the gyroscope, the largest axis's, with the units and where each came from written beside

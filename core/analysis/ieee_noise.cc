@@ -255,6 +255,20 @@ double IeeeNoiseFit::Adev(double tau_s) const {
   return std::sqrt(v);
 }
 
+std::vector<GaussMarkovPole> FlickerAsGaussMarkov(double b, double shortest_tau_s,
+                                                  double longest_tau_s) {
+  // Correlation times tau_i = shortest r^i, each of variance s^2: the sum's one-sided spectrum
+  // sum 4 s^2 tau_i / (1 + (2 pi f tau_i)^2) is s^2 / (f ln r) between the ends, which is
+  // IEEE 952's two-sided B^2 / (2 pi f) (one-sided: B^2 / (pi f)) for s^2 = B^2 ln r / pi.
+  std::vector<GaussMarkovPole> poles;
+  if (!(b > 0) || !(shortest_tau_s > 0)) return poles;
+  const double ratio = std::pow(10.0, 1.0 / 3.0);
+  const double variance = b * b * std::log(ratio) / M_PI;
+  for (double tau = shortest_tau_s; tau < longest_tau_s * ratio; tau *= ratio)
+    poles.push_back({tau, variance});
+  return poles;
+}
+
 double AvarCovariance(std::int64_t m1, std::int64_t m2, double dt_s, std::int64_t n,
                       const std::array<double, kIeeeTerms>& theta) {
   return Covariance(SumPair(m1, m2, dt_s, n, Kappas(dt_s)), theta);

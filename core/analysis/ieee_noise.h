@@ -81,6 +81,16 @@ struct IeeeNoiseFit {
 IeeeNoiseFit FitIeeeNoise(const std::vector<IeeeAvarPoint>& points, double dt_s, std::int64_t n,
                           bool independent = false);
 
+// IEEE's flicker B as a sum of first-order Gauss-Markov processes, three a decade with correlation
+// times from `shortest_tau_s` to `longest_tau_s`, each of variance B^2 ln(10^(1/3)) / pi: their
+// one-sided spectrum is B^2 / (pi f) between the ends, the Allan variance flat at B^2 2 ln 2 / pi
+// within 3.5 % (the simulator's flicker, and the warm-up fit's model of the bias's wander).
+struct GaussMarkovPole {
+  double tau_s = 0.0, variance = 0.0;
+};
+std::vector<GaussMarkovPole> FlickerAsGaussMarkov(double b, double shortest_tau_s,
+                                                  double longest_tau_s);
+
 // The covariance of the overlapping Allan variances at cluster sizes m1 and m2 (samples) of n
 // samples dt_s apart, for the terms' squared coefficients `theta` (Q^2, N^2, B^2, K^2, R^2).
 // Exposed for its test against simulated scatter.

@@ -74,6 +74,16 @@ std::vector<RestNoiseAxis> AnalyseRestNoise(const RestNoise& noise) {
         avars.push_back({p.m, p.avar[static_cast<std::size_t>(axis)]});
       }
       r.ieee = FitIeeeNoise(avars, dt, n);
+      // The warm-up transient, below the floor of the Allan deviation.
+      double floor = INFINITY;
+      for (const RestNoisePoint& o : r.points)
+        if (9 * o.m <= n) floor = std::min(floor, o.adev);
+      std::vector<double> bin_t, bin_mean;
+      triad->bins().Series(axis, &bin_t, &bin_mean);
+      const double bin_s = triad->bins().bin_s();
+      const BinNoiseModel bin_noise = BinNoiseFromIeee(r.ieee, bin_s, triad->span_s());
+      r.warm_up = FitWarmUp(bin_t, bin_mean, bin_s, std::isfinite(floor) ? floor : 0.0,
+                            r.ieee.ok ? &bin_noise : nullptr);
       for (std::size_t i = 0; i < r.points.size(); ++i) {
         RestNoisePoint& o = r.points[i];
         o.alpha = NoiseTypeOfSlope(AvarSlope(r.fit, r.points, i));
@@ -105,6 +115,7 @@ void RestTriad::Add(double t_s, const Eigen::Vector3d& v, double from_s, double 
   }
   t_last_ = t_s;
   allan_.Add(v.data());
+  bins_.Add(t, v);
 }
 
 double RestTriad::period_s() const {

@@ -15,6 +15,7 @@
 #include "core/analysis/allan_edf.h"
 #include "core/analysis/ieee_noise.h"
 #include "core/analysis/streaming_allan.h"
+#include "core/analysis/warm_up.h"
 
 namespace turncal {
 
@@ -26,6 +27,8 @@ class RestTriad {
 
   const char* name() const { return name_; }
   const StreamingAllan& allan() const { return allan_; }
+  // One-second means from the first sample (longer for recordings past 9 hours): the warm-up.
+  const BinnedMeans& bins() const { return bins_; }
   std::int64_t samples() const { return allan_.samples(); }
   // The median of the first intervals (4096 of them): the sample period.
   double period_s() const;
@@ -36,6 +39,7 @@ class RestTriad {
  private:
   const char* name_;
   StreamingAllan allan_;
+  BinnedMeans bins_;
   bool started_ = false;
   double t_first_ = 0.0, t_kept_ = 0.0, t_last_ = 0.0;
   std::vector<double> first_intervals_;
@@ -67,6 +71,9 @@ struct RestNoiseAxis {
   std::int64_t gaps = 0;
   NoiseFit fit;       // turncald's noise model (white, Gauss-Markov, random walk)
   IeeeNoiseFit ieee;  // IEEE 952's Q, N, B, K, R with their sigma
+  // The transient from the first sample (switch-on, when the recording starts there), its
+  // threshold the floor of the Allan deviation.
+  WarmUpFit warm_up;
   std::size_t samples = 0;
   double rate_hz = 0.0;
 };
