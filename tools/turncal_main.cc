@@ -4,6 +4,7 @@
 
 #include "tools/capture_command.h"
 #include "tools/certificate_command.h"
+#include "tools/characterise_command.h"
 #include "tools/client_commands.h"
 #include "tools/decode_command.h"
 #include "tools/device_write_command.h"
@@ -31,6 +32,7 @@ int main(int argc, char** argv) {
   turncal::tools::AddModelsCommand(&app);
   turncal::tools::AddSimFitCommands(&app);
   turncal::tools::AddNoiseCommand(&app);
+  turncal::tools::AddCharacteriseCommand(&app);
   turncal::tools::AddNoiseMonteCarloCommand(&app);
   turncal::tools::AddFreeCommand(&app);
   turncal::tools::AddFreeMonteCarloCommand(&app);
