@@ -257,37 +257,37 @@ void Accelerometer(Builder* b, const TriadEstimates& t, const nlohmann::json& no
                  "accel15, or free mode's accel9)");
   } else {
     const Estimate& e = *t.latest;
-    AddTriplet(b, e, triad, "bias (K0)", "IEEE 1293 §11.3", {{"bx", "by", "bz"}, {"x", "y", "z"}},
-               to_mg, "mg");
+    AddTriplet(b, e, triad, "bias (K0)", "IEEE 1293", {{"bx", "by", "bz"}, {"x", "y", "z"}}, to_mg,
+               "mg");
     if (e.free) {
-      AddTriplet(b, e, triad, "scale-factor error (K1 / nominal - 1)", "IEEE 1293 §11.3",
+      AddTriplet(b, e, triad, "scale-factor error (K1 / nominal - 1)", "IEEE 1293",
                  {{"kx", "ky", "kz"}, {"x", "y", "z"}, 1.0}, 1e6, "ppm");
-      AddTriplet(b, e, triad, "misalignment (axis to the frame)", "IEEE 1293 §11.3",
+      AddTriplet(b, e, triad, "misalignment (axis to the frame)", "IEEE 1293",
                  {{"m_yz", "m_zy", "m_zx"}, {"yz", "zy", "zx"}}, 1e3, "mrad");
     } else {
-      AddTriplet(b, e, triad, "scale-factor error (K1)", "IEEE 1293 §11.3",
+      AddTriplet(b, e, triad, "scale-factor error (K1)", "IEEE 1293",
                  {{"Sx", "Sy", "Sz"}, {"x", "y", "z"}}, 1e6, "ppm");
-      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1293 §11.3",
+      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1293",
                  {{"alpha1", "alpha2"}, {"alpha1", "alpha2"}}, 1e3, "mrad");
-      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1293 §11.3",
+      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1293",
                  {{"alpha3"}, {"alpha3 - 90 deg"}, M_PI / 2}, 1e3, "mrad");
-      AddTriplet(b, e, triad, "misalignment to the case", "IEEE 1293 §11.3",
+      AddTriplet(b, e, triad, "misalignment to the case", "IEEE 1293",
                  {{"eps_x", "eps_y", "eps_z"}, {"x", "y", "z"}}, 1e3, "mrad");
     }
     if (e.Param("K2x")) {
       // The output error K2 a^2 at 1 g, in ug per g^2.
-      AddTriplet(b, e, triad, "second-order coefficient (K2)", "IEEE 1293 §11.3",
+      AddTriplet(b, e, triad, "second-order coefficient (K2)", "IEEE 1293",
                  {{"K2x", "K2y", "K2z"}, {"x", "y", "z"}}, kG * 1e6, "ug/g^2");
     } else {
-      b->Missing(triad, "second-order coefficient (K2)", "IEEE 1293 §11.3",
+      b->Missing(triad, "second-order coefficient (K2)", "IEEE 1293",
                  fmt::format("{} has no second-order term: calibrate with accel15 on a turntable "
-                             "(poses at intermediate angles as well as +-1 g; its own "
-                             "observability gate says whether the poses carry it)",
+                             "(the cube's +-1 g and 0 g poses carry it; its observability and "
+                             "gate say whether a given pose set does)",
                              e.model));
     }
   }
   if (t.all.size() >= 2) {
-    AddRepeatability(b, t.all, triad, "IEEE 1293 §11.3", to_mg, "mg");
+    AddRepeatability(b, t.all, triad, "IEEE 1293", to_mg, "mg");
   } else {
     b->Missing(triad, "bias turn-on repeatability", "IEEE 1293",
                "one turn-on: give the calibrations of several sessions with the unit switched "
@@ -309,23 +309,23 @@ void Gyroscope(Builder* b, const TriadEstimates& t, const nlohmann::json& noise,
                  "mode's gyro9/gyro9g)");
   } else {
     const Estimate& e = *t.latest;
-    AddTriplet(b, e, triad, "bias", "IEEE 1431 §6.3", {{"bx", "by", "bz"}, {"x", "y", "z"}}, to_dph,
+    AddTriplet(b, e, triad, "bias", "IEEE 1431", {{"bx", "by", "bz"}, {"x", "y", "z"}}, to_dph,
                "deg/h");
     if (e.free) {
-      AddTriplet(b, e, triad, "scale-factor error (nominal - 1)", "IEEE 1431 §6.3",
+      AddTriplet(b, e, triad, "scale-factor error (nominal - 1)", "IEEE 1431",
                  {{"kx", "ky", "kz"}, {"x", "y", "z"}, 1.0}, 1e6, "ppm");
       AddTriplet(
-          b, e, triad, "misalignment (to the accelerometer)", "IEEE 1431 §6.3",
+          b, e, triad, "misalignment (to the accelerometer)", "IEEE 1431",
           {{"m_yz", "m_zy", "m_zx", "m_xz", "m_xy", "m_yx"}, {"yz", "zy", "zx", "xz", "xy", "yx"}},
           1e3, "mrad");
     } else {
-      AddTriplet(b, e, triad, "scale-factor error", "IEEE 1431 §6.3",
+      AddTriplet(b, e, triad, "scale-factor error", "IEEE 1431",
                  {{"Sx", "Sy", "Sz"}, {"x", "y", "z"}}, 1e6, "ppm");
-      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1431 §6.3",
+      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1431",
                  {{"alpha1", "alpha2"}, {"alpha1", "alpha2"}}, 1e3, "mrad");
-      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1431 §6.3",
+      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1431",
                  {{"alpha3"}, {"alpha3 - 90 deg"}, M_PI / 2}, 1e3, "mrad");
-      AddTriplet(b, e, triad, "misalignment to the case", "IEEE 1431 §6.3",
+      AddTriplet(b, e, triad, "misalignment to the case", "IEEE 1431",
                  {{"eps_x", "eps_y", "eps_z"}, {"x", "y", "z"}}, 1e3, "mrad");
     }
     // g-sensitivity: gyro21's Bg_ij, gyro9g's gij, in deg/h per g.
@@ -338,9 +338,9 @@ void Gyroscope(Builder* b, const TriadEstimates& t, const nlohmann::json& noise,
       g.axes.push_back(std::string(kAxes[i / 3]) + kAxes[i % 3]);
     }
     if (e.Param(g.names[0])) {
-      AddTriplet(b, e, triad, "g-sensitivity", "IEEE 1431 §6.3", g, to_dph * kG, "deg/h/g");
+      AddTriplet(b, e, triad, "g-sensitivity", "IEEE 1431", g, to_dph * kG, "deg/h/g");
     } else {
-      b->Missing(triad, "g-sensitivity", "IEEE 1431 §6.3",
+      b->Missing(triad, "g-sensitivity", "IEEE 1431",
                  fmt::format("{} has no g-sensitivity: calibrate with gyro21 (turntable) or "
                              "gyro9g (free)",
                              e.model));
@@ -356,35 +356,35 @@ void Gyroscope(Builder* b, const TriadEstimates& t, const nlohmann::json& noise,
     }
     if (lin.compared) {
       const double lo = lin.levels.front().rate_dps, hi = lin.levels.back().rate_dps;
-      b->Measured(triad, "scale-factor non-linearity (change over the range)", "IEEE 1431 §6.3", "",
+      b->Measured(triad, "scale-factor non-linearity (change over the range)", "IEEE 1431", "",
                   lin.slope_per_dps * (hi - lo) * 1e6, lin.slope_sigma * (hi - lo) * 1e6, "ppm",
                   fmt::format("{}: {} rate segments at {} rates from {:.1f} to {:.1f} deg/s; the "
                               "linear fit's chi^2 {:.1f} with {} dof (p {:.2f})",
                               e.From(), lin.segments, lin.levels.size(), lo, hi, lin.chi2, lin.dof,
                               lin.p_value));
     } else {
-      b->Missing(triad, "scale-factor non-linearity", "IEEE 1431 §6.3",
+      b->Missing(triad, "scale-factor non-linearity", "IEEE 1431",
                  "no rate steps at two or more rates: a turntable session with rate segments "
                  "(the sequence's rates, up and down)");
     }
     if (lin.has_asymmetry) {
-      b->Measured(triad, "scale-factor asymmetry (positive - negative)", "IEEE 1431 §6.3", "",
+      b->Measured(triad, "scale-factor asymmetry (positive - negative)", "IEEE 1431", "",
                   lin.asymmetry * 1e6, lin.asymmetry_sigma * 1e6, "ppm",
                   fmt::format("{}: rate segments of both signs", e.From()));
     } else {
-      b->Missing(triad, "scale-factor asymmetry", "IEEE 1431 §6.3",
+      b->Missing(triad, "scale-factor asymmetry", "IEEE 1431",
                  "no rate steps of both signs: a turntable session turning both ways");
     }
   }
   if (t.all.size() >= 2) {
-    AddRepeatability(b, t.all, triad, "IEEE 1431 §6.3", to_dph, "deg/h");
+    AddRepeatability(b, t.all, triad, "IEEE 1431", to_dph, "deg/h");
   } else {
-    b->Missing(triad, "bias turn-on repeatability", "IEEE 1431 §6.3",
+    b->Missing(triad, "bias turn-on repeatability", "IEEE 1431",
                "one turn-on: give the calibrations of several sessions with the unit switched "
                "off between them (or see `turncal registry drift SERIAL`)");
   }
   AddNoise(b, noise, triad, "gyr", "IEEE 952 Annex C (Allan variance)", noise_source);
-  AddWarmUp(b, noise, triad, "gyr", "IEEE 1431 §6.3 (warm-up time)", to_dph, "deg/h", noise_source);
+  AddWarmUp(b, noise, triad, "gyr", "IEEE 1431 (warm-up time)", to_dph, "deg/h", noise_source);
 }
 
 }  // namespace

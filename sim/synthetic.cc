@@ -35,6 +35,8 @@ Eigen::VectorXd DrawTruth(const MeasurementModel& model, const SensorClass& sens
       theta[i] += sensor.mag_soft_iron_sigma * normal(*rng);
     } else if (p.unit == ParameterUnit::kField) {
       theta[i] += sensor.mag_hard_iron_sigma * normal(*rng);
+    } else if (p.unit == ParameterUnit::kSecondOrder) {
+      theta[i] += sensor.acc_second_order * normal(*rng);
     }
   }
   if (model.gauge_dimension() > 0) ApplyMag22Gauge(model, &theta);

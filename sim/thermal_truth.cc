@@ -24,6 +24,7 @@ double ClassTempco(const MeasurementModel& model, const SensorClass& sensor, int
     case ParameterUnit::kAngularRate:
       return sensor.gyr_bias_tempco;
     case ParameterUnit::kGSensitivity:
+    case ParameterUnit::kSecondOrder:
       return 0.0;
   }
   return 0.0;

@@ -36,4 +36,9 @@ for r in demo-output/report.html /tmp/imu1-report.html; do
   ((plots >= 6)) || fail "$r has $plots plots (expected at least 6: residuals, coverage, convergence per model)"
 done
 grep -q "gate PASS" "$log" || fail "no gate passed"
-echo "README walkthrough: followed literally, exit 0 in ${elapsed} s; demo-output/report.html and /tmp/imu1-report.html written"
+# The IEEE test report (docs/CHARACTERISE.md): the accelerometer's figures and the rest's.
+grep -q "the IEEE test report: .*ieee-report.html" "$log" || fail "the demo did not print the IEEE report"
+grep -q "second-order coefficient (K2)" demo-output/ieee-report.html ||
+  fail "the IEEE report lists no K2 item"
+grep -q "warm-up time" demo-output/ieee-report.html || fail "the IEEE report has no warm-up item"
+echo "README walkthrough: followed literally, exit 0 in ${elapsed} s; demo-output/report.html, ieee-report.html and /tmp/imu1-report.html written"

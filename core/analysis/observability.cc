@@ -43,6 +43,9 @@ double ParameterScale(const ParameterInfo& parameter, const MeasurementModel& mo
       return 1.0;
     case ParameterUnit::kGSensitivity:
       return 1.0 / kStandardGravity_mps2;
+    // K2's column is the squared specific force (~g^2): scaled to ~g like the others'.
+    case ParameterUnit::kSecondOrder:
+      return 1.0 / model.excitation_ned().norm();
   }
   return 1.0;
 }

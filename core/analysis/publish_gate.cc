@@ -21,6 +21,7 @@ bool GateTolerancesForClass(const std::string& sensor_class, GateTolerances* out
     t.field = 2e-3;
     t.angular_rate_radps = 100.0 * M_PI / 180 / 3600;
     t.g_sensitivity = 200.0 * M_PI / 180 / 3600 / 9.80665;
+    t.second_order = 1000e-6 / 9.80665;
     *out = t;
     return true;
   }
@@ -40,7 +41,7 @@ bool GateOptions::IsValid(std::string* error) const {
   };
   const GateTolerances& t = tolerances;
   for (double v : {t.scale_factor, t.angle_rad, t.acceleration_mps2, t.gain, t.field,
-                   t.angular_rate_radps, t.g_sensitivity}) {
+                   t.angular_rate_radps, t.g_sensitivity, t.second_order}) {
     if (!(v > 0) || !std::isfinite(v)) return fail("every tolerance must be finite and > 0");
   }
   for (const auto& [name, v] : parameter_tolerance) {
@@ -87,6 +88,8 @@ double ToleranceFor(const ParameterInfo& parameter, const GateOptions& options) 
       return t.angular_rate_radps;
     case ParameterUnit::kGSensitivity:
       return t.g_sensitivity;
+    case ParameterUnit::kSecondOrder:
+      return t.second_order;
   }
   return t.gain;
 }

@@ -24,11 +24,13 @@ struct GateTolerances {
   double angular_rate_radps = 10.0 * M_PI / 180 / 3600;  // gyroscope bias: 10 deg/h
   // gyroscope g-sensitivity: 10 deg/h/g, rad/s per m/s^2
   double g_sensitivity = 10.0 * M_PI / 180 / 3600 / 9.80665;
+  // accelerometer second-order K2: 100 ug/g^2, per m/s^2
+  double second_order = 100e-6 / 9.80665;
 };
 
 // Defaults for a sensor class of SENSORS.md: "industrial" (tactical-grade targets: 100 ppm,
-// 0.01 deg, 1 mg; gain 1e-3, 1 mG; gyro bias 10 deg/h, g-sensitivity 10 deg/h/g) or "consumer"
-// (1000 ppm, 0.1 deg, 2 mg; gain 2e-3, 2 mG; 100 deg/h, 200 deg/h/g).
+// 0.01 deg, 1 mg; gain 1e-3, 1 mG; gyro bias 10 deg/h, g-sensitivity 10 deg/h/g; K2 100 ug/g^2)
+// or "consumer" (1000 ppm, 0.1 deg, 2 mg; gain 2e-3, 2 mG; 100 deg/h, 200 deg/h/g; 1000 ug/g^2).
 // False when the name is unknown.
 bool GateTolerancesForClass(const std::string& sensor_class, GateTolerances* out);
 

@@ -15,6 +15,7 @@ SensorClass IndustrialClass() {
   c.acc_bias_instability = 4e-4;                 // between poses over minutes (SENSORS.md)
   c.acc_turn_on_bias = 2e-3 * 9.80665;           // 2 mg
   c.acc_scale_sigma = 500e-6;                    // 500 ppm
+  c.acc_second_order = 30e-6 / 9.80665;          // 30 ug/g^2 (a MEMS accelerometer's, assumed)
   c.misalignment_sigma_rad = 0.05 * kRadPerDeg;  // 0.05 deg
   c.mag_noise_rms = 0.5e-3;                      // 0.5 mG
   c.mag_bias_instability = 0.1e-3;
@@ -44,6 +45,7 @@ SensorClass ConsumerClass() {
   c.acc_bias_instability = 0.02;                // SENSORS.md: 0.02 m/s^2
   c.acc_turn_on_bias = 20e-3 * 9.80665;         // 20 mg
   c.acc_scale_sigma = 3e-3;                     // 0.3 %
+  c.acc_second_order = 300e-6 / 9.80665;        // 300 ug/g^2 (assumed)
   c.misalignment_sigma_rad = 0.1 * kRadPerDeg;  // 0.1 deg
   c.mag_noise_rms = 0.5e-3;
   c.mag_bias_instability = 0.2e-3;

@@ -41,6 +41,7 @@ struct SensorClass {
   double gyr_turn_on_bias = 0.0;      // 1 sigma
   double gyr_bias_instability = 0.0;  // 1 sigma of the Gauss-Markov wander (tau bias_tau_s)
   double gyr_scale_sigma = 0.0;       // 1 sigma relative (the misalignment: misalignment_sigma_rad)
+  double acc_second_order = 0.0;      // 1 sigma of each K2, per m/s^2 (accel15)
   double gyr_g_sensitivity = 0.0;     // 1 sigma of each B_g entry, rad/s per m/s^2
   double gyr_random_walk = 0.0;       // bias random walk, rad/s/sqrt(s)
   // Quantisation steps of a 16-bit ADC (0 = floats on the wire, no quantisation).

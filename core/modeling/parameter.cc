@@ -34,6 +34,8 @@ const char* ToString(ParameterUnit unit) {
       return "rad/s";
     case ParameterUnit::kGSensitivity:
       return "rad/s/(m/s^2)";
+    case ParameterUnit::kSecondOrder:
+      return "1/(m/s^2)";
   }
   return "?";
 }
@@ -56,6 +58,8 @@ DisplayQuantity ForDisplay(const ParameterInfo& p, double v, bool is_sigma) {
       return {v * 180 / M_PI * 3600, "deg/h"};
     case ParameterUnit::kGSensitivity:
       return {v * 180 / M_PI * 3600 * 9.80665, "deg/h/g"};
+    case ParameterUnit::kSecondOrder:  // K2 a^2 at a = 1 g, in ug
+      return {v * 9.80665 * 1e6, "ug/g^2"};
   }
   return {v, ""};
 }

@@ -21,6 +21,7 @@ enum class ParameterUnit {
   kGain,          // dimensionless matrix entry (G, K)
   kAngularRate,   // rad/s; reports use deg/h
   kGSensitivity,  // rad/s per m/s^2 (a gyroscope's response to specific force); reports deg/h/g
+  kSecondOrder,   // per m/s^2: an accelerometer's K2 (output error K2 a^2); reports ug/g^2
 };
 
 struct ParameterInfo {

@@ -48,8 +48,8 @@ bool ParseGate(const toml::table& t, const std::string& context, const std::stri
                GateOptions* gate, std::string* error) {
   if (!OnlyKeys(t,
                 {"scale_factor", "angle_deg", "acceleration_mps2", "gain", "field",
-                 "angular_rate_deg_h", "g_sensitivity_deg_h_g", "min_p_value", "min_dof",
-                 "max_normalized_residual", "parameters"},
+                 "angular_rate_deg_h", "g_sensitivity_deg_h_g", "second_order_ug_g2", "min_p_value",
+                 "min_dof", "max_normalized_residual", "parameters"},
                 context, source, error)) {
     return false;
   }
@@ -58,9 +58,11 @@ bool ParseGate(const toml::table& t, const std::string& context, const std::stri
   constexpr double kDegPerHour = M_PI / 180 / 3600;
   double rate_deg_h = g.angular_rate_radps / kDegPerHour;
   double gsens_deg_h_g = g.g_sensitivity * kStandardGravity_mps2 / kDegPerHour;
+  double k2_ug_g2 = g.second_order * kStandardGravity_mps2 * 1e6;
   if (!GetNumber(t, "scale_factor", &g.scale_factor, source, error) ||
       !GetNumber(t, "angular_rate_deg_h", &rate_deg_h, source, error) ||
       !GetNumber(t, "g_sensitivity_deg_h_g", &gsens_deg_h_g, source, error) ||
+      !GetNumber(t, "second_order_ug_g2", &k2_ug_g2, source, error) ||
       !GetNumber(t, "angle_deg", &angle_deg, source, error) ||
       !GetNumber(t, "acceleration_mps2", &g.acceleration_mps2, source, error) ||
       !GetNumber(t, "gain", &g.gain, source, error) ||
@@ -73,6 +75,7 @@ bool ParseGate(const toml::table& t, const std::string& context, const std::stri
   g.angle_rad = angle_deg * M_PI / 180;
   g.angular_rate_radps = rate_deg_h * kDegPerHour;
   g.g_sensitivity = gsens_deg_h_g * kDegPerHour / kStandardGravity_mps2;
+  g.second_order = k2_ug_g2 * 1e-6 / kStandardGravity_mps2;
   if (const toml::table* p = t["parameters"].as_table()) {
     for (const auto& [key, node] : *p) {
       auto v = node.value<double>();

@@ -329,6 +329,20 @@ TEST(DeviceWritePlan, EachRefusalNamesItsReason) {
             std::string::npos);
 }
 
+// accel15's second-order term is not affine: no device can hold it, and the plan says so.
+TEST(DeviceWritePlan, AccelFifteensSecondOrderTermIsRefusedAsNotAffine) {
+  auto accel = Model("accel15");
+  Eigen::VectorXd theta = accel->nominal();
+  theta[accel->index_of("K2x")] = 50e-6 / 9.80665;  // 50 ug/g^2
+  AffineCorrection a;
+  std::string error;
+  EXPECT_FALSE(AffineCorrectionOf(*accel, theta, &a, &error));
+  EXPECT_NE(error.find("accel15's correction is not affine"), std::string::npos) << error;
+  // With K2 zero it is accel12's affine correction.
+  theta[accel->index_of("K2x")] = 0.0;
+  EXPECT_TRUE(AffineCorrectionOf(*accel, theta, &a, &error)) << error;
+}
+
 TEST(DeviceWritePlan, TheIdentitysStoredCalibrationReadsBack) {
   const nlohmann::json identity = {
       {"serial", "SIM0001"},
