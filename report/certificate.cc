@@ -2,6 +2,7 @@
 // A4 pages. Every number shown comes from the content, so the page and its data block agree.
 
 #include "report/certificate.h"
+#include "report/drift_section.h"
 
 #include <fmt/format.h>
 
@@ -545,7 +546,8 @@ bool RenderCertificateHtml(const CertificateSource& source, std::string* html,
       "</title>\n<style>" + kCertStyle + "</style>\n</head>\n<body>\n<main class=\"sheet\">\n" +
       CertHeader(c) + "\n<div class=\"facts\">" + CertInstrument(c) + CertCalibration(c) +
       CertEnvironment(c) + CertProcedure(c) + "</div>\n" + CertResults(c) + "\n" + CertVerdict(c) +
-      "\n" + CertFooter(c) + "\n" + CertDataBlock(c) + "</main>\n</body>\n</html>\n";
+      "\n" + DriftSectionHtml(c.value("drift", Json()), CertText(c["calibration"], "model")) +
+      CertFooter(c) + "\n" + CertDataBlock(c) + "</main>\n</body>\n</html>\n";
   // The hash over the page with the placeholder, then written where the placeholder stands
   // for it: the <meta> and the footer (a placeholder anywhere else stays, and is hashed as is).
   const std::string hash = Sha256Hex(page);

@@ -35,6 +35,10 @@ struct CertificateSource {
   // keys "serial", "model_name", "firmware", ... fill in or replace
   // provenance.device_identity's. May be null.
   nlohmann::json identity;
+  // The unit's drift over its calibrations (issue 39 item 3): the rows of `turncal registry
+  // drift --json` (any model's; the certificate keeps its model's, report/drift_section.h).
+  // Null: none, and no section.
+  nlohmann::json drift;
   // When the certificate was issued, shown as given (rendering reads no clock, so that the same
   // input gives the same bytes); "" leaves it out.
   std::string issued_utc;

@@ -14,6 +14,7 @@
 #include "protocol/free_json.h"
 #include "protocol/thermal_json.h"
 #include "report/certificate.h"
+#include "report/drift_section.h"
 #include "turncal/version.h"
 
 namespace turncal::report {
@@ -450,6 +451,8 @@ bool CertificateContent(const CertificateSource& source, Json* content, std::str
                 {"message", CertString(c.value("fit_check", Json()), "message")}}},
               {"renderer", std::string("turncal ") + kVersion}};
   if (thermal) (*content)["temperature"] = temperature;
+  if (nlohmann::json drift = DriftSummary(source.drift, model); !drift.is_null())
+    (*content)["drift"] = drift;
   return true;
 }
 

@@ -10,6 +10,7 @@
 #include "protocol/thermal_json.h"
 #include "report/analysis.h"
 #include "report/device_writes.h"
+#include "report/drift_section.h"
 #include "report/free_report.h"
 #include "report/plots.h"
 #include "report/sections.h"
@@ -394,7 +395,10 @@ bool RenderReportHtml(const std::vector<nlohmann::json>& calibrations, const Rep
   o += SummaryHtml(docs);
   o += "</header>\n";
   o += BatchHtml(options.batch, device);
-  for (const auto& d : docs) o += ModelSection(d);
+  for (const auto& d : docs) {
+    o += ModelSection(d);
+    o += DriftSectionHtml(DriftSummary(options.drift, d.model), d.model);
+  }
   o += TriadAngleHtml(docs);
   o += DeviceWritesHtml(options.device_writes);
   o += free_body;

@@ -32,6 +32,10 @@ struct ReportOptions {
   // pass or what it waits for, the time each unit took -- when it has more than one unit or a
   // fixture. Null: none.
   nlohmann::json batch;
+  // The unit's drift over its calibrations (issue 39 item 3): the rows `turncal registry drift
+  // SERIAL --json` prints; each model's section then ends with its drift table
+  // (report/drift_section.h). Null: none.
+  nlohmann::json drift;
 };
 
 // Renders the report of the device all `calibrations` belong to (one per model, any order; the

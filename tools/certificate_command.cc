@@ -141,6 +141,7 @@ std::string CertLogTail(const std::string& log) {
 
 struct CertificateArgs {
   std::string state_dir, device, output, pdf, station, issued, verify;
+  std::string drift;  // a file of `turncal registry drift SERIAL --json`
   std::vector<std::string> models;
   int version = 0;
 };
@@ -214,6 +215,7 @@ int RunCertificateCommand(const CertificateArgs& a) {
     source.station = a.station;
     source.source = "state directory " + a.state_dir;
     source.issued_utc = a.issued == "now" ? drivers::UtcNowIso8601() : a.issued;
+    if (!a.drift.empty() && !ReadDriftFile(a.drift, &source.drift, &error)) return CertFail(error);
     const std::string model = c.value("model", "");
     const std::string html = several ? CertPathForModel(a.output, model) : a.output;
     const std::string pdf = a.pdf.empty() || !several ? a.pdf : CertPathForModel(a.pdf, model);
@@ -325,6 +327,9 @@ void AddCertificateCommand(CLI::App* app) {
                 "the HTML certificate; with several models, one file each with the model's name "
                 "before the extension (cert.html -> cert.accel13.html)");
   c->add_option("--pdf", args->pdf, "also print it to this PDF with headless Chromium");
+  c->add_option("--drift", args->drift,
+                "the unit's drift over its calibrations, a file of `turncal registry drift SERIAL "
+                "--json` (`turncal registry certificate` reads it from the registry itself)");
   auto* verify = c->add_option("--verify", args->verify,
                                "check FILE's content hash: exit 0 verified, 1 changed since "
                                "turncal wrote it, 2 unreadable or not a certificate");

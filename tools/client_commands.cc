@@ -291,9 +291,12 @@ void AddClientCommands(CLI::App* app) {
                  "read DIR/calibrations/*.json directly (no daemon needed); without it, -o asks "
                  "the daemon for its state directory");
   rp->add_option("--device", report->html.device, "only this device's report (with -o)");
+  rp->add_option("--drift", report->html.drift,
+                 "with -o: the unit's drift over its calibrations, a file of `turncal registry "
+                 "drift SERIAL --json`: each model's section ends with its table");
   rp->callback([report, rp] {
-    const bool html =
-        rp->count("--output") > 0 || rp->count("--state-dir") > 0 || rp->count("--device") > 0;
+    const bool html = rp->count("--output") > 0 || rp->count("--state-dir") > 0 ||
+                      rp->count("--device") > 0 || rp->count("--drift") > 0;
     if (html) {
       report->html.socket = report->common.socket;
       report->html.json = report->common.json;

@@ -290,6 +290,18 @@ int RunCertificate(const RegistryArgs& a) {
     if (row[5]) source.identity["protocol"] = *row[5];
   }
   source.issued_utc = a.issued;
+  // A unit with history: its drift over its calibrations on the certificate (issue 39 item 3;
+  // shown when a parameter has a trend, two sessions or more).
+  nlohmann::json drift;
+  std::string drift_error;
+  if (AnalyseSerialDrift(&db, a.serial, a.model, {}, &drift, nullptr, &drift_error)) {
+    source.drift = drift;
+  } else {
+    fmt::print(stderr,
+               "turncal registry: the unit's drift could not be read ({}); the "
+               "certificate shows none\n",
+               drift_error);
+  }
   if (int rc = WriteCertificate(source, a.output, a.pdf)) return rc;
   // The registry keeps the certificate and its hash: `turncal registry verify` then tells a
   // certificate it issued from one edited and given a recomputed hash.

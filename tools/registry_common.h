@@ -4,6 +4,7 @@
 // as JSON, or written to a file.
 
 #include <CLI/CLI.hpp>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -43,5 +44,12 @@ int Emit(const RegistryArgs& a, const std::string& text);
 void AddRegistryBatchCommands(CLI::App* registry);
 // `turncal registry drift SERIAL` (tools/registry_drift.cc).
 void AddRegistryDriftCommand(CLI::App* registry);
+// Its analysis: one row per model and parameter of `serial`'s passing calibrations (one a
+// session), as `turncal registry drift --json` prints them; only `model` when not empty; `text`
+// (may be null) gets the table. False with a message when the query fails; an empty list when
+// the serial has none.
+bool AnalyseSerialDrift(daemon::RegistryDb* db, const std::string& serial, const std::string& model,
+                        const std::map<std::string, double>& override_tolerance,
+                        nlohmann::json* rows, std::string* text, std::string* error);
 
 }  // namespace turncal::tools

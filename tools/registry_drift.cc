@@ -88,33 +88,18 @@ nlohmann::json DriftJson(const std::string& model, const std::string& name, cons
   return j;
 }
 
-int RunDrift(const DriftArgs& args) {
-  const RegistryArgs& a = *args.registry;
-  std::map<std::string, double> override_tolerance;
-  for (const std::string& t : args.tolerances) {
-    const auto eq = t.find('=');
-    char* end = nullptr;
-    const double v = eq == std::string::npos ? NAN : std::strtod(t.c_str() + eq + 1, &end);
-    if (eq == std::string::npos || end == t.c_str() + eq + 1 || *end != '\0' || !(v > 0)) {
-      fmt::print(stderr, "turncal registry drift: --tolerance '{}' is not NAME=VALUE (> 0)\n", t);
-      return 2;
-    }
-    override_tolerance[t.substr(0, eq)] = v;
-  }
-  RegistryDb db;
-  if (int rc = OpenRegistry(a, &db)) return rc;
+}  // namespace
+
+// Every parameter's drift of `serial` (one model, or every one when `model` is empty): the rows
+// `--json` prints, and the table's text. False with the message when the query fails; an empty
+// list when the serial has no passing calibration.
+bool AnalyseSerialDrift(RegistryDb* db, const std::string& serial, const std::string& model_only,
+                        const std::map<std::string, double>& override_tolerance,
+                        nlohmann::json* out, std::string* text, std::string* error) {
   RegistryRows rows;
-  std::string error;
-  if (!db.Query(kDriftSql, {a.serial, Maybe(a.model)}, &rows, &error)) {
-    fmt::print(stderr, "turncal registry: {}\n", error);
-    return 2;
-  }
+  if (!db->Query(kDriftSql, {serial, Maybe(model_only)}, &rows, error)) return false;
   const nlohmann::json list = RowsJson(rows);
-  if (list.empty()) {
-    fmt::print(stderr, "turncal registry drift: serial {} has no passing calibration{}\n", a.serial,
-               a.model.empty() ? "" : " of " + a.model);
-    return 1;
-  }
+  *out = nlohmann::json::array();
   // model -> parameter -> history, in time order; and the latest tolerance of each.
   std::map<std::string, std::map<std::string, std::vector<DriftPoint>>> histories;
   std::map<std::string, std::map<std::string, double>> tolerances;
@@ -133,14 +118,14 @@ int RunDrift(const DriftArgs& args) {
         if (v.is_number()) tolerances[model][name] = v.get<double>();
     }
   }
-  nlohmann::json out = nlohmann::json::array();
-  std::string text;
   for (const auto& [model, params] : histories) {
-    text += fmt::format("\n{} ({} calibrations, one a session):\n", model,
-                        params.begin()->second.size());
-    text += fmt::format("{:<10} {:>13} {:>22} {:>22} {:>11} {:>12} {:>12}\n", "parameter", "latest",
-                        "repeatability (95 %)", "trend / month", "tolerance", "recalibrate",
-                        "not before");
+    if (text) {
+      *text += fmt::format("\n{} ({} calibrations, one a session):\n", model,
+                           params.begin()->second.size());
+      *text += fmt::format("{:<10} {:>13} {:>22} {:>22} {:>11} {:>12} {:>12}\n", "parameter",
+                           "latest", "repeatability (95 %)", "trend / month", "tolerance",
+                           "recalibrate", "not before");
+    }
     for (const auto& [name, points] : params) {
       double tolerance = NAN;
       if (auto it = override_tolerance.find(name); it != override_tolerance.end()) {
@@ -149,9 +134,10 @@ int RunDrift(const DriftArgs& args) {
         if (auto t = m->second.find(name); t != m->second.end()) tolerance = t->second;
       }
       const ParameterDrift d = AnalyseParameterDrift(points, tolerance);
-      out.push_back(DriftJson(model, name, d, points));
+      out->push_back(DriftJson(model, name, d, points));
+      if (!text) continue;
       if (!d.ok) {
-        text += fmt::format("{:<10} {}\n", name, d.error);
+        *text += fmt::format("{:<10} {}\n", name, d.error);
         continue;
       }
       const std::string repeat = std::isfinite(d.repeatability)
@@ -165,11 +151,42 @@ int RunDrift(const DriftArgs& args) {
                                     ? fmt::format("{} +- {:.0f} d", Date(d.recalibrate_t_s),
                                                   d.recalibrate_sigma_s / 86400)
                                     : "-";
-      text += fmt::format("{:<10} {:>13.6g} {:>22} {:>22} {:>11} {:>12} {:>12}\n", name,
-                          points.back().value, repeat, trend,
-                          std::isfinite(tolerance) ? fmt::format("{:.3g}", tolerance) : "-", recal,
-                          Date(d.not_before_t_s));
+      *text += fmt::format("{:<10} {:>13.6g} {:>22} {:>22} {:>11} {:>12} {:>12}\n", name,
+                           points.back().value, repeat, trend,
+                           std::isfinite(tolerance) ? fmt::format("{:.3g}", tolerance) : "-", recal,
+                           Date(d.not_before_t_s));
     }
+  }
+  return true;
+}
+
+namespace {
+
+int RunDrift(const DriftArgs& args) {
+  const RegistryArgs& a = *args.registry;
+  std::map<std::string, double> override_tolerance;
+  for (const std::string& t : args.tolerances) {
+    const auto eq = t.find('=');
+    char* end = nullptr;
+    const double v = eq == std::string::npos ? NAN : std::strtod(t.c_str() + eq + 1, &end);
+    if (eq == std::string::npos || end == t.c_str() + eq + 1 || *end != '\0' || !(v > 0)) {
+      fmt::print(stderr, "turncal registry drift: --tolerance '{}' is not NAME=VALUE (> 0)\n", t);
+      return 2;
+    }
+    override_tolerance[t.substr(0, eq)] = v;
+  }
+  RegistryDb db;
+  if (int rc = OpenRegistry(a, &db)) return rc;
+  nlohmann::json out;
+  std::string text, error;
+  if (!AnalyseSerialDrift(&db, a.serial, a.model, override_tolerance, &out, &text, &error)) {
+    fmt::print(stderr, "turncal registry: {}\n", error);
+    return 2;
+  }
+  if (out.empty()) {
+    fmt::print(stderr, "turncal registry drift: serial {} has no passing calibration{}\n", a.serial,
+               a.model.empty() ? "" : " of " + a.model);
+    return 1;
   }
   if (a.json) return Emit(a, out.dump(1) + "\n");
   return Emit(

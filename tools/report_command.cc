@@ -64,6 +64,7 @@ int RunHtmlReport(const HtmlReportArgs& args) {
   report::ReportOptions options;
   options.source = state_dir;
   options.generated_utc = drivers::UtcNowIso8601();
+  if (!args.drift.empty() && !ReadDriftFile(args.drift, &options.drift, &error)) return Fail(error);
   for (auto& [device, d] : devices) {
     for (std::size_t i = 0; i < d.calibrations.size(); ++i) {
       const std::string note = AttachJournalRecords(state_dir, &d.calibrations[i]);

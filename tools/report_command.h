@@ -15,6 +15,7 @@ struct HtmlReportArgs {
   std::string output = "turncal-report.html";
   std::string state_dir;
   std::string device;
+  std::string drift;  // a file of `turncal registry drift SERIAL --json`; "" none
 };
 
 // 0 when every report was written; 2 with a message on stderr otherwise.

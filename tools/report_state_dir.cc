@@ -153,4 +153,18 @@ std::string AttachJournalRecords(const std::string& state_dir, nlohmann::json* c
          "convergence and observability are left out";
 }
 
+bool ReadDriftFile(const std::string& path, nlohmann::json* rows, std::string* error) {
+  std::ifstream in(path);
+  if (!in) {
+    *error = fmt::format("--drift: cannot open {}", path);
+    return false;
+  }
+  *rows = nlohmann::json::parse(in, nullptr, false);
+  if (!rows->is_array() || (!rows->empty() && !(*rows)[0].contains("parameter"))) {
+    *error = fmt::format("--drift: {} is not `turncal registry drift SERIAL --json` output", path);
+    return false;
+  }
+  return true;
+}
+
 }  // namespace turncal::tools

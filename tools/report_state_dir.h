@@ -27,4 +27,8 @@ bool ReadStateDirCalibrations(const std::string& state_dir, const std::string& d
 // where they came from, or why there are none; "" when the calibration has its records.
 std::string AttachJournalRecords(const std::string& state_dir, nlohmann::json* calibration);
 
+// A file of `turncal registry drift SERIAL --json` (the unit's drift, for the report's and the
+// certificate's drift sections). False with a message when it cannot be read or is not that.
+bool ReadDriftFile(const std::string& path, nlohmann::json* rows, std::string* error);
+
 }  // namespace turncal::tools

@@ -7,7 +7,9 @@ sigma goes into a registry the test starts, with a failed calibration (left out)
 that published two versions (only its last counts). Then `turncal registry drift SERIAL --json`:
 12 calibrations; the trend per month and the recalibration date within 3 sigma of the truth; the
 repeatability's 95 % interval holds the truth; --tolerance doubles the interval; the text output
-names the date; an unknown serial is exit 1 and a malformed --tolerance exit 2.
+names the date; an unknown serial is exit 1 and a malformed --tolerance exit 2. The certificate
+of the unit's latest calibration (`turncal registry certificate`) shows the drift table with the
+recalibration date, its data block the summary, and it verifies.
 
 Usage: registry_drift_test.py TURNCAL   (exit 77: PostgreSQL is not installed)
 """
@@ -115,6 +117,29 @@ def main(d):
             gap1, gap2 = recal["t_s"] - last, bx2["recalibrate"]["t_s"] - last
             check(abs(gap2 / gap1 - 2) < 1e-6, f"--tolerance bx=2e-4 doubles the interval: "
                   f"{gap1 / 86400:.0f} d -> {gap2 / 86400:.0f} d")
+        # The certificate of the unit's latest calibration shows the drift (issue 39 item 3): the
+        # latest session's document is a real accel13 calibration (tests/report's).
+        doc = open(os.path.join(os.path.dirname(os.path.abspath(__file__)),
+                                "../report/certificate_accel13.json")).read()
+        pg.psql(f"UPDATE calibrations SET document = $doc${doc}$doc$ "
+                f"WHERE idempotency_key = 'k{len(times) - 1}'")
+        cert = os.path.join(d, "cert.html")
+        r = subprocess.run([TURNCAL, "registry", "certificate", "6251.00039", "--model", "accel13",
+                            "-o", cert, "--db", db], capture_output=True, text=True)
+        check(r.returncode == 0, f"registry certificate: exit {r.returncode} {r.stderr.strip()}")
+        if r.returncode == 0:
+            html = open(cert).read()
+            check("Drift over the unit's calibrations" in html and 'id="drift-accel13-bx"' in html
+                  and recal["date"] in html and recal["not_before"] in html,
+                  f"the certificate shows bx's drift: recalibrate {recal['date']}, not before "
+                  f"{recal['not_before']}")
+            data = json.loads(html.split('id="turncal-certificate-data">')[1].split("</script>")[0])
+            bxd = [x for x in data.get("drift", []) if x["parameter"] == "bx"]
+            check(len(bxd) == 1 and "history" not in bxd[0] and bxd[0]["calibrations"] == 12,
+                  "its data block holds the drift's summary (12 calibrations, no history)")
+            r = subprocess.run([TURNCAL, "certificate", "--verify", cert], capture_output=True,
+                               text=True)
+            check(r.returncode == 0, f"the certificate with its drift verifies: {r.stdout.strip()}")
         r = drift(db, "6251.00039")
         check(r.returncode == 0 and "bx" in r.stdout and "Recalibrate" in r.stdout,
               f"text: exit {r.returncode}\n{r.stdout}")

@@ -81,6 +81,46 @@ TEST(Certificate, HashVerifiesAndIsShownInTheMetaAndTheFooter) {
   EXPECT_FALSE(std::regex_search(html, std::regex("\\b(nan|inf)\\b", std::regex::icase)));
 }
 
+// A unit with history (issue 39 item 3): `turncal registry drift --json`'s rows of the
+// certificate's model become a drift table in the report units and a summary in the data block;
+// another model's rows and each row's history are left out; the page still verifies.
+TEST(Certificate, AUnitsDriftIsShownInItsUnitsAndKeptInTheDataBlock) {
+  CertificateSource source = Source();
+  const nlohmann::json history = nlohmann::json::array({{{"t", "2026-01-01"}, {"value", 1e-3}}});
+  source.drift = nlohmann::json::array(
+      {{{"model", "accel13"},
+        {"parameter", "Sx"},
+        {"calibrations", 12},
+        {"history", history},
+        {"first", "2026-01-01"},
+        {"last", "2026-11-01"},
+        {"repeatability", {{"value", 20e-6}, {"ci95", {10e-6, 60e-6}}}},
+        {"trend", {{"per_month", 5e-6}, {"sigma_per_month", 1e-6}, {"resolved", true}}},
+        {"tolerance", 100e-6},
+        {"recalibrate",
+         {{"date", "2027-06-30"}, {"sigma_days", 40.0}, {"not_before", "2027-04-01"}}}},
+       {{"model", "mag13"}, {"parameter", "bx"}, {"calibrations", 3}, {"history", history}}});
+  std::string hash;
+  const std::string html = Render(source, &hash);
+  EXPECT_TRUE(VerifyCertificateHtml(html).ok);
+  const std::size_t at = html.find("<tr id=\"drift-accel13-Sx\">");
+  ASSERT_NE(at, std::string::npos);
+  const std::string row = html.substr(at, html.find("</tr>", at) - at);
+  // ppm, as the parameter table shows Sx: 20 [10, 60], +5 +- 1 a month, tolerance 100.
+  EXPECT_NE(row.find("20 [10, 60]"), std::string::npos) << row;
+  EXPECT_NE(row.find("+5 &#177; 1"), std::string::npos) << row;
+  EXPECT_NE(row.find("2027-06-30 &#177; 40 d"), std::string::npos) << row;
+  EXPECT_NE(row.find("2027-04-01"), std::string::npos) << row;
+  EXPECT_NE(row.find("ppm"), std::string::npos) << row;
+  EXPECT_EQ(html.find("drift-mag13"), std::string::npos);
+  const nlohmann::json data = DataBlock(html);
+  ASSERT_EQ(data["drift"].size(), 1u);
+  EXPECT_FALSE(data["drift"][0].contains("history"));
+  // Without a trend anywhere (one calibration), no section.
+  source.drift = nlohmann::json::array({{{"model", "accel13"}, {"parameter", "Sx"}}});
+  EXPECT_EQ(Render(source, &hash).find("Drift over the unit"), std::string::npos);
+}
+
 TEST(Certificate, TheSameCalibrationGivesTheSameBytes) {
   std::string a_hash, b_hash;
   const std::string a = Render(Source(), &a_hash);

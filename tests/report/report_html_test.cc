@@ -174,8 +174,8 @@ TEST_F(CalibrationReport, IsOneWellFormedScriptFreeDocumentWithEveryPlotAndParam
   for (const Session& s : Sessions()) {
     std::string html, error;
     const auto start = std::chrono::steady_clock::now();
-    ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "2030-01-01T00:00:00Z", {}, {}},
-                                         &html, &error))
+    ASSERT_TRUE(report::RenderReportHtml(
+        s.calibrations, {s.dir, "2030-01-01T00:00:00Z", {}, {}, {}}, &html, &error))
         << error;
     const double render_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
@@ -363,7 +363,7 @@ TEST_F(CalibrationReport, OpensWithTheBatchSummarySlotBySlot) {
 TEST(GyroReport, SaysWhichSourceDeterminedWhatAndTheTriadAngle) {
   const Session s = RunSession("gyro", drivers::Protocol::kMip, "accel13", "mag13", 9, "gyro12");
   std::string html, error;
-  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}, {}}, &html, &error))
+  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}, {}, {}}, &html, &error))
       << error;
   std::filesystem::remove_all(s.dir);
   EXPECT_NE(html.find("G (gyroscope)"), std::string::npos);
@@ -412,7 +412,7 @@ TEST(GyroReport, MovesAloneSayWhatTheyDetermine) {
   const Session s =
       RunSession("gyro_moves", drivers::Protocol::kXbus, "accel13", "mag13", 11, "gyro12", false);
   std::string html, error;
-  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}, {}}, &html, &error))
+  ASSERT_TRUE(report::RenderReportHtml(s.calibrations, {s.dir, "", {}, {}, {}}, &html, &error))
       << error;
   std::filesystem::remove_all(s.dir);
   EXPECT_NE(html.find("from static poses alone (26)"), std::string::npos);

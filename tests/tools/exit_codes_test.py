@@ -91,6 +91,7 @@ CASES = {
                         (["--model", "magellipsoid", "--hand", "10", "--magnet", "2",
                           "--magnet-peak", "0", "--runs", "2"], MISTAKE)],
     "noise": [(["/nonexistent.tcap"], "cannot be read")],
+    "characterise": [(["/nonexistent.json"], "cannot be read"), (["--noise-to", "-1"], MISTAKE)],
     "noise-montecarlo": [(["--runs", "1"], MISTAKE)],
     "sim": [(["--protocol", "nmea", "-o", "x.tcap"], MISTAKE),
             (["--protocol", "mip", "--chamber", "0; ramp hot", "-o", "x.tcap"], MISTAKE),

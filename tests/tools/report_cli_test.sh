@@ -33,6 +33,22 @@ plots=$(grep -o '<svg class="plot" id="[a-z0-9-]*"' "$dir/r.html" | wc -l)
 [[ $plots == 6 ]] || fail "$plots plots, not 6 (3 per model)"
 grep -qi '<script' "$dir/r.html" && fail "a script in the report"
 
+# The unit's drift (issue 39 item 3): `turncal registry drift --json`'s rows as a file; each
+# model's section ends with its table; a file that is not that is refused.
+cat > "$dir/drift.json" << 'EOF'
+[{"model": "accel13", "parameter": "Sx", "calibrations": 5, "first": "2026-01-01",
+  "last": "2026-09-01", "repeatability": {"value": 2e-5, "ci95": [1e-5, 6e-5]},
+  "trend": {"per_month": 5e-6, "sigma_per_month": 1e-6, "resolved": true}, "tolerance": 1e-4,
+  "recalibrate": {"date": "2027-03-01", "sigma_days": 30, "not_before": "2027-01-15"}}]
+EOF
+"$turncal" report --state-dir "$dir/state" -o "$dir/d.html" --drift "$dir/drift.json" > /dev/null ||
+  fail "report --drift"
+grep -q 'id="drift-accel13-Sx"' "$dir/d.html" || fail "report --drift: no drift row for Sx"
+grep -q '2027-03-01 &#177; 30 d' "$dir/d.html" || fail "report --drift: no recalibration date"
+echo '{"not": "drift"}' > "$dir/notdrift.json"
+expect_refusal "is not .turncal registry drift SERIAL --json. output" \
+  "$turncal" report --state-dir "$dir/state" -o "$dir/x.html" --drift "$dir/notdrift.json"
+
 # Two devices: one file each; --device picks one; an unknown device is refused.
 for f in "$dir"/state/calibrations/imu.*.json; do
   sed 's/"device": "imu"/"device": "imu2"/' "$f" > "${f/\/imu./\/imu2.}"
