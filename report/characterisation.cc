@@ -135,6 +135,19 @@ void AddTriplet(Builder* b, const Estimate& e, const std::string& triad, const s
   }
 }
 
+// A turntable model's scale factors, non-orthogonality (alpha3 as its deviation from 90 deg) and
+// misalignment to the case: the same parameters in every accelerometer and gyroscope model.
+void AddTurntableGeometry(Builder* b, const Estimate& e, const std::string& triad,
+                          const std::string& scale_item, const std::string& standard) {
+  AddTriplet(b, e, triad, scale_item, standard, {{"Sx", "Sy", "Sz"}, {"x", "y", "z"}}, 1e6, "ppm");
+  AddTriplet(b, e, triad, "non-orthogonality", standard,
+             {{"alpha1", "alpha2"}, {"alpha1", "alpha2"}}, 1e3, "mrad");
+  AddTriplet(b, e, triad, "non-orthogonality", standard,
+             {{"alpha3"}, {"alpha3 - 90 deg"}, M_PI / 2}, 1e3, "mrad");
+  AddTriplet(b, e, triad, "misalignment to the case", standard,
+             {{"eps_x", "eps_y", "eps_z"}, {"x", "y", "z"}}, 1e3, "mrad");
+}
+
 // The turn-on repeatability of each bias axis over the sessions' estimates: the scatter of the
 // biases beyond their own sigma, with the chi^2 interval of the scatter (k - 1 degrees of
 // freedom).
@@ -265,14 +278,7 @@ void Accelerometer(Builder* b, const TriadEstimates& t, const nlohmann::json& no
       AddTriplet(b, e, triad, "misalignment (axis to the frame)", "IEEE 1293",
                  {{"m_yz", "m_zy", "m_zx"}, {"yz", "zy", "zx"}}, 1e3, "mrad");
     } else {
-      AddTriplet(b, e, triad, "scale-factor error (K1)", "IEEE 1293",
-                 {{"Sx", "Sy", "Sz"}, {"x", "y", "z"}}, 1e6, "ppm");
-      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1293",
-                 {{"alpha1", "alpha2"}, {"alpha1", "alpha2"}}, 1e3, "mrad");
-      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1293",
-                 {{"alpha3"}, {"alpha3 - 90 deg"}, M_PI / 2}, 1e3, "mrad");
-      AddTriplet(b, e, triad, "misalignment to the case", "IEEE 1293",
-                 {{"eps_x", "eps_y", "eps_z"}, {"x", "y", "z"}}, 1e3, "mrad");
+      AddTurntableGeometry(b, e, triad, "scale-factor error (K1)", "IEEE 1293");
     }
     if (e.Param("K2x")) {
       // The output error K2 a^2 at 1 g, in ug per g^2.
@@ -319,14 +325,7 @@ void Gyroscope(Builder* b, const TriadEstimates& t, const nlohmann::json& noise,
           {{"m_yz", "m_zy", "m_zx", "m_xz", "m_xy", "m_yx"}, {"yz", "zy", "zx", "xz", "xy", "yx"}},
           1e3, "mrad");
     } else {
-      AddTriplet(b, e, triad, "scale-factor error", "IEEE 1431",
-                 {{"Sx", "Sy", "Sz"}, {"x", "y", "z"}}, 1e6, "ppm");
-      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1431",
-                 {{"alpha1", "alpha2"}, {"alpha1", "alpha2"}}, 1e3, "mrad");
-      AddTriplet(b, e, triad, "non-orthogonality", "IEEE 1431",
-                 {{"alpha3"}, {"alpha3 - 90 deg"}, M_PI / 2}, 1e3, "mrad");
-      AddTriplet(b, e, triad, "misalignment to the case", "IEEE 1431",
-                 {{"eps_x", "eps_y", "eps_z"}, {"x", "y", "z"}}, 1e3, "mrad");
+      AddTurntableGeometry(b, e, triad, "scale-factor error", "IEEE 1431");
     }
     // g-sensitivity: gyro21's Bg_ij, gyro9g's gij, in deg/h per g.
     const char* const turntable_g[9] = {"Bg_xx", "Bg_xy", "Bg_xz", "Bg_yx", "Bg_yy",
