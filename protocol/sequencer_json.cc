@@ -197,6 +197,12 @@ nlohmann::json ToJson(const NoiseProfile& p) {
   if (p.device_period_s) j["device_period_s"] = *p.device_period_s;
   if (std::isfinite(p.sigma_dof)) j["sigma_dof"] = p.sigma_dof;
   if (std::isfinite(p.gyr_bias_temp_c)) j["gyr_bias_temp_c"] = p.gyr_bias_temp_c;
+  nlohmann::json lag_one = nlohmann::json::object();
+  for (int t = 0; t < 3; ++t) {
+    const double rho = p.lag_one[static_cast<std::size_t>(t)];
+    if (p.sigma[t] && rho != 0.0) lag_one[TriadName(t)] = rho;
+  }
+  if (!lag_one.empty()) j["lag_one"] = lag_one;
   nlohmann::json identified = nlohmann::json::object();
   for (int t = 0; t < 3; ++t) {
     const auto& d = p.identified_drift[static_cast<std::size_t>(t)];
@@ -240,6 +246,18 @@ bool ParseNoiseProfile(const nlohmann::json& j, NoiseProfile* out, std::string* 
   }
   if (j.contains("gyr_bias_temp_c") && j["gyr_bias_temp_c"].is_number()) {
     p.gyr_bias_temp_c = j["gyr_bias_temp_c"].get<double>();
+  }
+  if (j.contains("lag_one")) {
+    const auto& lag_one = j["lag_one"];
+    if (!lag_one.is_object()) return fail("lag_one malformed");
+    for (int t = 0; t < 3; ++t) {
+      if (!lag_one.contains(TriadName(t))) continue;
+      const auto& rho = lag_one[TriadName(t)];
+      if (!rho.is_number() || !(std::abs(rho.get<double>()) < 1)) {
+        return fail("a lag-one correlation is not a number in (-1, 1)");
+      }
+      p.lag_one[static_cast<std::size_t>(t)] = rho.get<double>();
+    }
   }
   if (j.contains("identified_drift")) {
     const auto& identified = j["identified_drift"];

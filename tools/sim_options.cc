@@ -151,8 +151,11 @@ void AddNoiseAndTableOptions(CLI::App* cmd, SimCommandArgs* args) {
                   "with --magnet: its field at the closest, Gauss")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  cmd->add_option("--start", args->start_s,
-                  "seconds at rest before the first move (default 1; 0: no still moment)")
+  cmd->add_option(
+         "--start", args->start_s,
+         "seconds at rest before the first move (default 1, or with --live and --controller 3 s "
+         "of wall time, 3 x --live-speed: the daemon's noise measurement sees fresh "
+         "samples; 0: no still moment)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--mag-rate", args->mag_rate_hz,
                   "the magnetometer's own rate, Hz: below --rate the device repeats its last "

@@ -271,7 +271,7 @@ FreeCollected CollectFree(const std::vector<Sample>& samples, const SequencerOpt
     MotionOptions mo = *motion;
     if (!mo.mag_sigma && out.found.noise && out.found.noise->sigma[kTriadMag]) {
       mo.mag_sigma = *out.found.noise->sigma[kTriadMag];
-      mo.mag_sigma_dof = out.found.noise->sigma_dof;
+      mo.mag_sigma_dof = out.found.noise->TriadDof(kTriadMag);
       mo.mag_sigma_rate_hz = out.found.noise->rate_hz;
       mo.noise_source = out.found.noise->source;
     }

@@ -72,6 +72,11 @@ bool NoiseProfile::IsValid(std::string* error) const {
   return true;
 }
 
+double NoiseProfile::TriadDof(int t) const {
+  const double rho = lag_one[static_cast<std::size_t>(t)];
+  return sigma_dof * (1 - rho * rho) / (1 + rho * rho);
+}
+
 std::string NoiseProfile::Describe() const {
   std::string out = fmt::format("{} at {:.1f} Hz:", source, rate_hz);
   for (int t = 0; t < 3; ++t) {
@@ -149,9 +154,22 @@ StillnessDetector::StillnessDetector(const NoiseProfile& profile, const Stillnes
   ring_.resize(static_cast<std::size_t>(w_));
   scratch_.resize(static_cast<std::size_t>(w_));
   for (int t = 0; t < 3; ++t) use_[t] = profile.sigma[t].has_value();
-  const double dof = profile.sigma_dof;
-  q_var_ = VarianceRatioLimit(options.false_alarm, w_ - 1, dof);
-  q_var_triad_.fill(q_var_);
+  q_var_ = VarianceRatioLimit(options.false_alarm, w_ - 1, profile.sigma_dof);
+  // A triad whose values correlate (NoiseProfile::lag_one): a window's variance has fewer
+  // degrees of freedom, and its means (the halves', the gyro rate's) vary (1 + rho) / (1 - rho)
+  // times more than independent values' would (never taken below 1: a negative correlation
+  // only makes the tests a little stricter than they need be).
+  double dof = profile.sigma_dof;
+  for (int t = 0; t < 3; ++t) {
+    const auto i = static_cast<std::size_t>(t);
+    const double rho = profile.lag_one[i];
+    dof_share_[i] = (1 - rho * rho) / (1 + rho * rho);
+    mean_inflation_[i] = std::max(1.0, (1 + rho) / (1 - rho));
+    q_var_base_[i] = VarianceRatioLimit(
+        options.false_alarm, std::max(1.0, (w_ - 1) * dof_share_[i]), profile.TriadDof(t));
+    if (use_[t]) dof = std::min(dof, profile.TriadDof(t));
+  }
+  q_var_triad_ = q_var_base_;
   fresh_.assign(static_cast<std::size_t>(w_), 0);
   z_ = TwoSidedZ(options.false_alarm, dof);
   // A stored profile carries what the calibrators identified before a restart.
@@ -170,7 +188,7 @@ double StillnessDetector::HalvesDriftLimit(int triad, int axis, double n1, doubl
   const double scale = drift_scale_[t];
   const double wander = options_.bias_drift[t].HalvesDifferenceVariance(axis, n1 / profile_.rate_hz,
                                                                         n2 / profile_.rate_hz);
-  const double held = std::max(1.0, samples_per_value);
+  const double held = std::max(1.0, samples_per_value) * mean_inflation_[t];
   return z_ * std::sqrt(sigma * sigma * held * (1 / n1 + 1 / n2) + scale * scale * wander);
 }
 
@@ -237,8 +255,10 @@ void StillnessDetector::UpdateHeld() {
     if (std::abs(k - samples_per_value_[i]) <= 0.02 * samples_per_value_[i]) continue;
     samples_per_value_[i] = k;
     const double values = std::max(2.0, static_cast<double>(w_) / k);
-    q_var_triad_[i] =
-        k > 1.0 ? VarianceRatioLimit(options_.false_alarm, values - 1, profile_.sigma_dof) : q_var_;
+    q_var_triad_[i] = k > 1.0 ? VarianceRatioLimit(options_.false_alarm,
+                                                   std::max(1.0, (values - 1) * dof_share_[i]),
+                                                   profile_.TriadDof(t))
+                              : q_var_base_[i];
     for (int a = 0; a < 3; ++a) {
       window_drift_limit_[3 * i + static_cast<std::size_t>(a)] =
           HalvesDriftLimit(t, a, h_, w_ - h_, k);
@@ -391,9 +411,10 @@ void StillnessDetector::Evaluate() {
                window_drift_limit_[static_cast<std::size_t>(c)]);
       if (t == kTriadGyr) {
         const double mean = anchor_[c] + s1_[c] / n;
-        const double limit = z_ * std::sqrt(sigma * sigma / n + profile_.gyr_bias_sigma_radps *
-                                                                    profile_.gyr_bias_sigma_radps) +
-                             bias_allowance;
+        const double limit =
+            z_ * std::sqrt(sigma * sigma * mean_inflation_[kTriadGyr] / n +
+                           profile_.gyr_bias_sigma_radps * profile_.gyr_bias_sigma_radps) +
+            bias_allowance;
         consider(StillFinding::kRate, t, a, std::abs(mean - profile_.gyr_bias_radps[a]), limit);
       }
     }

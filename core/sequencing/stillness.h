@@ -80,8 +80,16 @@ struct NoiseProfile {
   double gyr_bias_temp_c = std::numeric_limits<double>::quiet_NaN();
   double rate_hz = 0.0;                   // sample rate
   std::optional<double> device_period_s;  // device-clock sample period (for gap counting)
-  // Degrees of freedom of the sigma estimates; infinite when configured from a datasheet.
+  // Degrees of freedom of the sigma estimates (the samples'); infinite when configured from a
+  // datasheet.
   double sigma_dof = std::numeric_limits<double>::infinity();
+  // Per triad, the lag-one correlation of its values (of the axis that correlates most; 0: white
+  // or not measured). A device that filters its samples (a 1-kHz stream, a magnetometer behind
+  // a low-pass) sends correlated values, and n of them estimate sigma as n (1 - rho^2) /
+  // (1 + rho^2) independent ones would (first-order autoregressive noise).
+  std::array<double, 3> lag_one = {0.0, 0.0, 0.0};
+  // The degrees of freedom of triad t's sigma: sigma_dof with its values' correlation allowed for.
+  double TriadDof(int t) const;
   std::string source;  // e.g. "measured over 1.00 s (100 samples)"
   // Per triad, the bias wander identified from the poses (absent until a calibrator has); the
   // stillness tests allow for it, and it is kept with the profile across restarts.
@@ -139,10 +147,18 @@ class NoiseMeter {
   std::vector<StillSample> samples_;
   std::int64_t outliers_ = 0;
   // One triad's values in a part: their count, mean and sum of squared deviations (Welford).
+  // With the sums of the lag-one products of consecutive values, about the part's first value
+  // (no cancellation at a large mean): the values' correlation.
   struct Moments {
     std::int64_t n = 0;
     Eigen::Vector3d mean = Eigen::Vector3d::Zero(), m2 = Eigen::Vector3d::Zero();
+    Eigen::Vector3d ref = Eigen::Vector3d::Zero(), last = Eigen::Vector3d::Zero();
+    Eigen::Vector3d lag = Eigen::Vector3d::Zero(), head = Eigen::Vector3d::Zero(),
+                    tail = Eigen::Vector3d::Zero();
+    std::int64_t pairs = 0;
     void Add(const Eigen::Vector3d& v);
+    // The sum of the lag-one products of deviations from the part's mean, per axis.
+    Eigen::Vector3d LagOneSum() const;
   };
   // Per triad: every sample's value, and each value once (`fresh`: a triad slower than the
   // stream, a 50-Hz magnetometer in a 100-Hz stream, repeats its last value; counted twice, its
@@ -157,6 +173,8 @@ class NoiseMeter {
   // resolution repeats by chance).
   bool CountsHeldOnce(int t) const;
   const Moments& Of(const Part& p, int t) const;
+  // Triad t's lag-one correlation per axis, pooled over the parts.
+  Eigen::Vector3d LagOne(int t) const;
   std::vector<Part> parts_;
   NoiseProfile profile_;
   std::string failure_;
@@ -274,6 +292,11 @@ class StillnessDetector {
   std::array<bool, 3> has_last_{};
   std::array<double, 3> samples_per_value_{1.0, 1.0, 1.0};
   std::array<double, 3> q_var_triad_{};
+  // Per triad: its variance limit with every sample a value, and what its values' correlation
+  // makes of a window's degrees of freedom and of its means' variance.
+  std::array<double, 3> q_var_base_{};
+  std::array<double, 3> dof_share_ = {1.0, 1.0, 1.0};
+  std::array<double, 3> mean_inflation_ = {1.0, 1.0, 1.0};
   std::array<double, 3> drift_scale_{1.0, 1.0, 1.0};
   std::array<double, 9> window_drift_limit_{};  // HalvesDriftLimit for the window's halves
   std::int64_t still_run_ = 0;

@@ -171,7 +171,7 @@ void FreeCalibrations::QueueFit(DevicePipeline& d, double t_s, bool resuming,
     const NoiseProfile* noise = d.sequencer->noise();
     if (noise && noise->sigma[kTriadMag]) {
       motion_options.mag_sigma = *noise->sigma[kTriadMag];
-      motion_options.mag_sigma_dof = noise->sigma_dof;
+      motion_options.mag_sigma_dof = noise->TriadDof(kTriadMag);
       motion_options.mag_sigma_rate_hz = noise->rate_hz;
       motion_options.noise_source = noise->source;
     } else {

@@ -33,6 +33,11 @@ from live_session import check, cube_poses, run_in_temp_dir, wait_for
 
 TURNCAL, TURNCALD = sys.argv[1], sys.argv[2]
 SPEED = 20
+# The rest at home before the first move, device seconds: the daemon, started first, measures the
+# noise over one second of its clock (20 device seconds) from fresh samples, and the poses keep
+# their places in the chamber's steps (the simulator's default with a controller, 3 s of wall
+# time, would move them a minute later).
+START_S = 25
 SEED = 5
 SIM = ["--protocol", "mip", "--class", "industrial", "--rate", "100", "--seed", str(SEED),
        "--die-tau", "3", "--self-heating", "0", "--repeat-poses"]
@@ -112,7 +117,7 @@ def calibrate(d):
         [TURNCAL, "sim", *SIM, "--dwell", "4", "--poses", f"{d}/poses.csv", "--chamber",
          CALIBRATION_CHAMBER, "--truth-out", f"{d}/truth1.json", "--live", f"{d}/mip",
          "--controller", f"{d}/t.sock", "--live-speed", str(SPEED), "--answer-timeout", "60",
-         "--retries", "5"], stdout=open(f"{d}/sim1.out", "w"), stderr=subprocess.PIPE, text=True,
+         "--retries", "5", "--start", str(START_S)], stdout=open(f"{d}/sim1.out", "w"), stderr=subprocess.PIPE, text=True,
         timeout=600)
     check(sim.returncode == 0, "the session in the chamber: every pose captured "
           f"(exit {sim.returncode}) {sim.stderr.strip()[-200:]}")
