@@ -8,7 +8,10 @@
 #include <optional>
 
 #include "core/analysis/allan_edf.h"
+#include "core/modeling/free_model.h"
+#include "core/modeling/measurement_model.h"
 #include "protocol/calibration_json.h"
+#include "protocol/free_json.h"
 #include "report/analysis.h"
 
 namespace turncal::report {
@@ -31,17 +34,35 @@ std::string AxisSource(const nlohmann::json& axis, const std::string& fallback) 
   return axis.contains("source") ? Base(axis["source"].get<std::string>()) : fallback;
 }
 
+// The triad a model calibrates, as the model says (a turntable model's or a free one's; a
+// thermal model by its stem, "accel13@T" as accel13).
 std::string TriadOfModel(const std::string& model) {
-  if (model.rfind("accmag", 0) == 0 || model.rfind("mag", 0) == 0) return "magnetometer";
-  if (model.rfind("accel", 0) == 0) return "accelerometer";
-  if (model.rfind("gyro", 0) == 0) return "gyroscope";
+  const std::string stem = model.substr(0, model.find('@'));
+  std::string error;
+  std::optional<SensorKind> kind;
+  if (auto m = MakeModel(stem, ModelContext{}, &error)) {
+    kind = m->sensor();
+  } else if (auto f = MakeFreeModel(stem, FreeContext{}, &error)) {
+    kind = f->sensor();
+  }
+  if (!kind) return "";
+  switch (*kind) {
+    case SensorKind::kAccelerometer:
+      return "accelerometer";
+    case SensorKind::kGyroscope:
+      return "gyroscope";
+    case SensorKind::kMagnetometer:
+      return "magnetometer";
+  }
   return "";
 }
 
+// A free calibration: turncald's document says so, `turncal free --json`'s entries by their
+// model.
 bool IsFree(const nlohmann::json& doc) {
-  const std::string m = doc.value("model", "");
-  return doc.value("pose_source", "") == "free" || m == "accel9" || m == "gyro9" || m == "gyro9g" ||
-         m == "magellipsoid" || m == "magsphere" || m == "accmag";
+  const auto names = FreeModelNames();
+  return protocol::IsFreeCalibration(doc) ||
+         std::find(names.begin(), names.end(), doc.value("model", "")) != names.end();
 }
 
 struct Estimate {

@@ -34,25 +34,11 @@ struct CharacteriseArgs {
   bool json = false;
 };
 
-bool ReadJson(const std::string& path, nlohmann::json* out, std::string* error) {
-  std::ifstream in(path);
-  if (!in) {
-    *error = fmt::format("cannot open {}", path);
-    return false;
-  }
-  *out = nlohmann::json::parse(in, nullptr, false);
-  if (out->is_discarded()) {
-    *error = fmt::format("{} is not JSON", path);
-    return false;
-  }
-  return true;
-}
-
 // A calibration document, or `turncal free --json`'s output (its "models").
 bool AddCalibrationFile(const std::string& path, report::CharacterisationInput* in,
                         std::string* error) {
   nlohmann::json j;
-  if (!ReadJson(path, &j, error)) return false;
+  if (!daemon::ReadJsonFile(path, &j, error)) return false;
   if (j.is_object() && j.contains("models") && j["models"].is_array()) {
     for (const auto& m : j["models"]) {
       in->calibrations.push_back(m);
@@ -78,7 +64,7 @@ bool AddNoise(const CharacteriseArgs& a, std::size_t index, report::Characterisa
   nlohmann::json axes;
   if (std::filesystem::path(path).extension() == ".json") {
     nlohmann::json j;
-    if (!ReadJson(path, &j, error)) return false;
+    if (!daemon::ReadJsonFile(path, &j, error)) return false;
     if (!j.contains("axes") || !j["axes"].is_array()) {
       *error = fmt::format("{}: no \"axes\" (turncal noise --json's output or a rest_noise/ file)",
                            path);

@@ -192,7 +192,7 @@ with tempfile.TemporaryDirectory() as d:
     bad = os.path.join(d, "bad.json")
     open(bad, "w").write("{not json")
     r = run([TURNCAL, "characterise", bad])
-    check(r.returncode == 2 and "not JSON" in r.stderr, f"a file that is not JSON: {r.stderr.strip()}")
+    check(r.returncode == 2 and "not valid JSON" in r.stderr, f"a file that is not JSON: {r.stderr.strip()}")
     r = run([TURNCAL, "characterise", docs[0], "--noise", os.path.join(d, "absent.tcap")])
     check(r.returncode == 2 and "absent.tcap" in r.stderr, f"a missing rest: {r.stderr.strip()}")
 
