@@ -51,6 +51,13 @@ bool Reason(std::string* why, const std::string& what) {
   *why = what;
   return false;
 }
+
+// What each of k part means takes from the squares (and the lag-one products) of n values with
+// lag-one correlation rho: kappa = (1 + rho) / (1 - rho) values' share, taken at most n / (4 k),
+// so that parts of a few values (a 25-Hz magnetometer's second) cannot run a correction away.
+double CappedKappa(double rho, double n, double k) {
+  return std::min(std::max(1.0, n / (4 * k)), Ar1MeanInflation(rho));
+}
 }  // namespace
 
 std::uint8_t NoiseMeter::PresentTriads() const {
@@ -127,12 +134,10 @@ Eigen::Vector3d NoiseMeter::LagOne(int t) const {
   }
   // About the parts' own means, both sums lose about k kappa (kappa = (1 + rho) / (1 - rho)) of
   // the n values' share: the ratio is (n rho - k kappa) / (n - k kappa), solved here for rho
-  // (a few fixed-point steps; +0.007 at rho 0.6 in 4 parts of 250). Only where that share is
-  // small: kappa is taken at most n / (4 k), so that parts of a few values (a 25-Hz magnetometer's
-  // second) cannot run the correction away. Within white noise's 2 / sqrt(n) the raw value is
-  // taken as chance (a 50-value second reads +-0.14 on white noise): the noise is then white.
+  // (a few fixed-point steps; +0.007 at rho 0.6 in 4 parts of 250), kappa capped (CappedKappa).
+  // Within white noise's 2 / sqrt(n) the raw value is taken as chance (a 50-value second reads
+  // +-0.14 on white noise): the noise is then white.
   const auto k = static_cast<double>(parts_.size());
-  const double kappa_max = std::max(1.0, n / (4 * k));
   Eigen::Vector3d rho = Eigen::Vector3d::Zero();
   for (int a = 0; a < 3; ++a) {
     if (!(m2[a] > 0)) continue;
@@ -140,7 +145,7 @@ Eigen::Vector3d NoiseMeter::LagOne(int t) const {
     if (!(std::abs(raw) > 2 / std::sqrt(n))) continue;
     double r = raw;
     for (int step = 0; step < 5; ++step) {
-      const double kappa = std::min(kappa_max, (1 + r) / (1 - r));
+      const double kappa = CappedKappa(r, n, k);
       r = std::clamp((raw * (n - k * kappa) + k * kappa) / n, -0.99, 0.99);
     }
     rho[a] = r;
@@ -211,10 +216,7 @@ bool NoiseMeter::TriadNoise(int t, NoiseProfile* profile, std::string* why) cons
   int worst = 0;
   for (int a = 1; a < 3; ++a) worst = std::abs(rho[a]) > std::abs(rho[worst]) ? a : worst;
   profile->lag_one[static_cast<std::size_t>(t)] = rho[worst];
-  const double kappa_max = std::max(1.0, nd / (4 * k));  // as LagOne takes it
-  for (int a = 0; a < 3; ++a) {
-    pooled[a] /= nd - k * std::clamp((1 + rho[a]) / (1 - rho[a]), 1.0, kappa_max);
-  }
+  for (int a = 0; a < 3; ++a) pooled[a] /= nd - k * std::max(1.0, CappedKappa(rho[a], nd, k));
   Eigen::Vector3d sigma = pooled.cwiseSqrt();
   const double floor = kFloat32Resolution * std::max(grand.norm(), 1e-30);
   for (int a = 0; a < 3; ++a) sigma[a] = std::max(sigma[a], floor);
@@ -222,9 +224,9 @@ bool NoiseMeter::TriadNoise(int t, NoiseProfile* profile, std::string* why) cons
   // parts' means against each other (chi^2 with k - 1 dof).
   for (int a = 0; a < 3; ++a) {
     const double var = sigma[a] * sigma[a];
-    const double dof_share = (1 - rho[a] * rho[a]) / (1 + rho[a] * rho[a]);
+    const double dof_share = Ar1DofShare(rho[a]);
     // (Never below 1: a negative correlation only makes the test a little stricter than needed.)
-    const double mean_inflation = std::max(1.0, (1 + rho[a]) / (1 - rho[a]));
+    const double mean_inflation = std::max(1.0, Ar1MeanInflation(rho[a]));
     double means_chi2 = 0;
     for (const auto& p : parts_) {
       const Moments& m = Of(p, t);
@@ -266,7 +268,7 @@ bool NoiseMeter::TriadNoise(int t, NoiseProfile* profile, std::string* why) cons
     }
     // The mean of correlated values varies (1 + rho) / (1 - rho) times more.
     double inflation = 1.0;
-    for (int a = 0; a < 3; ++a) inflation = std::max(inflation, (1 + rho[a]) / (1 - rho[a]));
+    for (int a = 0; a < 3; ++a) inflation = std::max(inflation, Ar1MeanInflation(rho[a]));
     profile->gyr_bias_sigma_radps = sigma.maxCoeff() * std::sqrt(inflation / nd);
     double temp_sum = 0.0;
     int temp_n = 0;

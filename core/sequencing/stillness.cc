@@ -73,8 +73,7 @@ bool NoiseProfile::IsValid(std::string* error) const {
 }
 
 double NoiseProfile::TriadDof(int t) const {
-  const double rho = lag_one[static_cast<std::size_t>(t)];
-  return sigma_dof * (1 - rho * rho) / (1 + rho * rho);
+  return sigma_dof * Ar1DofShare(lag_one[static_cast<std::size_t>(t)]);
 }
 
 std::string NoiseProfile::Describe() const {
@@ -163,8 +162,8 @@ StillnessDetector::StillnessDetector(const NoiseProfile& profile, const Stillnes
   for (int t = 0; t < 3; ++t) {
     const auto i = static_cast<std::size_t>(t);
     const double rho = profile.lag_one[i];
-    dof_share_[i] = (1 - rho * rho) / (1 + rho * rho);
-    mean_inflation_[i] = std::max(1.0, (1 + rho) / (1 - rho));
+    dof_share_[i] = Ar1DofShare(rho);
+    mean_inflation_[i] = std::max(1.0, Ar1MeanInflation(rho));
     q_var_base_[i] = VarianceRatioLimit(
         options.false_alarm, std::max(1.0, (w_ - 1) * dof_share_[i]), profile.TriadDof(t));
     if (use_[t]) dof = std::min(dof, profile.TriadDof(t));

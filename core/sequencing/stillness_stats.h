@@ -35,4 +35,10 @@ inline double VarianceRatioLimit(double alpha, double n_dof, double dof) {
          n_dof;
 }
 
+// Values with lag-one correlation rho, taken as first-order autoregressive noise: n of them
+// estimate a variance as n (1 - rho^2) / (1 + rho^2) independent ones would, and their mean
+// varies (1 + rho) / (1 - rho) times more than independent values' (NoiseProfile::lag_one).
+inline double Ar1DofShare(double rho) { return (1 - rho * rho) / (1 + rho * rho); }
+inline double Ar1MeanInflation(double rho) { return (1 + rho) / (1 - rho); }
+
 }  // namespace turncal::stillness_stats
