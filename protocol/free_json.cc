@@ -200,6 +200,7 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
   m["covariance_scale"] = e.covariance_scale;
   m["fit_check"] = {{"verdict", ToString(e.fit.verdict)}, {"cause", e.fit.cause}};
   if (std::isfinite(e.fit.noise_dof)) m["fit_check"]["noise_dof"] = e.fit.noise_dof;
+  if (e.fit.dof_share < 1) m["fit_check"]["dof_share"] = e.fit.dof_share;
   m["coverage"] = {{"filled", fe.coverage.filled},
                    {"total", fe.coverage.total},
                    {"fraction", fe.coverage.fraction()}};

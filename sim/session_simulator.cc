@@ -445,10 +445,15 @@ class SessionSimulator {
       // The magnetometer's first-order low-pass, started at the first value; with the noise
       // filtered, the noise before it (the draws as below, scaled by sqrt((2 - alpha) / alpha):
       // the filter's output variance is alpha / (2 - alpha) of its input's), quantised after it.
+      // A device's filter runs from power-on, long before a capture: it starts in its steady
+      // state, the first value's noise at the output's own level (started from one raw draw,
+      // its first 50 ms carried 5.6 times the noise, and a chi^2 too large by 1 %).
       const double alpha = 1.0 - std::exp(-2 * M_PI * o_.mag_bandwidth_hz * dt_);
-      if (o_.mag_noise_filtered) AddWhiteNoise(&acc, &gyr, &mag, std::sqrt((2 - alpha) / alpha));
-      mag_filtered_ =
-          k == 0 ? mag : Eigen::Vector3d(*mag_filtered_ + alpha * (mag - *mag_filtered_));
+      const double input_scale = std::sqrt((2 - alpha) / alpha);
+      const Eigen::Vector3d clean = mag;
+      if (o_.mag_noise_filtered) AddWhiteNoise(&acc, &gyr, &mag, input_scale);
+      mag_filtered_ = k == 0 ? Eigen::Vector3d(clean + (mag - clean) / input_scale)
+                             : Eigen::Vector3d(*mag_filtered_ + alpha * (mag - *mag_filtered_));
       mag = *mag_filtered_;
       if (o_.mag_noise_filtered) {
         for (int i = 0; i < 3; ++i) mag[i] = Quantise(mag[i], c_.mag_quantum);

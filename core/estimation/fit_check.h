@@ -26,6 +26,9 @@ struct FitCheck {
   // Finite: the p-values are the F test's of chi^2 / dof against a noise estimated with this many
   // degrees of freedom (free mode's samples in motion, FreeCalibratorOptions::motion_noise_dof).
   double noise_dof = std::numeric_limits<double>::infinity();
+  // Below 1: the p-values count chi^2 / dof as having dof x dof_share degrees of freedom (free
+  // mode's values in motion whitened with a correlation measured from them, ChainChi2DofShare).
+  double dof_share = 1.0;
   // Per axis of the triad: the squared innovations' sum over the poses, divided by its share of
   // the degrees of freedom (1 when that axis's noise is as modelled).
   Eigen::Vector3d axis_ratio = Eigen::Vector3d::Ones();

@@ -377,16 +377,22 @@ class FreeCalibration {
     const double nu = est_.dof > 0 && 2 * out_.motion_points > out_.intervals
                           ? MotionNoiseDof()
                           : std::numeric_limits<double>::infinity();
+    // Whitened with a correlation measured from the same residuals, chi^2 varies as their plain
+    // sum of squares does: fewer degrees of freedom (ChainChi2DofShare).
+    if (out_.correlation.whitened) {
+      fit.dof_share = ChainChi2DofShare(MotionChain(terms_, data_, out_.correlation.tau_s),
+                                        static_cast<int>(ev_.r.size()));
+    }
+    const double d1 = est_.dof * fit.dof_share, x = est_.dof > 0 ? est_.chi2 / est_.dof : 0.0;
     if (est_.dof > 0 && std::isfinite(nu) && nu > 0) {
-      // F = (chi^2 / dof) against the noise's own chi^2_nu / nu: P(F > x) = I_{nu / (nu + dof x)}
-      // (nu / 2, dof / 2).
-      const double d1 = est_.dof, x = est_.chi2 / d1;
+      // F = (chi^2 / dof) against the noise's own chi^2_nu / nu: P(F > x) = I_{nu / (nu + d1 x)}
+      // (nu / 2, d1 / 2).
       fit.p_upper = boost::math::ibeta(nu / 2, d1 / 2, nu / (nu + d1 * x));
       fit.p_lower = boost::math::ibetac(nu / 2, d1 / 2, nu / (nu + d1 * x));
       fit.noise_dof = nu;
     } else if (est_.dof > 0) {
-      fit.p_upper = boost::math::gamma_q(est_.dof / 2.0, est_.chi2 / 2.0);
-      fit.p_lower = boost::math::gamma_p(est_.dof / 2.0, est_.chi2 / 2.0);
+      fit.p_upper = boost::math::gamma_q(d1 / 2, d1 * x / 2);
+      fit.p_lower = boost::math::gamma_p(d1 / 2, d1 * x / 2);
     }
     est_.p_value = fit.p_upper;
     for (const auto& t : out_.terms) {

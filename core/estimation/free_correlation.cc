@@ -140,6 +140,22 @@ void AddChainCovariance(const CorrelatedChain& chain, Eigen::MatrixXd* S) {
   }
 }
 
+double ChainChi2DofShare(const CorrelatedChain& chain, int m) {
+  if (!(chain.tau_s > 0) || m <= 0) return 1.0;
+  // a_k = sum_{j < k} rho_jk^2 along the time order: rho_jk = rho_{j,k-1} phi_k, so
+  // a_k = phi_k^2 (1 + a_{k-1}).
+  const std::vector<std::size_t> order = TimeOrder(chain);
+  double a = 0, pairs = 0;
+  for (std::size_t k = 1; k < order.size(); ++k) {
+    const double dt = chain.t_s[order[k]] - chain.t_s[order[k - 1]];
+    const double phi = std::exp(-std::max(dt, 0.0) / chain.tau_s);
+    a = phi * phi * (1 + a);
+    pairs += a;
+  }
+  const double md = m;
+  return md / (md + 2 * pairs);
+}
+
 Eigen::MatrixXd ChainWhitener(int m, const CorrelatedChain& chain) {
   Eigen::MatrixXd W = Eigen::MatrixXd::Identity(m, m);
   if (!(chain.tau_s > 0)) return W;

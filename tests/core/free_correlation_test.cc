@@ -148,9 +148,55 @@ TEST(MotionCorrelation, TheChainsWhiteningIsExact) {
   EXPECT_EQ(S(0, 1), 0.0);
   const Eigen::MatrixXd W = ChainWhitener(6, chain);
   EXPECT_TRUE((W * S * W.transpose()).isIdentity(1e-12)) << W * S * W.transpose();
+  // chi^2's share of degrees of freedom: 6 / (6 + 2 sum_{i<j} rho_ij^2), rho_ij^2 = exp(-2 dt /
+  // tau) over the chain's six pairs (0.01, 0.02, 0.02, 0.03, 0.04, 0.05 s apart).
+  const double sum =
+      std::exp(-1.0) + 2 * std::exp(-2.0) + std::exp(-3.0) + std::exp(-4.0) + std::exp(-5.0);
+  EXPECT_NEAR(ChainChi2DofShare(chain, 6), 6 / (6 + 2 * sum), 1e-15);
   // No time constant: nothing correlated.
   chain.tau_s = 0;
   EXPECT_TRUE(ChainWhitener(6, chain).isIdentity(0.0));
+  EXPECT_EQ(ChainChi2DofShare(chain, 6), 1.0);
+}
+
+// Whitened with a time constant measured from the same values, chi^2 varies as their plain sum of
+// squares does, more than chi^2_m: its variance is 2 m / share (ChainChi2DofShare), and the fit
+// check's p-values are uniform only with that share (without it, the free row's fit check
+// refused 18 % of runs at the lowest tenth where 10 % were due).
+TEST(MotionCorrelation, AMeasuredCorrelationLeavesTheChiSquareFewerDegreesOfFreedom) {
+  const double tau = 1.0 / (2 * M_PI * 10.0);
+  const int m = 600, seeds = 1000;
+  double sum = 0, sum2 = 0, share = 0;
+  for (std::uint32_t seed = 1; seed <= seeds; ++seed) {
+    const std::vector<MotionResidual> r = Noise(m, tau, 5000 + seed);
+    const MotionCorrelation c = MeasureMotionCorrelation(r);
+    ASSERT_TRUE(c.correlated());
+    CorrelatedChain chain;
+    chain.tau_s = c.tau_s;
+    for (int k = 0; k < m; ++k) {
+      chain.rows.push_back(k);
+      chain.t_s.push_back(r[static_cast<std::size_t>(k)].t_s);
+    }
+    double chi2 = r[0].r * r[0].r;  // Prais-Winsten, as ChainWhitener's rows
+    for (std::size_t k = 1; k < r.size(); ++k) {
+      const double phi = std::exp(-(r[k].t_s - r[k - 1].t_s) / c.tau_s);
+      const double e = (r[k].r - phi * r[k - 1].r) / std::sqrt(1 - phi * phi);
+      chi2 += e * e;
+    }
+    sum += chi2;
+    sum2 += chi2 * chi2;
+    share += ChainChi2DofShare(chain, m);
+  }
+  const double mean = sum / seeds, variance = sum2 / seeds - mean * mean;
+  share /= seeds;
+  std::printf(
+      "chi^2 of %d values whitened with their own tau over %d seeds: mean %.1f, variance %.0f "
+      "(chi^2_m: %d; 2 m / share: %.0f, share %.3f)\n",
+      m, seeds, mean, variance, 2 * m, 2 * m / share, share);
+  // The variance's relative sigma over 1000 seeds is sqrt(2 / 1000) = 0.045: 4 sigma.
+  EXPECT_NEAR(variance / (2 * m / share), 1.0, 0.18);
+  EXPECT_GT(variance / (2 * m), 1.0 + 0.18);
+  EXPECT_NEAR(mean, m, 4 * std::sqrt(2 * m / share / seeds));
 }
 
 }  // namespace
