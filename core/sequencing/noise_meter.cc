@@ -245,8 +245,11 @@ bool NoiseMeter::TriadNoise(int t, NoiseProfile* profile, std::string* why) cons
       const double d = m.mean[a] - grand[a];
       means_chi2 += d * d * static_cast<double>(m.n) / (var * mean_inflation);
     }
-    const double chi_lim = boost::math::quantile(
-        boost::math::complement(boost::math::chi_squared(k - 1), options_.false_alarm / 9.0));
+    // The pooled variance is itself an estimate (50 values' worth for a 100-Hz magnetometer
+    // whose values correlate): the sum is (k - 1) times an F variable, not a chi^2 (as a chi^2,
+    // 3 of 1000 one-second attempts at such a magnetometer were refused, 0.01 were due).
+    const double chi_lim = (k - 1) * VarianceRatioLimit(options_.false_alarm / 9.0, k - 1,
+                                                        std::max(1.0, dof * dof_share));
     if (means_chi2 > chi_lim) {
       return Reason(
           why,
@@ -362,12 +365,20 @@ NoiseMeter::Status NoiseMeter::Finish() {
       fmt::format("measured over {:.2f} s ({} samples, {} outliers left out)", span, n, outliers_);
   for (int t = 0; t < 3; ++t) {
     const double rho = prof.lag_one[static_cast<std::size_t>(t)];
+    // The values the triad's sigma came from (its held repeats counted once: fewer than the
+    // samples; TriadDof counts samples, as its users scale it).
+    double values = nd;
+    if (CountsHeldOnce(t)) {
+      values = 0;
+      for (const auto& p : parts_)
+        values += static_cast<double>(p.fresh[static_cast<std::size_t>(t)].n);
+    }
     // Named when beyond white noise's 3 sigma (1 / sqrt(n)): a real correlation, not chance.
-    if (!(present & (1u << t)) || std::abs(rho) <= 3.0 / std::sqrt(nd)) continue;
+    if (!(present & (1u << t)) || std::abs(rho) <= 3.0 / std::sqrt(values)) continue;
     prof.source.insert(prof.source.size() - 1,
                        fmt::format("; the {}'s values correlate (lag one {:.2f}): {:.0f} effective "
                                    "degrees of freedom",
-                                   TriadName(t), rho, prof.TriadDof(t)));
+                                   TriadName(t), rho, prof.TriadDof(t) * values / nd));
   }
   for (int t = 0; t < 3; ++t) {
     if (!(present & (1u << t)) || !CountsHeldOnce(t)) continue;
