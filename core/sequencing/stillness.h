@@ -175,6 +175,9 @@ class NoiseMeter {
   const Moments& Of(const Part& p, int t) const;
   // Triad t's lag-one correlation per axis, pooled over the parts.
   Eigen::Vector3d LagOne(int t) const;
+  // Triad t's steady drift per axis: the slope of the line through the parts' means (each
+  // weighted by its count) per part; zero with fewer than three parts.
+  Eigen::Vector3d Drift(int t) const;
   std::vector<Part> parts_;
   NoiseProfile profile_;
   std::string failure_;
