@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
+#include <string>
 
 #include "core/frames/rotations.h"
 #include "core/modeling/measurement_model.h"
@@ -78,20 +80,30 @@ TEST(HandMotion, PausesStopSmoothlyAndTheEndsAreStill) {
   EXPECT_LT((after - before).norm(), 0.05);
 }
 
+// A 1-kHz session of a 2-s hand rotation after start_s at rest, and the models it simulates.
+struct HandSession {
+  SessionSimOptions options;
+  std::unique_ptr<MeasurementModel> accel, mag;
+  explicit HandSession(double start_s) {
+    options.rate_hz = 1000;
+    options.start_s = start_s;
+    HandMotion m;
+    m.duration_s = 2;
+    options.hand = m;
+    std::string error;
+    accel = MakeModel("accel13", ModelContext{}, &error);
+    mag = MakeModel("mag13", ModelContext{}, &error);
+  }
+  SimulatedSession Run() const { return SimulateSession(*accel, *mag, {}, options); }
+};
+
 TEST(HandMotion, TheMagnetometerHoldsBetweenItsOwnSamples) {
-  SessionSimOptions o;
-  o.rate_hz = 1000;
+  HandSession h(0.0);
+  SessionSimOptions& o = h.options;
   o.mag_rate_hz = 100;
-  o.start_s = 0;
-  HandMotion m;
-  m.duration_s = 2;
-  o.hand = m;
   std::string error;
   ASSERT_TRUE(o.IsValid(&error)) << error;
-  ModelContext mc;
-  auto accel = MakeModel("accel13", mc, &error);
-  auto mag = MakeModel("mag13", mc, &error);
-  const SimulatedSession s = SimulateSession(*accel, *mag, {}, o);
+  const SimulatedSession s = h.Run();
   ASSERT_EQ(s.samples.size(), 2000u);
   EXPECT_TRUE(s.events.empty());
   int fresh = 0;
@@ -111,26 +123,19 @@ TEST(HandMotion, TheMagnetometerHoldsBetweenItsOwnSamples) {
 // (5.6 times larger at 10 Hz of 1 kHz: its first 50 ms read as a magnet passing by in a quarter
 // of the free rows' runs, and their chi^2 came out 1 % large).
 TEST(HandMotion, AFilteredNoiseStartsInItsSteadyState) {
-  SessionSimOptions o;
-  o.rate_hz = 1000;
-  o.start_s = 1.0;  // still for the first second
+  HandSession h(1.0);  // still for the first second
+  SessionSimOptions& o = h.options;
   o.mag_bandwidth_hz = 10;
   o.mag_noise_filtered = true;
-  HandMotion m;
-  m.duration_s = 2;
-  o.hand = m;
   std::string error;
   ASSERT_TRUE(o.IsValid(&error)) << error;
-  ModelContext mc;
-  auto accel = MakeModel("accel13", mc, &error);
-  auto mag = MakeModel("mag13", mc, &error);
   // Per seed, the x axis's first value and a later one (0.4 s) less the mean of 0.5-1 s (the
   // field the same, still): their variances over the seeds should be alike.
   double first = 0, later = 0;
   const int seeds = 60;
   for (int seed = 1; seed <= seeds; ++seed) {
     o.seed = static_cast<std::uint64_t>(seed);
-    const SimulatedSession s = SimulateSession(*accel, *mag, {}, o);
+    const SimulatedSession s = h.Run();
     ASSERT_GE(s.samples.size(), 1000u);
     double mean = 0;
     for (std::size_t k = 500; k < 1000; ++k) mean += s.samples[k].mag->x() / 500;
