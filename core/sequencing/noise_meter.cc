@@ -418,16 +418,17 @@ NoiseMeter::Status NoiseMeter::Finish() {
   prof.sigma_dof = dof;
   prof.source =
       fmt::format("measured over {:.2f} s ({} samples, {} outliers left out)", span, n, outliers_);
+  // Each triad's new values (its held repeats counted once).
+  std::array<std::int64_t, 3> fresh{};
+  for (const auto& p : parts_) {
+    for (std::size_t t = 0; t < 3; ++t) fresh[t] += p.fresh[t].n;
+  }
   for (int t = 0; t < 3; ++t) {
     const double rho = prof.lag_one[static_cast<std::size_t>(t)];
-    // The values the triad's sigma came from (its held repeats counted once: fewer than the
-    // samples; TriadDof counts samples, as its users scale it).
-    double values = nd;
-    if (CountsHeldOnce(t)) {
-      values = 0;
-      for (const auto& p : parts_)
-        values += static_cast<double>(p.fresh[static_cast<std::size_t>(t)].n);
-    }
+    // The values the triad's sigma came from (fewer than the samples when its held repeats are
+    // counted once; TriadDof counts samples, as its users scale it).
+    const double values =
+        CountsHeldOnce(t) ? static_cast<double>(fresh[static_cast<std::size_t>(t)]) : nd;
     // Named when beyond white noise's 3 sigma (1 / sqrt(n)): a real correlation, not chance.
     if (!(present & (1u << t)) || std::abs(rho) <= 3.0 / std::sqrt(values)) continue;
     prof.source.insert(prof.source.size() - 1,
@@ -437,11 +438,9 @@ NoiseMeter::Status NoiseMeter::Finish() {
   }
   for (int t = 0; t < 3; ++t) {
     if (!(present & (1u << t)) || !CountsHeldOnce(t)) continue;
-    std::int64_t values = 0;
-    for (const auto& p : parts_) values += p.fresh[static_cast<std::size_t>(t)].n;
-    prof.source.insert(
-        prof.source.size() - 1,
-        fmt::format("; the {}'s held repeats counted once: {} values", TriadName(t), values));
+    prof.source.insert(prof.source.size() - 1,
+                       fmt::format("; the {}'s held repeats counted once: {} values", TriadName(t),
+                                   fresh[static_cast<std::size_t>(t)]));
   }
   std::string error;
   if (!prof.IsValid(&error)) return reject(error);
