@@ -199,7 +199,10 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
   m["p_value"] = e.p_value;
   m["covariance_scale"] = e.covariance_scale;
   m["fit_check"] = {{"verdict", ToString(e.fit.verdict)}, {"cause", e.fit.cause}};
-  if (std::isfinite(e.fit.noise_dof)) m["fit_check"]["noise_dof"] = e.fit.noise_dof;
+  if (std::isfinite(e.fit.noise_dof)) {
+    m["fit_check"]["noise_dof"] = e.fit.noise_dof;
+    m["fit_check"]["noise_scale"] = e.fit.noise_scale;
+  }
   if (e.fit.dof_share < 1) m["fit_check"]["dof_share"] = e.fit.dof_share;
   m["coverage"] = {{"filled", fe.coverage.filled},
                    {"total", fe.coverage.total},
@@ -227,6 +230,7 @@ nlohmann::json FreeResultJson(const FreeModelResult& r,
       bias[e.parameters[i].name] = fe.norm_bias[static_cast<Eigen::Index>(i)];
     }
     m["norm_bias"] = bias;  // removed from the values above (core/estimation/free_bias.h)
+    m["norm_bias_sigmas"] = fe.norm_bias_sigmas;  // its size in the estimate's own metric
   }
   if (fe.disturbance) {
     const FieldDisturbance& d = *fe.disturbance;

@@ -196,6 +196,9 @@ nlohmann::json ToJson(const NoiseProfile& p) {
                       {"source", p.source}};
   if (p.device_period_s) j["device_period_s"] = *p.device_period_s;
   if (std::isfinite(p.sigma_dof)) j["sigma_dof"] = p.sigma_dof;
+  if (p.measured_host_s) {
+    j["measured_host_s"] = {p.measured_host_s->first, p.measured_host_s->second};
+  }
   if (std::isfinite(p.gyr_bias_temp_c)) j["gyr_bias_temp_c"] = p.gyr_bias_temp_c;
   nlohmann::json lag_one = nlohmann::json::object();
   for (int t = 0; t < 3; ++t) {
@@ -243,6 +246,12 @@ bool ParseNoiseProfile(const nlohmann::json& j, NoiseProfile* out, std::string* 
   }
   if (j.contains("sigma_dof") && j["sigma_dof"].is_number()) {
     p.sigma_dof = j["sigma_dof"].get<double>();
+  }
+  if (j.contains("measured_host_s") && j["measured_host_s"].is_array() &&
+      j["measured_host_s"].size() == 2 && j["measured_host_s"][0].is_number() &&
+      j["measured_host_s"][1].is_number()) {
+    p.measured_host_s = std::make_pair(j["measured_host_s"][0].get<double>(),
+                                       j["measured_host_s"][1].get<double>());
   }
   if (j.contains("gyr_bias_temp_c") && j["gyr_bias_temp_c"].is_number()) {
     p.gyr_bias_temp_c = j["gyr_bias_temp_c"].get<double>();

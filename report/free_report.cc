@@ -107,7 +107,8 @@ std::string FreeReportText(const FreeReportInput& in, bool list_intervals) {
         fe.residuals, e.rank, e.parameters.size(), e.condition, e.dof > 0 ? e.chi2 / e.dof : 0.0,
         e.p_value,
         std::isfinite(e.fit.noise_dof)
-            ? fmt::format(", the F test against a noise measured with {:.0f} dof", e.fit.noise_dof)
+            ? fmt::format(", the F test against a noise measured with {:.0f} dof, its mean x{:.3f}",
+                          e.fit.noise_dof, e.fit.noise_scale)
             : std::string());
     if (e.fit.verdict != FitVerdict::kOk) o += fmt::format("  fit: {}\n", e.fit.cause);
     for (const auto& w : e.warnings) o += fmt::format("  {}\n", w);
@@ -224,6 +225,7 @@ nlohmann::json FreeReportJson(const FreeReportInput& in) {
                      {"samples_with_mag", m.samples_with_mag},
                      {"held", m.held},
                      {"in_intervals", m.in_intervals},
+                     {"in_noise_measurement", m.in_noise_measurement},
                      {"decimated", m.decimated},
                      {"rate_hz", m.period_s > 0 ? 1.0 / m.period_s : 0.0},
                      {"sigma", {m.sigma.x(), m.sigma.y(), m.sigma.z()}},

@@ -26,6 +26,9 @@ struct FitCheck {
   // Finite: the p-values are the F test's of chi^2 / dof against a noise estimated with this many
   // degrees of freedom (free mode's samples in motion, FreeCalibratorOptions::motion_noise_dof).
   double noise_dof = std::numeric_limits<double>::infinity();
+  // ... of (chi^2 / dof) / noise_scale: each residual mixes the axes' measured sigma by its own
+  // direction, which moves chi^2's mean beyond the F's (free_calibrator.cc MotionNoise).
+  double noise_scale = 1.0;
   // Below 1: the p-values count chi^2 / dof as having dof x dof_share degrees of freedom (free
   // mode's values in motion whitened with a correlation measured from them, ChainChi2DofShare).
   double dof_share = 1.0;

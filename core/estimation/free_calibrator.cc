@@ -147,9 +147,12 @@ class FreeCalibration {
           out_.correlation.lag_one, out_.correlation.pairs, 1e3 * out_.correlation.spacing_s,
           1e3 * out_.correlation.tau_s));
     }
-    RemoveNormBias();
+    // The bias is worked out at the least-squares solution, and the fit is checked there (chi^2's
+    // distribution is the minimum's); the estimate then moves by it.
+    const std::optional<Eigen::VectorXd> norm_bias = NormBias();
     if (!EvaluateAtSolution()) return std::move(out_);
     RankAndCovariance();
+    if (norm_bias) RemoveNormBias(*norm_bias);
     CheckFit();
     est_.covariance = cov_;
     est_.sigma = cov_.diagonal().cwiseMax(0).cwiseSqrt();
@@ -293,14 +296,20 @@ class FreeCalibration {
     return true;
   }
 
-  // The estimate less its second-order bias from the values' noise (core/estimation/free_bias.h),
-  // for the norm models; kept in the estimate.
-  void RemoveNormBias() {
-    if (!options_.remove_norm_bias) return;
-    const std::optional<Eigen::VectorXd> bias = NormFitBias(model_, data_, theta_);
-    if (!bias) return;
-    theta_ -= *bias;
-    out_.norm_bias = *bias;
+  // The norm models' second-order bias from the values' noise at theta_ (core/estimation/
+  // free_bias.h); nullopt when not removed.
+  std::optional<Eigen::VectorXd> NormBias() const {
+    if (!options_.remove_norm_bias) return std::nullopt;
+    return NormFitBias(model_, data_, theta_);
+  }
+
+  // The estimate less `bias`, kept in the estimate with its size in the estimate's own metric:
+  // |J b| with J whitened at the fit, the chi^2 the move adds (before any inflation).
+  void RemoveNormBias(const Eigen::VectorXd& bias) {
+    out_.norm_bias = bias;
+    out_.norm_bias_sigmas = (ev_.J * bias).norm();
+    theta_ -= bias;
+    est_.theta = theta_;
   }
 
   // The terms at the solution (with a joint whitening: the innovations, the terms whitened
@@ -374,9 +383,10 @@ class FreeCalibration {
     FitCheck& fit = est_.fit;
     fit.chi2 = est_.chi2;
     fit.dof = est_.dof;
-    const double nu = est_.dof > 0 && 2 * out_.motion_points > out_.intervals
-                          ? MotionNoiseDof()
-                          : std::numeric_limits<double>::infinity();
+    const MotionNoiseReference noise = est_.dof > 0 && 2 * out_.motion_points > out_.intervals
+                                           ? MotionNoise()
+                                           : MotionNoiseReference{};
+    const double nu = noise.dof;
     // Whitened with a correlation measured from the same residuals, chi^2 varies as their plain
     // sum of squares does: fewer degrees of freedom (ChainChi2DofShare).
     if (out_.correlation.whitened) {
@@ -385,11 +395,13 @@ class FreeCalibration {
     }
     const double d1 = est_.dof * fit.dof_share, x = est_.dof > 0 ? est_.chi2 / est_.dof : 0.0;
     if (est_.dof > 0 && std::isfinite(nu) && nu > 0) {
-      // F = (chi^2 / dof) against the noise's own chi^2_nu / nu: P(F > x) = I_{nu / (nu + d1 x)}
-      // (nu / 2, d1 / 2).
-      fit.p_upper = boost::math::ibeta(nu / 2, d1 / 2, nu / (nu + d1 * x));
-      fit.p_lower = boost::math::ibetac(nu / 2, d1 / 2, nu / (nu + d1 * x));
+      // F = (chi^2 / dof) / scale against the noise's own chi^2_nu / nu: P(F > y) =
+      // I_{nu / (nu + d1 y)}(nu / 2, d1 / 2).
+      const double y = x / noise.scale;
+      fit.p_upper = boost::math::ibeta(nu / 2, d1 / 2, nu / (nu + d1 * y));
+      fit.p_lower = boost::math::ibetac(nu / 2, d1 / 2, nu / (nu + d1 * y));
       fit.noise_dof = nu;
+      fit.noise_scale = noise.scale;
     } else if (est_.dof > 0) {
       fit.p_upper = boost::math::gamma_q(d1 / 2, d1 * x / 2);
       fit.p_lower = boost::math::gamma_p(d1 / 2, d1 * x / 2);
@@ -430,20 +442,49 @@ class FreeCalibration {
   // field's direction), so a rotation that turns every axis along the field averages the three
   // axes' independent estimates (3 nu for nu each); one that keeps one axis along it sees only
   // that axis's nu. nu_eff = nu / sum_k w_k^2, w_k each axis's share of the residuals' variance.
-  double MotionNoiseDof() const {
+  // The reference of chi^2 / dof against a noise measured per axis with nu = motion_noise_dof
+  // degrees of freedom (each axis's sigma^2 off by c_a ~ chi^2_nu / nu): a value's residual carries
+  // the axes' noise in the shares w_ia (its direction's squares, weighed by the axes' variances).
+  // chi^2 / dof then moves with sum_a W_a c_a (W_a the shares' mean over the values): its spread
+  // is F's with nu / sum_a W_a^2 degrees of freedom. Its mean is each value's own
+  // E[1 / sum_a w_ia c_a] = 1 + 2 m / (nu - 2), m = mean_i sum_a w_ia^2, which is at least
+  // sum_a W_a^2 (0.6 over a whole sphere, where sum_a W_a^2 is 1/3): the F is scaled to it.
+  struct MotionNoiseReference {
+    double dof = std::numeric_limits<double>::infinity();
+    double scale = 1.0;
+  };
+  MotionNoiseReference MotionNoise() const {
+    MotionNoiseReference out;
     const double nu = options_.motion_noise_dof;
-    if (!std::isfinite(nu) || !(nu > 0)) return nu;
+    if (!std::isfinite(nu) || !(nu > 0)) {
+      out.dof = nu;
+      return out;
+    }
     Eigen::Vector3d share = Eigen::Vector3d::Zero();
+    double concentration = 0.0;
+    int values = 0;
     for (const auto& iv : data_.intervals) {
       if (!iv.in_motion || !iv.mag) continue;
       const Eigen::Vector3d u = model_.Direction(data_, theta_, iv).normalized();
       if (!u.allFinite()) continue;
       const Eigen::Vector3d part = u.cwiseAbs2().cwiseProduct(iv.mag->covariance.diagonal());
-      if (part.sum() > 0) share += part / part.sum();
+      if (!(part.sum() > 0)) continue;
+      const Eigen::Vector3d w = part / part.sum();
+      share += w;
+      concentration += w.squaredNorm();
+      ++values;
     }
-    if (!(share.sum() > 0)) return nu;
-    share /= share.sum();
-    return nu / share.squaredNorm();
+    if (values == 0) {
+      out.dof = nu;
+      return out;
+    }
+    share /= values;
+    concentration /= values;
+    out.dof = nu / share.squaredNorm();
+    if (nu > 2 && out.dof > 2) {
+      out.scale = (1 + 2 * concentration / (nu - 2)) * (out.dof - 2) / out.dof;
+    }
+    return out;
   }
 
   // The parameters in a null direction (sigma infinite) and in a direction weaker than the gate

@@ -132,6 +132,9 @@ struct FreeEstimate {
   // The second-order bias from the values' noise, removed from the estimate (parameter units;
   // empty when not computed: FreeCalibratorOptions::remove_norm_bias, a model without norm terms).
   Eigen::VectorXd norm_bias;
+  // Its size in the estimate's own metric, sqrt(b' C^-1 b) (C the covariance before any chi^2
+  // inflation; at least the largest |b_i| / sigma_i): the chi^2 the move adds is its square.
+  double norm_bias_sigmas = 0.0;
 };
 
 // The norm misfit's RMS after the fit in per cent of the magnitude it is fitted to (the field's,

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 #include "core/models/free_common.h"
 
@@ -48,6 +49,9 @@ std::string MotionPoints::Summary() const {
       "magnetometer in motion: {} values taken (of {} samples with the field: {} held repeats "
       "dropped, {} in or next to still intervals",
       points.size(), samples_with_mag, held, in_intervals);
+  if (in_noise_measurement > 0) {
+    s += fmt::format(", {} the noise was measured from", in_noise_measurement);
+  }
   if (frozen) s += ": the value never changed -- a frozen magnetometer";
   if (decimated > 0) s += fmt::format(", {} left out to keep at most {}", decimated, points.size());
   s += ")";
@@ -165,12 +169,33 @@ MotionPoints MotionCollector::Select(const std::vector<FreeInterval>& intervals,
                                                 : b.t_host_s - a.t_host_s);
   }
   out.period_s = std::max(MedianOf(gaps), 1e-6);
-  // Outside the still intervals, with a margin of two periods on each side.
+  // The per-sample noise: pooled over the still intervals' own samples when they hold enough
+  // (thousands of samples: sigma to a per cent; the noise meter's second has a hundred, and a
+  // chi^2 over a thousand points would see its 7 %), else as given, else the points' scatter.
+  double dof = 0;
+  Eigen::Vector3d pooled = Eigen::Vector3d::Zero();
+  int pooled_intervals = 0;
+  for (const auto& iv : intervals) {
+    if (iv.in_motion || !iv.mag || iv.mag->count < 2) continue;
+    const double n = static_cast<double>(iv.mag->count - 1);
+    pooled += n * iv.mag->covariance.diagonal();
+    dof += n;
+    ++pooled_intervals;
+  }
+  const bool use_pooled =
+      dof >= options.min_pooled_samples && pooled.allFinite() && (pooled.array() > 0).all();
+  // Outside the still intervals, with a margin of two periods on each side, and outside the
+  // noise's measurement when that is what the points are weighed with.
   std::vector<std::pair<double, double>> still;
   for (const auto& iv : intervals) {
     if (!iv.in_motion) still.emplace_back(iv.t_start_s, iv.t_end_s);
   }
   std::sort(still.begin(), still.end());
+  double measured_from_s = std::numeric_limits<double>::infinity(),
+         measured_to_s = -measured_from_s;
+  if (!use_pooled && options.mag_sigma && options.mag_sigma_measured_host_s) {
+    std::tie(measured_from_s, measured_to_s) = *options.mag_sigma_measured_host_s;
+  }
   std::vector<const MotionValue*> moving;
   std::size_t w = 0;
   const double margin = 2 * out.period_s;
@@ -178,6 +203,10 @@ MotionPoints MotionCollector::Select(const std::vector<FreeInterval>& intervals,
     while (w < still.size() && still[w].second + margin < v.t_host_s) ++w;
     if (w < still.size() && v.t_host_s >= still[w].first - margin) {
       ++out.in_intervals;
+      continue;
+    }
+    if (v.t_host_s >= measured_from_s && v.t_host_s <= measured_to_s) {
+      ++out.in_noise_measurement;
       continue;
     }
     moving.push_back(&v);
@@ -194,20 +223,7 @@ MotionPoints MotionCollector::Select(const std::vector<FreeInterval>& intervals,
   out.decimated = static_cast<std::int64_t>(moving.size() - kept.size()) + thinned_;
   if (kept.empty()) return out;
 
-  // The per-sample noise: pooled over the still intervals' own samples when they hold enough
-  // (thousands of samples: sigma to a per cent; the noise meter's second has a hundred, and a
-  // chi^2 over a thousand points would see its 7 %), else as given, else the points' scatter.
-  double dof = 0;
-  Eigen::Vector3d pooled = Eigen::Vector3d::Zero();
-  int pooled_intervals = 0;
-  for (const auto& iv : intervals) {
-    if (iv.in_motion || !iv.mag || iv.mag->count < 2) continue;
-    const double n = static_cast<double>(iv.mag->count - 1);
-    pooled += n * iv.mag->covariance.diagonal();
-    dof += n;
-    ++pooled_intervals;
-  }
-  if (dof >= options.min_pooled_samples && pooled.allFinite() && (pooled.array() > 0).all()) {
+  if (use_pooled) {
     out.sigma = (pooled / dof).cwiseSqrt();
     out.sigma_dof = dof;
     out.noise_source = fmt::format("pooled over the {} still intervals' {:.0f} samples",
@@ -274,6 +290,7 @@ FreeCollected CollectFree(const std::vector<Sample>& samples, const SequencerOpt
       mo.mag_sigma_dof = out.found.noise->TriadDof(kTriadMag);
       mo.mag_sigma_rate_hz = out.found.noise->rate_hz;
       mo.noise_source = out.found.noise->source;
+      mo.mag_sigma_measured_host_s = out.found.noise->measured_host_s;
     }
     out.motion = MagnetometerInMotion(samples, out.found.intervals, mo);
     out.data.insert(out.data.end(), out.motion->points.begin(), out.motion->points.end());

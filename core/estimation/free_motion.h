@@ -51,6 +51,11 @@ struct MotionOptions {
   // that one).
   double mag_sigma_dof = std::numeric_limits<double>::infinity();
   double mag_sigma_rate_hz = 0.0;
+  // The host times mag_sigma was measured over (a noise meter's second): the values there are
+  // left out when mag_sigma is what the points are weighed with, so that the fit check's F test
+  // compares the residuals with an independent estimate of their noise (the meter's values in
+  // both made the check's p-values pile in the middle).
+  std::optional<std::pair<double, double>> mag_sigma_measured_host_s;
   // The still intervals' own samples, pooled, are the noise instead when they hold at least this
   // many (their scatter about their means: sigma to sqrt(1 / 2n)).
   double min_pooled_samples = 1000;
@@ -66,11 +71,12 @@ struct MotionOptions {
 struct MotionPoints {
   std::vector<FreeInterval> points;  // in time order
   std::int64_t samples_with_mag = 0;
-  std::int64_t held = 0;          // repeats of the previous value, dropped
-  std::int64_t in_intervals = 0;  // new values inside (or next to) a still interval
-  std::int64_t decimated = 0;     // new values in motion left out to keep max_points
-  double period_s = 0.0;          // between new values (the magnetometer's own rate's period)
-  bool frozen = false;            // every sample with the field held one value
+  std::int64_t held = 0;                  // repeats of the previous value, dropped
+  std::int64_t in_intervals = 0;          // new values inside (or next to) a still interval
+  std::int64_t in_noise_measurement = 0;  // new values the noise was measured from, left out
+  std::int64_t decimated = 0;             // new values in motion left out to keep max_points
+  double period_s = 0.0;  // between new values (the magnetometer's own rate's period)
+  bool frozen = false;    // every sample with the field held one value
   Eigen::Vector3d sigma = Eigen::Vector3d::Zero();
   // Its degrees of freedom: a noise meter's second of a 50-Hz magnetometer has about 50, so that
   // sigma is uncertain by 10 % and the fit check is an F test against it (FreeCalibratorOptions::

@@ -416,6 +416,8 @@ NoiseMeter::Status NoiseMeter::Finish() {
   }
   if (std::string why; !MeasureRate(&prof, &why)) return reject(why);
   prof.sigma_dof = dof;
+  prof.measured_host_s =
+      std::make_pair(static_cast<double>(t_first_ns) * 1e-9, static_cast<double>(t_last_ns) * 1e-9);
   prof.source =
       fmt::format("measured over {:.2f} s ({} samples, {} outliers left out)", span, n, outliers_);
   // Each triad's new values (its held repeats counted once).

@@ -91,6 +91,10 @@ struct NoiseProfile {
   // The degrees of freedom of triad t's sigma: sigma_dof with its values' correlation allowed for.
   double TriadDof(int t) const;
   std::string source;  // e.g. "measured over 1.00 s (100 samples)"
+  // The host times of the measurement's first and last sample, s (absent: a datasheet's profile):
+  // free mode leaves the magnetometer's values there out of its fit in motion, whose check weighs
+  // the other values with this sigma (an F test needs the two independent).
+  std::optional<std::pair<double, double>> measured_host_s;
   // Per triad, the bias wander identified from the poses (absent until a calibrator has); the
   // stillness tests allow for it, and it is kept with the profile across restarts.
   std::array<std::optional<IdentifiedDrift>, 3> identified_drift;

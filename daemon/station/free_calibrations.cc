@@ -174,6 +174,7 @@ void FreeCalibrations::QueueFit(DevicePipeline& d, double t_s, bool resuming,
       motion_options.mag_sigma_dof = noise->TriadDof(kTriadMag);
       motion_options.mag_sigma_rate_hz = noise->rate_hz;
       motion_options.noise_source = noise->source;
+      motion_options.mag_sigma_measured_host_s = noise->measured_host_s;
     } else {
       motion_options.mag_sigma = class_mag_sigma_;
       motion_options.noise_source = class_noise_source_;

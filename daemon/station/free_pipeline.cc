@@ -79,6 +79,7 @@ nlohmann::json FreeMotionState::Json() const {
   if (last) {
     j["points"] = last->points.size();
     j["in_intervals"] = last->in_intervals;
+    j["in_noise_measurement"] = last->in_noise_measurement;
     j["decimated"] = last->decimated;
     j["rate_hz"] = last->period_s > 0 ? nlohmann::json(1.0 / last->period_s) : nlohmann::json();
     j["noise_source"] = last->noise_source;

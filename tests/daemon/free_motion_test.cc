@@ -389,6 +389,43 @@ TEST(FreeMotion, AnXbusConsumerWithPausesGivesAnHonestEllipsoid) {
   ExpectHonest(f, f.results[0], "xbus consumer, pauses");
 }
 
+// A noise measured in a pause (the noise meter's second, issue 37's 4-s pause row): the values
+// it was measured from are left out of the points, whose fit check weighs the rest with it (an F
+// test needs the two independent; with them in, 600 runs' p-values piled in the middle).
+TEST(FreeMotion, TheNoiseMetersOwnValuesAreLeftOutOfThePoints) {
+  HandCase k;
+  k.protocol = drivers::Protocol::kXbus;
+  k.rate_hz = 100;
+  k.mag_rate_hz = 50;
+  k.sensor_class = "consumer";
+  k.hand.duration_s = 10;
+  k.hand.pause_every_s = 3;
+  k.hand.pause_s = 4.0;
+  k.class_noise = false;  // measured by the meter, in the pause
+  k.seed = 3;
+  const HandFit f = Fit(k, {"magellipsoid"});
+  ASSERT_TRUE(f.collected.found.noise);
+  ASSERT_TRUE(f.collected.found.noise->measured_host_s);
+  const auto [from_s, to_s] = *f.collected.found.noise->measured_host_s;
+  EXPECT_NEAR(to_s - from_s, 1.0, 0.05);
+  EXPECT_GE(from_s - static_cast<double>(f.capture.offset_ns) * 1e-9, 3.0);  // in the pause
+  ASSERT_TRUE(f.collected.motion);
+  const MotionPoints& m = *f.collected.motion;
+  // A second of a 50-Hz magnetometer: 50 values, none of them a point.
+  EXPECT_NEAR(static_cast<double>(m.in_noise_measurement), 50, 2) << m.Summary();
+  for (const FreeInterval& p : m.points) {
+    EXPECT_FALSE(p.t_start_s >= from_s && p.t_start_s <= to_s) << p.t_start_s;
+  }
+  EXPECT_EQ(static_cast<std::int64_t>(m.points.size()) + m.in_intervals + m.in_noise_measurement +
+                m.decimated,
+            500)
+      << m.Summary();
+  EXPECT_NE(m.Summary().find("the noise was measured from"), std::string::npos) << m.Summary();
+  ASSERT_EQ(f.results.size(), 1u);
+  EXPECT_EQ(f.results[0].model, "magellipsoid") << f.results[0].note;
+  ExpectHonest(f, f.results[0], "xbus consumer, the noise measured in a pause");
+}
+
 // A magnetometer 50 ms behind the stream's clock (4.5 deg of a 90-deg/s turn): the field's
 // magnitude is the same whenever it was measured, so the norm terms do not see the lag, and the
 // pauses' intervals start once the magnetometer is still too (it is part of the stillness test).

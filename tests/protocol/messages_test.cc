@@ -75,6 +75,7 @@ TEST(NoiseProfileJson, IdentifiedDriftRoundTripsAndOldFilesStillParse) {
   acc.poses = 32;
   p.identified_drift[kTriadAcc] = acc;
   p.gyr_bias_temp_c = 31.25;
+  p.measured_host_s = std::make_pair(12.5, 13.49);
   const nlohmann::json j = ToJson(p);
   NoiseProfile back;
   std::string error;
@@ -86,14 +87,19 @@ TEST(NoiseProfileJson, IdentifiedDriftRoundTripsAndOldFilesStillParse) {
   EXPECT_EQ(back.identified_drift[kTriadAcc]->drift.gm_sigma, acc.drift.gm_sigma);
   EXPECT_EQ(back.identified_drift[kTriadAcc]->drift.gm_tau_s, 100);
   EXPECT_EQ(back.gyr_bias_temp_c, 31.25);
+  ASSERT_TRUE(back.measured_host_s.has_value());
+  EXPECT_EQ(back.measured_host_s->first, 12.5);
+  EXPECT_EQ(back.measured_host_s->second, 13.49);
 
   nlohmann::json old = j;
   old.erase("identified_drift");
   ASSERT_TRUE(ParseNoiseProfile(old, &back, &error)) << error;
   EXPECT_FALSE(back.identified_drift[kTriadAcc].has_value());
   old.erase("gyr_bias_temp_c");
+  old.erase("measured_host_s");
   ASSERT_TRUE(ParseNoiseProfile(old, &back, &error)) << error;
   EXPECT_TRUE(std::isnan(back.gyr_bias_temp_c));
+  EXPECT_FALSE(back.measured_host_s.has_value());
 
   nlohmann::json bad = j;
   bad["identified_drift"]["acc"]["scale"] = -1;
