@@ -27,7 +27,7 @@ struct FitCheck {
   // degrees of freedom (free mode's samples in motion, FreeCalibratorOptions::motion_noise_dof).
   double noise_dof = std::numeric_limits<double>::infinity();
   // ... of (chi^2 / dof) / noise_scale: each residual mixes the axes' measured sigma by its own
-  // direction, which moves chi^2's mean beyond the F's (free_calibrator.cc MotionNoise).
+  // direction, which moves chi^2's mean beyond the F's (core/estimation/free_noise_reference.h).
   double noise_scale = 1.0;
   // Below 1: the p-values count chi^2 / dof as having dof x dof_share degrees of freedom (free
   // mode's values in motion whitened with a correlation measured from them, ChainChi2DofShare).

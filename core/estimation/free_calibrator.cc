@@ -2,6 +2,7 @@
 
 #include "core/estimation/free_bias.h"
 #include "core/estimation/free_drift.h"
+#include "core/estimation/free_noise_reference.h"
 
 #include <ceres/ceres.h>
 #include <fmt/format.h>
@@ -383,9 +384,10 @@ class FreeCalibration {
     FitCheck& fit = est_.fit;
     fit.chi2 = est_.chi2;
     fit.dof = est_.dof;
-    const MotionNoiseReference noise = est_.dof > 0 && 2 * out_.motion_points > out_.intervals
-                                           ? MotionNoise()
-                                           : MotionNoiseReference{};
+    const MotionNoiseReference noise =
+        est_.dof > 0 && 2 * out_.motion_points > out_.intervals
+            ? MotionNoiseReferenceFor(model_, data_, theta_, options_.motion_noise_dof)
+            : MotionNoiseReference{};
     const double nu = noise.dof;
     // Whitened with a correlation measured from the same residuals, chi^2 varies as their plain
     // sum of squares does: fewer degrees of freedom (ChainChi2DofShare).
@@ -435,56 +437,6 @@ class FreeCalibration {
       fit.verdict = FitVerdict::kTooSmall;
       fit.cause = "the residuals are smaller than the intervals' noise says";
     }
-  }
-
-  // The degrees of freedom of the noise the samples in motion are weighed with, as their norm
-  // residuals see it: each residual's variance is sum_k u_k^2 sigma_k^2 over the axes (u the
-  // field's direction), so a rotation that turns every axis along the field averages the three
-  // axes' independent estimates (3 nu for nu each); one that keeps one axis along it sees only
-  // that axis's nu. nu_eff = nu / sum_k w_k^2, w_k each axis's share of the residuals' variance.
-  // The reference of chi^2 / dof against a noise measured per axis with nu = motion_noise_dof
-  // degrees of freedom (each axis's sigma^2 off by c_a ~ chi^2_nu / nu): a value's residual carries
-  // the axes' noise in the shares w_ia (its direction's squares, weighed by the axes' variances).
-  // chi^2 / dof then moves with sum_a W_a c_a (W_a the shares' mean over the values): its spread
-  // is F's with nu / sum_a W_a^2 degrees of freedom. Its mean is each value's own
-  // E[1 / sum_a w_ia c_a] = 1 + 2 m / (nu - 2), m = mean_i sum_a w_ia^2, which is at least
-  // sum_a W_a^2 (0.6 over a whole sphere, where sum_a W_a^2 is 1/3): the F is scaled to it.
-  struct MotionNoiseReference {
-    double dof = std::numeric_limits<double>::infinity();
-    double scale = 1.0;
-  };
-  MotionNoiseReference MotionNoise() const {
-    MotionNoiseReference out;
-    const double nu = options_.motion_noise_dof;
-    if (!std::isfinite(nu) || !(nu > 0)) {
-      out.dof = nu;
-      return out;
-    }
-    Eigen::Vector3d share = Eigen::Vector3d::Zero();
-    double concentration = 0.0;
-    int values = 0;
-    for (const auto& iv : data_.intervals) {
-      if (!iv.in_motion || !iv.mag) continue;
-      const Eigen::Vector3d u = model_.Direction(data_, theta_, iv).normalized();
-      if (!u.allFinite()) continue;
-      const Eigen::Vector3d part = u.cwiseAbs2().cwiseProduct(iv.mag->covariance.diagonal());
-      if (!(part.sum() > 0)) continue;
-      const Eigen::Vector3d w = part / part.sum();
-      share += w;
-      concentration += w.squaredNorm();
-      ++values;
-    }
-    if (values == 0) {
-      out.dof = nu;
-      return out;
-    }
-    share /= values;
-    concentration /= values;
-    out.dof = nu / share.squaredNorm();
-    if (nu > 2 && out.dof > 2) {
-      out.scale = (1 + 2 * concentration / (nu - 2)) * (out.dof - 2) / out.dof;
-    }
-    return out;
   }
 
   // The parameters in a null direction (sigma infinite) and in a direction weaker than the gate
