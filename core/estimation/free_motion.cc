@@ -44,6 +44,16 @@ double ScatterSigma(const std::vector<Eigen::Vector3d>& points) {
 
 }  // namespace
 
+bool MotionOptions::TakeNoise(const NoiseProfile& profile) {
+  if (!profile.sigma[kTriadMag]) return false;
+  mag_sigma = *profile.sigma[kTriadMag];
+  mag_sigma_dof = profile.TriadDof(kTriadMag);
+  mag_sigma_rate_hz = profile.rate_hz;
+  noise_source = profile.source;
+  mag_sigma_measured_host_s = profile.measured_host_s;
+  return true;
+}
+
 std::string MotionPoints::Summary() const {
   std::string s = fmt::format(
       "magnetometer in motion: {} values taken (of {} samples with the field: {} held repeats "
@@ -285,13 +295,7 @@ FreeCollected CollectFree(const std::vector<Sample>& samples, const SequencerOpt
                                    [](const Sample& s) { return s.mag.has_value(); });
   if (motion && has_mag) {
     MotionOptions mo = *motion;
-    if (!mo.mag_sigma && out.found.noise && out.found.noise->sigma[kTriadMag]) {
-      mo.mag_sigma = *out.found.noise->sigma[kTriadMag];
-      mo.mag_sigma_dof = out.found.noise->TriadDof(kTriadMag);
-      mo.mag_sigma_rate_hz = out.found.noise->rate_hz;
-      mo.noise_source = out.found.noise->source;
-      mo.mag_sigma_measured_host_s = out.found.noise->measured_host_s;
-    }
+    if (!mo.mag_sigma && out.found.noise) mo.TakeNoise(*out.found.noise);
     out.motion = MagnetometerInMotion(samples, out.found.intervals, mo);
     out.data.insert(out.data.end(), out.motion->points.begin(), out.motion->points.end());
   }

@@ -56,6 +56,9 @@ struct MotionOptions {
   // compares the residuals with an independent estimate of their noise (the meter's values in
   // both made the check's p-values pile in the middle).
   std::optional<std::pair<double, double>> mag_sigma_measured_host_s;
+  // The magnetometer's noise as `profile` has it (sigma, dof, rate, source, when measured); false
+  // (nothing set) when the profile has no magnetometer.
+  bool TakeNoise(const NoiseProfile& profile);
   // The still intervals' own samples, pooled, are the noise instead when they hold at least this
   // many (their scatter about their means: sigma to sqrt(1 / 2n)).
   double min_pooled_samples = 1000;

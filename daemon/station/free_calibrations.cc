@@ -169,13 +169,7 @@ void FreeCalibrations::QueueFit(DevicePipeline& d, double t_s, bool resuming,
     motion = std::make_shared<const MotionCollector>(motion_.collector);
     // The noise per sample: the profile's the sequencer uses (measured or the class's).
     const NoiseProfile* noise = d.sequencer->noise();
-    if (noise && noise->sigma[kTriadMag]) {
-      motion_options.mag_sigma = *noise->sigma[kTriadMag];
-      motion_options.mag_sigma_dof = noise->TriadDof(kTriadMag);
-      motion_options.mag_sigma_rate_hz = noise->rate_hz;
-      motion_options.noise_source = noise->source;
-      motion_options.mag_sigma_measured_host_s = noise->measured_host_s;
-    } else {
+    if (!noise || !motion_options.TakeNoise(*noise)) {
       motion_options.mag_sigma = class_mag_sigma_;
       motion_options.noise_source = class_noise_source_;
     }
