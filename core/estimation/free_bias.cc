@@ -1,6 +1,7 @@
 #include "core/estimation/free_bias.h"
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <cmath>
 #include <vector>
@@ -40,7 +41,8 @@ const std::optional<TriadStats>& StatsOf(const FreeInterval& interval, SensorKin
 }  // namespace
 
 std::optional<Eigen::VectorXd> NormFitBias(const FreeModel& model, const FreeData& data,
-                                           const Eigen::VectorXd& theta) {
+                                           const Eigen::VectorXd& theta,
+                                           const NormBiasCorrelation* correlated) {
   const SensorKind triad = model.sensor();
   for (SensorKind k :
        {SensorKind::kAccelerometer, SensorKind::kGyroscope, SensorKind::kMagnetometer}) {
@@ -106,33 +108,62 @@ std::optional<Eigen::VectorXd> NormFitBias(const FreeModel& model, const FreeDat
     for (Eigen::Index i = 0; i < m; ++i) C[static_cast<std::size_t>(i)].row(p) = row.row(i);
   }
 
-  // A^-1 in the model's scaled units (full rank only).
-  const Eigen::MatrixXd Js = J0 * scales.asDiagonal();
-  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Js, Eigen::ComputeThinV);
-  const Eigen::VectorXd& s = svd.singularValues();
-  if (!(s.size() == n && s[n - 1] > 1e-12 * s[0])) return std::nullopt;
-  const Eigen::MatrixXd Ainv = scales.asDiagonal() * svd.matrixV() *
-                               s.cwiseInverse().cwiseAbs2().asDiagonal() *
-                               svd.matrixV().transpose() * scales.asDiagonal();
-  Eigen::VectorXd w(m);
-  for (Eigen::Index i = 0; i < m; ++i)
-    w[i] = c[0][i] * c[0][i] + c[1][i] * c[1][i] + c[2][i] * c[2][i];
-  const Eigen::MatrixXd P = Ainv * (J0.transpose() * w.asDiagonal() * J0) * Ainv;
+  // A = J' Q J and its inverse in the model's scaled units (full rank only); Q = I when the
+  // values are fitted as independent.
+  const Eigen::MatrixXd* Q = correlated ? &correlated->weight : nullptr;
+  const Eigen::MatrixXd* rho = correlated ? &correlated->noise : nullptr;
+  if (Q && (Q->rows() != m || Q->cols() != m || rho->rows() != m || rho->cols() != m)) {
+    return std::nullopt;
+  }
+  const Eigen::MatrixXd QJ = Q ? Eigen::MatrixXd(*Q * J0) : J0;
+  Eigen::MatrixXd Ainv;
+  if (!Q) {
+    const Eigen::MatrixXd Js = J0 * scales.asDiagonal();
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Js, Eigen::ComputeThinV);
+    const Eigen::VectorXd& s = svd.singularValues();
+    if (!(s.size() == n && s[n - 1] > 1e-12 * s[0])) return std::nullopt;
+    Ainv = scales.asDiagonal() * svd.matrixV() * s.cwiseInverse().cwiseAbs2().asDiagonal() *
+           svd.matrixV().transpose() * scales.asDiagonal();
+  } else {
+    const Eigen::MatrixXd As = scales.asDiagonal() * (J0.transpose() * QJ) * scales.asDiagonal();
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(As);
+    const Eigen::VectorXd& e = eig.eigenvalues();
+    if (eig.info() != Eigen::Success || !(e[0] > 1e-24 * e[n - 1])) return std::nullopt;
+    Ainv = scales.asDiagonal() * eig.eigenvectors() * e.cwiseInverse().asDiagonal() *
+           eig.eigenvectors().transpose() * scales.asDiagonal();
+  }
+  // G = A^-1 J' Q: the first-order estimate is -G u, u_i = c_i' z_i. K = E[u u'] =
+  // rho o (c c'), P = G K G' its covariance.
+  const Eigen::MatrixXd G = Ainv * QJ.transpose();
+  Eigen::MatrixXd cz(m, 3);
+  for (int k = 0; k < 3; ++k) cz.col(k) = c[k];
+  Eigen::MatrixXd GK, M[3];
+  Eigen::MatrixXd both_c;  // (Q o rho) c: each value's noise against the weighted others'
+  if (!Q) {
+    const Eigen::VectorXd w = cz.rowwise().squaredNorm();
+    GK = G * w.asDiagonal();
+    for (int k = 0; k < 3; ++k) M[k] = G * c[k].asDiagonal();
+    both_c = cz;
+  } else {
+    GK = G * rho->cwiseProduct(cz * cz.transpose());
+    for (int k = 0; k < 3; ++k) M[k] = G * c[k].asDiagonal() * *rho;
+    both_c = Q->cwiseProduct(*rho) * cz;
+  }
+  const Eigen::MatrixXd P = GK * G.transpose();
+  const Eigen::MatrixXd GKQ = Q ? Eigen::MatrixXd(GK * *Q) : GK;
 
   Eigen::VectorXd g = Eigen::VectorXd::Zero(n);
   for (Eigen::Index i = 0; i < m; ++i) {
-    const Eigen::VectorXd a = J0.row(i).transpose();
-    const Eigen::VectorXd Aa = Ainv * a;
+    const Eigen::VectorXd qa = QJ.row(i).transpose();
     const Eigen::MatrixXd& Ci = C[static_cast<std::size_t>(i)];
     double scalar = (Ci.cwiseProduct(P)).sum() / 2;  // tr(C_i P) / 2, both symmetric
-    Eigen::VectorXd vector = Ci * (P * a - w[i] * Aa);
-    const double leverage = a.dot(Aa);
+    Eigen::VectorXd vector = Ci * (P * qa - GKQ.col(i));
     for (int k = 0; k < 3; ++k) {
       const Eigen::VectorXd b = dJ[k].row(i).transpose();
-      scalar += hzz[k][i] / 2 - c[k][i] * b.dot(Aa);
-      vector += b * (c[k][i] * (1 - leverage));
+      scalar += hzz[k][i] / 2 - b.dot(M[k].col(i));
+      vector += b * (both_c(i, k) - qa.dot(M[k].col(i)));
     }
-    g += a * scalar + vector;
+    g += qa * scalar + vector;
   }
   const Eigen::VectorXd bias = -Ainv * g;
   if (!bias.allFinite()) return std::nullopt;

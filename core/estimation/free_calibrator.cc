@@ -299,9 +299,20 @@ class FreeCalibration {
 
   // The norm models' second-order bias from the values' noise at theta_ (core/estimation/
   // free_bias.h); nullopt when not removed.
-  std::optional<Eigen::VectorXd> NormBias() const {
+  // Whitened together (a drift, a correlation between the values), the bias is the generalised
+  // fit's: its weights W'W and the values' noise correlation.
+  std::optional<Eigen::VectorXd> NormBias() {
     if (!options_.remove_norm_bias) return std::nullopt;
-    return NormFitBias(model_, data_, theta_);
+    if (!joint_) return NormFitBias(model_, data_, theta_);
+    const std::vector<FreeTerm> terms = model_.Terms(data_, theta_);
+    NormBiasCorrelation correlated;
+    const Eigen::MatrixXd W = Whitener(terms, theta_);
+    correlated.weight = W.transpose() * W;
+    correlated.noise = Eigen::MatrixXd::Identity(W.rows(), W.cols());
+    if (out_.correlation.whitened) {
+      AddChainCovariance(MotionChain(terms, data_, out_.correlation.tau_s), &correlated.noise);
+    }
+    return NormFitBias(model_, data_, theta_, &correlated);
   }
 
   // The estimate less `bias`, kept in the estimate with its size in the estimate's own metric:
