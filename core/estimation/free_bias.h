@@ -25,12 +25,13 @@
 // generalised least squares with the weight Q = W'W, E[z_i z_j'] = rho_ij I: the same expansion
 // of J' Q r = 0 with G = A^-1 J' Q (A = J' Q J), u_i = c_i' z_i, K = E[u u'] = rho o (c c'),
 // P = G K G', M_k = G diag(c_k) rho (c_k the k-th axis' c_i over the values) gives
-//   E[theta_hat - theta] = -A^-1 { sum_i (QJ)_i (tr H_i / 2 + tr(C_i P) / 2 - sum_k B_ik' M_k,i)
+//   E[theta_hat - theta] = -A^-1 { sum_i (QJ)_i (tr H_i / 2 + tr(C_i P) / 2 - sum_k b_ik' M_k,i)
 //                                  + sum_i C_i (P (QJ)_i - (G K Q)_i)
-//                                  + sum_i sum_k B_ik (((Q o rho) c)_ik - (QJ)_i' M_k,i) }
-// (M_k,i the column i, B_ik = d a_i / d z_ik), which is the formula above when Q = rho = I. The
-// noise's correlation with the Jacobians of the values around it does not average out as the
-// values grow denser: the bias grows with the values while the information they add levels off.
+//                                  + sum_i sum_k b_ik (((Q o rho) c)_ik - (QJ)_i' M_k,i) }
+// (M_k,i its column i, b_ik = d a_i / d z_ik the k-th row of B_i as an n-vector), which is the
+// formula above when Q = rho = I. The noise's correlation with the Jacobians of the values
+// around it does not average out as the values grow denser: the bias grows with the values
+// while the information they add levels off.
 // On one 10-second tumble of a 10-Hz filtered magnetometer sampled at 100 Hz (issue 37's
 // correlated pause row, seed 7000 run 43) the generalised fit was 5-6 sigma off; the independent
 // values' formula gave a bias of 1.4 sigma, this one 4.2, and with it removed bx is 1.8 sigma off
