@@ -148,10 +148,11 @@ class FreeCalibration {
           out_.correlation.lag_one, out_.correlation.pairs, 1e3 * out_.correlation.spacing_s,
           1e3 * out_.correlation.tau_s));
     }
-    // The bias is worked out at the least-squares solution, and the fit is checked there (chi^2's
-    // distribution is the minimum's); the estimate then moves by it.
-    const std::optional<Eigen::VectorXd> norm_bias = NormBias();
+    // The bias is worked out at the least-squares solution (with the terms and their whitener
+    // evaluated there), and the fit is checked there (chi^2's distribution is the minimum's); the
+    // estimate then moves by it.
     if (!EvaluateAtSolution()) return std::move(out_);
+    const std::optional<Eigen::VectorXd> norm_bias = NormBias();
     RankAndCovariance();
     if (norm_bias) RemoveNormBias(*norm_bias);
     CheckFit();
@@ -300,17 +301,16 @@ class FreeCalibration {
   // The norm models' second-order bias from the values' noise at theta_ (core/estimation/
   // free_bias.h); nullopt when not removed.
   // Whitened together (a drift, a correlation between the values), the bias is the generalised
-  // fit's: its weights W'W and the values' noise correlation.
-  std::optional<Eigen::VectorXd> NormBias() {
+  // fit's: its weights W'W (the whitener EvaluateAtSolution built) and the values' noise
+  // correlation.
+  std::optional<Eigen::VectorXd> NormBias() const {
     if (!options_.remove_norm_bias) return std::nullopt;
     if (!joint_) return NormFitBias(model_, data_, theta_);
-    const std::vector<FreeTerm> terms = model_.Terms(data_, theta_);
     NormBiasCorrelation correlated;
-    const Eigen::MatrixXd W = Whitener(terms, theta_);
-    correlated.weight = W.transpose() * W;
-    correlated.noise = Eigen::MatrixXd::Identity(W.rows(), W.cols());
+    correlated.weight = whitener_.transpose() * whitener_;
+    correlated.noise = Eigen::MatrixXd::Identity(whitener_.rows(), whitener_.cols());
     if (out_.correlation.whitened) {
-      AddChainCovariance(MotionChain(terms, data_, out_.correlation.tau_s), &correlated.noise);
+      AddChainCovariance(MotionChain(terms_, data_, out_.correlation.tau_s), &correlated.noise);
     }
     return NormFitBias(model_, data_, theta_, &correlated);
   }
@@ -330,10 +330,10 @@ class FreeCalibration {
     terms_ = model_.Terms(data_, theta_);
     ev_ = Evaluate(terms_, theta_, upstream_, &out_.terms);
     if (joint_ && ev_.r.allFinite()) {
-      const Eigen::MatrixXd W = Whitener(terms_, theta_);
-      ev_.r = W * ev_.r;
-      ev_.J = W * ev_.J;
-      if (ev_.Ju.cols() > 0) ev_.Ju = W * ev_.Ju;
+      whitener_ = Whitener(terms_, theta_);
+      ev_.r = whitener_ * ev_.r;
+      ev_.J = whitener_ * ev_.J;
+      if (ev_.Ju.cols() > 0) ev_.Ju = whitener_ * ev_.Ju;
       int row = 0;
       for (auto& t : out_.terms) {
         const auto k = t.whitened.size();
@@ -562,6 +562,7 @@ class FreeCalibration {
   bool correlated_by_drift_ = false;  // by a triad's drift or noise terms share
   // The solve's terms (the stacked cost refers to them) and the terms at the solution.
   std::vector<FreeTerm> terms_;
+  Eigen::MatrixXd whitener_;  // the terms whitened together at the solution (joint_)
   std::unique_ptr<StackedFreeCost> stacked_;
   Evaluated ev_;
   bool with_upstream_ = false;
