@@ -28,12 +28,24 @@ class ZScoreSummary {
   // The Monte Carlo engines' verdict on a parameter (docs/ACCURACY.md): spread in [0.9, 1.1] and
   // |mean| <= 0.15.
   bool Honest(int parameter) const;
+  // The correlation of the parameters' z over the runs added (the identity's entries where a
+  // parameter has no spread, or with fewer than two runs).
+  Eigen::MatrixXd Correlation() const;
 
  private:
   int runs_ = 0;
   Eigen::VectorXd sum_, sum_sq_;
+  Eigen::MatrixXd sum_outer_;  // sum of z z^T
   Eigen::VectorXi beyond_3_, beyond_4_;
 };
+
+// How often a row of `runs` runs passes Honest() on every parameter when the sigma IS honest:
+// z normal with mean 0, spread 1 and the given correlation between the parameters, simulated
+// for `rows` rows (a fixed seed: the same answer each time). The verdict's bounds are about two
+// standard errors wide at 200 runs (std z's 1/sqrt(2 * 200) = 0.05, mean z's 1/sqrt(200) =
+// 0.071), so with nine parameters an honest sigma fails a row of 200 about half the time
+// (docs/FREE.md, "How often an honest sigma fails a row").
+double HonestRowPassChance(const Eigen::MatrixXd& correlation, int runs, int rows = 2000);
 
 // The runs of an engine's summary (`s->runs`, each with ok, error, z and p_value) that have an
 // estimate, in order: their z-scores added to `s->z`, counted in `s->solved`, and `each` called

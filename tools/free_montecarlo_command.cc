@@ -4,6 +4,7 @@
 #include <fmt/ranges.h>
 
 #include <algorithm>
+#include <cmath>
 #include <memory>
 #include <nlohmann/json.hpp>
 
@@ -27,7 +28,10 @@ constexpr Manual kFreeMonteCarloManual = {
     "its errors: mean and std of z per parameter, the count beyond 3 sigma, the chi^2 "
     "p-values against uniform, the gate. With --hand, a hand's continuous rotation instead "
     "(the magnetometer's samples in motion as data), through the station exactly as "
-    "`turncald --replay FILE --once --pose-source free` runs it.",
+    "`turncald --replay FILE --once --pose-source free` runs it. It also says how often an "
+    "honest sigma passes the criteria in a row of this many runs (about half the rows of 200 "
+    "for nine parameters; 99 % of rows of 600): a row that misses them by a little asks for "
+    "more runs.",
     "turncal free-montecarlo --model accel9 --runs 200\n"
     "turncal free-montecarlo --model gyro9 --class consumer --runs 200\n"
     "turncal free-montecarlo --model magellipsoid --cap 20 --runs 50   # low coverage\n"
@@ -60,6 +64,31 @@ std::string HardIronText(const montecarlo::FreeMonteCarloSummary& s) {
       ErrorsText(s.hard_iron), ErrorsText(s.plain_sphere), ErrorsText(s.plain_ellipsoid));
 }
 
+// How often an honest sigma passes the criteria in a row of this many runs, and of 600: the
+// criteria are about two standard errors wide at 200 runs (montecarlo::HonestRowPassChance).
+struct RowChance {
+  double these = 0, of600 = 0;
+};
+
+RowChance ChanceOf(const montecarlo::FreeMonteCarloSummary& s) {
+  const Eigen::MatrixXd correlation = s.z.Correlation();
+  return {montecarlo::HonestRowPassChance(correlation, s.solved),
+          montecarlo::HonestRowPassChance(correlation, 600, 1000)};
+}
+
+std::string ChanceText(const montecarlo::FreeMonteCarloSummary& s) {
+  const RowChance c = ChanceOf(s);
+  const double n = std::max(1, s.solved), widths = 0.1 * std::sqrt(2 * n);
+  return fmt::format(
+      "An honest sigma (z normal, with these parameters' correlation) passes the criteria in "
+      "{:.0f} % of rows of {} runs{} (simulated): std z's bounds are {:.1f} of its standard "
+      "errors (+-{:.3f}) from 1 here, mean z's {:.1f} (+-{:.3f}){}.\n",
+      100 * c.these, s.solved,
+      s.solved < 600 ? fmt::format(", in {:.1f} % of rows of 600", 100 * c.of600) : "", widths,
+      1 / std::sqrt(2 * n), 0.15 * std::sqrt(n), 1 / std::sqrt(n),
+      widths < 3 ? "; a row that misses them by a little asks for more runs, not a verdict" : "");
+}
+
 nlohmann::json ErrorsJson(const montecarlo::HardIronErrors& e) {
   return {{"runs", e.runs},
           {"rms_mG", e.runs ? nlohmann::json(1e3 * e.rms) : nlohmann::json()},
@@ -69,6 +98,7 @@ nlohmann::json ErrorsJson(const montecarlo::HardIronErrors& e) {
 
 void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                    const montecarlo::FreeMonteCarloSummary& s) {
+  const RowChance chance = ChanceOf(s);
   fmt::print("{}\n", nlohmann::json{{"model", o.model},
                                     {"class", o.sensor_class},
                                     {"protocol", o.protocol},
@@ -98,6 +128,8 @@ void PrintFreeJson(const montecarlo::FreeMonteCarloOptions& o,
                                     {"norm_bias_sigmas_median", s.norm_bias_median},
                                     {"norm_bias_sigmas_max", s.norm_bias_max},
                                     {"p_value_deciles", s.p_value_deciles},
+                                    {"honest_row_pass_chance", chance.these},
+                                    {"honest_row_pass_chance_600", chance.of600},
                                     {"hard_iron_error",
                                      {{"turncal", ErrorsJson(s.hard_iron)},
                                       {"plain_sphere", ErrorsJson(s.plain_sphere)},
@@ -138,6 +170,7 @@ void PrintFreeText(const montecarlo::FreeMonteCarloOptions& o,
       s.intervals_mean, s.gate_passed, s.gated,
       s.top_reasons.empty() ? "" : "refused for:\n" + ReasonsText(s), table, s.ks.d, s.ks.p,
       fmt::join(s.p_value_deciles, " "), bad, s.parameters.size());
+  fmt::print("{}", ChanceText(s));
   if (s.norm_bias_max > 0) {
     fmt::print(
         "Second-order bias from the values' noise, removed from each fit (its largest parameter, "

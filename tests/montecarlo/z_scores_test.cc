@@ -96,5 +96,45 @@ TEST(ZScoreSummary, NormalScoresHaveUnitSpreadAndTheirTails) {
   EXPECT_FALSE(s.Honest(1));
 }
 
+// z2 = 0.6 z0 + 0.8 e over 20000 runs: correlation 0.6 within 4 (1 - 0.36) / sqrt(n) = 0.018,
+// z0 and z1 independent within 4 / sqrt(n) = 0.028; a parameter with no spread is uncorrelated
+// (the identity's entries), and so is everything with fewer than two runs.
+TEST(ZScoreSummary, TheCorrelationOfTheParametersScores) {
+  const int n = 20000;
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> normal;
+  ZScoreSummary s(4);
+  for (int i = 0; i < n; ++i) {
+    const double z0 = normal(rng), z1 = normal(rng);
+    s.Add(Eigen::Vector4d(z0, z1, 0.6 * z0 + 0.8 * normal(rng), 1.5));
+  }
+  const Eigen::MatrixXd c = s.Correlation();
+  EXPECT_NEAR(c(2, 0), 0.6, 4 * 0.64 / std::sqrt(n));
+  EXPECT_DOUBLE_EQ(c(0, 2), c(2, 0));
+  EXPECT_NEAR(c(1, 0), 0.0, 4 / std::sqrt(n));
+  EXPECT_DOUBLE_EQ(c(3, 0), 0.0);
+  for (int i = 0; i < 4; ++i) EXPECT_DOUBLE_EQ(c(i, i), 1.0);
+  ZScoreSummary one(2);
+  one.Add(Eigen::Vector2d(1, 2));
+  EXPECT_TRUE(one.Correlation().isIdentity());
+}
+
+// An honest sigma's rows against the verdict. Normal z's mean and spread are independent, so a
+// parameter passes with P(|mean| <= 0.15) P(0.81 n <= chi^2_(n-1) <= 1.21 n): 0.96611 x 0.95423
+// = 0.92189 at n = 200 (0.99923 at 600), and nine independent ones with its ninth power,
+// 0.48095 (0.99313 at 600). Nine z that are one (correlation 1) pass as one. The simulated
+// chance within 4 binomial sigma: sqrt(p (1 - p) / rows).
+TEST(HonestRowPassChance, IsTheVerdictsFalseAlarmRateForIndependentAndCorrelatedScores) {
+  const auto tolerance = [](double p, int rows) { return 4 * std::sqrt(p * (1 - p) / rows); };
+  const Eigen::MatrixXd nine = Eigen::MatrixXd::Identity(9, 9);
+  EXPECT_NEAR(HonestRowPassChance(nine, 200, 4000), 0.48095, tolerance(0.48095, 4000));
+  EXPECT_NEAR(HonestRowPassChance(nine, 600, 1000), 0.99313, tolerance(0.99313, 1000));
+  EXPECT_NEAR(HonestRowPassChance(Eigen::MatrixXd::Identity(1, 1), 200, 4000), 0.92189,
+              tolerance(0.92189, 4000));
+  EXPECT_NEAR(HonestRowPassChance(Eigen::MatrixXd::Ones(9, 9), 200, 4000), 0.92189,
+              tolerance(0.92189, 4000));
+  EXPECT_TRUE(std::isnan(HonestRowPassChance(nine, 1)));
+}
+
 }  // namespace
 }  // namespace turncal::montecarlo

@@ -128,6 +128,11 @@ with tempfile.TemporaryDirectory() as d:
         # 30 runs estimate a std to ~13 %: 1 within 4 of those.
         for p in mc["params"] if not SANITIZED else []:
             check(0.5 < p["std_z"] < 1.5, f"accel9 {p['name']}: std z {p['std_z']:.2f}")
+        # An honest sigma fails a row of 600 on one of 9 parameters with P <= 9 x 0.00077
+        # (union bound, whatever their correlation): at least 98 % of 1000 simulated rows pass.
+        chance, of600 = mc["honest_row_pass_chance"], mc["honest_row_pass_chance_600"]
+        check(0 <= chance <= 1 and of600 >= 0.98,
+              f"an honest sigma passes {chance:.2f} of rows of {runs}, {of600:.3f} of 600")
 
 shared = os.environ.get("TURNCAL_SHARED_DIR", os.path.join(os.path.dirname(__file__), "../../../shared"))
 acc = os.path.join(shared, "fixtures/imu_tk/xsens_acc.mat")
