@@ -41,7 +41,8 @@ class ZScoreSummary {
 
 // How often a row of `runs` runs passes Honest() on every parameter when the sigma IS honest:
 // z normal with mean 0, spread 1 and the given correlation between the parameters, simulated
-// for `rows` rows (a fixed seed: the same answer each time). The verdict's bounds are about two
+// for `rows` rows (a fixed seed: the same answer from the same build; the normal
+// draws are the standard library's). The verdict's bounds are about two
 // standard errors wide at 200 runs (std z's 1/sqrt(2 * 200) = 0.05, mean z's 1/sqrt(200) =
 // 0.071), so with nine parameters an honest sigma fails a row of 200 about half the time
 // (docs/FREE.md, "How often an honest sigma fails a row").

@@ -73,7 +73,7 @@ struct RowChance {
 RowChance ChanceOf(const montecarlo::FreeMonteCarloSummary& s) {
   const Eigen::MatrixXd correlation = s.z.Correlation();
   return {montecarlo::HonestRowPassChance(correlation, s.solved),
-          montecarlo::HonestRowPassChance(correlation, 600, 1000)};
+          montecarlo::HonestRowPassChance(correlation, 600)};
 }
 
 std::string ChanceText(const montecarlo::FreeMonteCarloSummary& s) {
@@ -82,9 +82,9 @@ std::string ChanceText(const montecarlo::FreeMonteCarloSummary& s) {
   return fmt::format(
       "An honest sigma (z normal, with these parameters' correlation) passes the criteria in "
       "{:.0f} % of rows of {} runs{} (simulated): std z's bounds are {:.1f} of its standard "
-      "errors (+-{:.3f}) from 1 here, mean z's {:.1f} (+-{:.3f}){}.\n",
+      "errors (+-{:.3f}) from 1 here, mean z's {:.1f} of its (+-{:.3f}) from 0{}.\n",
       100 * c.these, s.solved,
-      s.solved < 600 ? fmt::format(", in {:.1f} % of rows of 600", 100 * c.of600) : "", widths,
+      s.solved < 600 ? fmt::format(", in {:.0f} % of rows of 600", 100 * c.of600) : "", widths,
       1 / std::sqrt(2 * n), 0.15 * std::sqrt(n), 1 / std::sqrt(n),
       widths < 3 ? "; a row that misses them by a little asks for more runs, not a verdict" : "");
 }
