@@ -42,7 +42,8 @@ namespace {
 
 // The verdict on one parameter's mean and spread (ZScoreSummary::Honest).
 bool HonestMeanAndSpread(double mean, double std_z) {
-  return std_z >= 0.9 && std_z <= 1.1 && std::abs(mean) <= 0.15;
+  return std_z >= 1 - kHonestStdZBound && std_z <= 1 + kHonestStdZBound &&
+         std::abs(mean) <= kHonestMeanZBound;
 }
 
 }  // namespace

@@ -9,6 +9,10 @@
 
 namespace turncal::montecarlo {
 
+// The Monte Carlo engines' verdict on a parameter (docs/ACCURACY.md): std z within
+// kHonestStdZBound of 1 and mean z within kHonestMeanZBound of 0.
+inline constexpr double kHonestStdZBound = 0.1, kHonestMeanZBound = 0.15;
+
 class ZScoreSummary {
  public:
   explicit ZScoreSummary(int parameters = 0);

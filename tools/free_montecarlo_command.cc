@@ -78,14 +78,14 @@ RowChance ChanceOf(const montecarlo::FreeMonteCarloSummary& s) {
 
 std::string ChanceText(const montecarlo::FreeMonteCarloSummary& s) {
   const RowChance c = ChanceOf(s);
-  const double n = std::max(1, s.solved), widths = 0.1 * std::sqrt(2 * n);
+  const double n = std::max(1, s.solved), widths = montecarlo::kHonestStdZBound * std::sqrt(2 * n);
   return fmt::format(
       "An honest sigma (z normal, with these parameters' correlation) passes the criteria in "
       "{:.0f} % of rows of {} runs{} (simulated): std z's bounds are {:.1f} of its standard "
       "errors (+-{:.3f}) from 1 here, mean z's {:.1f} of its (+-{:.3f}) from 0{}.\n",
       100 * c.these, s.solved,
       s.solved < 600 ? fmt::format(", in {:.0f} % of rows of 600", 100 * c.of600) : "", widths,
-      1 / std::sqrt(2 * n), 0.15 * std::sqrt(n), 1 / std::sqrt(n),
+      1 / std::sqrt(2 * n), montecarlo::kHonestMeanZBound * std::sqrt(n), 1 / std::sqrt(n),
       widths < 3 ? "; a row that misses them by a little asks for more runs, not a verdict" : "");
 }
 
